@@ -1,0 +1,231 @@
+// oclvox: conservative mesh voxelization on OpenCL devices.
+//
+// The public API is a handful of value types (Mesh, Grid, SparseVoxels, options and stats), plain
+// functions that take and return them, and one handle (Device) that hides every OpenCL object.
+// No OpenCL header is needed to use it. Library code never prints: it reports through
+// VoxelizeStats and the progress callback, and fails by throwing an oclvox::Error subclass.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+namespace oclvox {
+
+// ---------------------------------------------------------------------------------------------
+// Errors. Every failure names the problem; none is reported as an empty result.
+// ---------------------------------------------------------------------------------------------
+struct Error : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+// The input mesh file or mesh data is unusable (missing, malformed, NaN, no triangles, ...).
+struct InputError : Error {
+    using Error::Error;
+};
+// The requested grid cannot be built (zero or absurd resolution, memory limits, bad options).
+struct GridError : Error {
+    using Error::Error;
+};
+// An OpenCL call failed, or no (matching) device exists.
+struct DeviceError : Error {
+    using Error::Error;
+};
+// A kernel failed to compile; build_log() holds the compiler's output.
+struct KernelBuildError : DeviceError {
+    KernelBuildError(const std::string& what, std::string log)
+        : DeviceError(what + "\n--- build log ---\n" + log), log_(std::move(log)) {}
+    const std::string& build_log() const { return log_; }
+
+private:
+    std::string log_;
+};
+// Writing an output file failed (nothing is left under the final name).
+struct OutputError : Error {
+    using Error::Error;
+};
+// The progress callback asked to stop.
+struct Cancelled : Error {
+    using Error::Error;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Meshes
+// ---------------------------------------------------------------------------------------------
+// An indexed triangle mesh in double precision. Polygons are triangulated on load and all
+// objects/groups/solids of a file are merged.
+struct Mesh {
+    std::vector<std::array<double, 3>> positions;
+    std::vector<std::array<uint32_t, 3>> triangles;
+};
+
+// Loads OBJ (tinyobjloader), STL (ASCII and binary), PLY and OFF (assimp). The format follows
+// from the file extension (case-insensitive). Throws InputError naming the file and the problem.
+Mesh load_mesh(const std::string& path);
+
+// Throws InputError if the mesh has no triangles, an index out of range, or a non-finite
+// coordinate in a used vertex.
+void validate_mesh(const Mesh& mesh);
+
+// ---------------------------------------------------------------------------------------------
+// Grids
+// ---------------------------------------------------------------------------------------------
+// Voxel (i,j,k) is the closed box [origin + (i,j,k)*voxel_size, origin + (i+1,j+1,k+1)*voxel_size].
+struct Grid {
+    std::array<double, 3> origin{0, 0, 0};
+    double voxel_size = 1.0;
+    std::array<int64_t, 3> dims{0, 0, 0};
+
+    uint64_t voxel_count() const { return uint64_t(dims[0]) * uint64_t(dims[1]) * uint64_t(dims[2]); }
+};
+
+// How to fit a grid to a mesh. Defaults: the mesh bounding box with `resolution` voxels along the
+// longest axis, cubic voxels, the other axes as many voxels as they need.
+struct GridFit {
+    int64_t resolution = 256;        // voxels along the longest axis (ignored if voxel_size > 0)
+    bool cubic = false;              // resolution^3 grid, mesh centred (binvox convention)
+    double voxel_size = 0;           // > 0: use this voxel size instead of resolution
+    bool has_origin = false;         // use `origin` instead of the fitted one
+    std::array<double, 3> origin{0, 0, 0};
+    bool has_dims = false;           // use `dims` instead of the fitted ones
+    std::array<int64_t, 3> dims{0, 0, 0};
+    int64_t pad = 0;                 // empty voxels added on every side
+};
+
+// Largest number of voxels along one axis that any grid may have.
+constexpr int64_t kMaxGridAxis = int64_t(1) << 20;
+
+// Throws GridError on zero/negative/absurd sizes or a degenerate mesh box.
+Grid fit_grid(const Mesh& mesh, const GridFit& fit);
+void validate_grid(const Grid& grid);
+
+// ---------------------------------------------------------------------------------------------
+// Sparse voxel results
+// ---------------------------------------------------------------------------------------------
+// A bit grid stored as cubic bricks of `brick_size`^3 voxels; only bricks with at least one set
+// voxel are stored. Inside a brick, voxels are grouped in 4x4x4 blocks, one uint64_t each (bit
+// x + 4*(y + 4*z) of the block), blocks ordered x-fastest. Voxels outside the grid are never set.
+class SparseVoxels {
+public:
+    static constexpr int kBlock = 4;
+
+    SparseVoxels() = default;
+    SparseVoxels(const Grid& grid, int brick_size);
+
+    const Grid& grid() const { return grid_; }
+    int brick_size() const { return brick_size_; }
+    int blocks_per_brick_axis() const { return brick_size_ / kBlock; }
+    size_t blocks_per_brick() const;
+    std::array<int64_t, 3> brick_dims() const;  // bricks along each axis (ceil)
+
+    bool get(int64_t i, int64_t j, int64_t k) const;  // false outside the grid
+    void set(int64_t i, int64_t j, int64_t k);        // throws std::out_of_range outside
+    uint64_t count() const;                           // number of set voxels
+    size_t brick_count() const { return bricks_.size(); }
+
+    // Brick storage, keyed by linear brick index bx + nbx*(by + nby*bz).
+    const std::unordered_map<uint64_t, std::vector<uint64_t>>& bricks() const { return bricks_; }
+    // Adds (ORs) a brick's blocks; all-zero bricks are dropped.
+    void merge_brick(uint64_t brick_index, const uint64_t* blocks);
+
+    // Calls f(i, j, k) for every set voxel, brick by brick (order unspecified across bricks).
+    void for_each(const std::function<void(int64_t, int64_t, int64_t)>& f) const;
+
+    // Dense occupancy, x fastest: index i + nx*(j + ny*k). Throws GridError if it cannot fit.
+    std::vector<uint8_t> to_dense() const;
+
+    // Same grid and same set voxels (brick size may differ).
+    bool same_voxels(const SparseVoxels& other) const;
+
+private:
+    Grid grid_{};
+    int brick_size_ = 0;
+    std::unordered_map<uint64_t, std::vector<uint64_t>> bricks_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Voxelization
+// ---------------------------------------------------------------------------------------------
+// Triangle/box overlap test. In exact arithmetic both give the same voxels; in float they can
+// differ only where a voxel touches a triangle to within rounding.
+enum class OverlapTest {
+    SAT,  // separating axis theorem, 13 axes
+    PEF,  // plane test + three projected edge-function tests (Schwarz & Seidel 2010)
+};
+const char* to_string(OverlapTest test);
+OverlapTest overlap_test_from_string(const std::string& name);  // "sat" / "pef"
+
+// Called after each batch of bricks; return false to cancel (the run throws Cancelled).
+using ProgressCallback = std::function<bool(uint64_t bricks_done, uint64_t bricks_total)>;
+
+struct VoxelizeOptions {
+    OverlapTest test = OverlapTest::PEF;
+    int brick_size = 64;                        // voxels per brick edge, a multiple of 4 in [4, 1024]
+    uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
+    uint64_t host_budget_bytes = 0;             // 0: half of physical memory
+    ProgressCallback progress;
+};
+
+// Timing breakdown and counts of one run (seconds).
+struct VoxelizeStats {
+    double seconds_binning = 0, seconds_upload = 0, seconds_kernels = 0, seconds_download = 0;
+    uint64_t triangles_in = 0;         // triangles in the mesh
+    uint64_t triangles_used = 0;       // after dropping those outside the grid (after clipping)
+    uint64_t brick_pairs = 0;          // (triangle, brick) pairs after binning
+    uint64_t work_items = 0;           // (triangle, 4^3 block) work items launched
+    uint64_t bricks_total = 0;         // bricks in the grid
+    uint64_t bricks_active = 0;        // bricks with at least one triangle
+    uint64_t batches = 0;              // device batches
+    uint64_t voxels_set = 0;
+};
+
+struct DeviceInfo {
+    std::string platform, name, vendor, version, driver_version;
+    std::string type;  // "CPU", "GPU", "ACCELERATOR", ...
+    uint64_t global_memory = 0, max_alloc = 0;
+    std::string id;  // "P:D" indices as accepted by Device::open
+};
+
+// All OpenCL devices of all platforms. Throws DeviceError if no platform exists.
+std::vector<DeviceInfo> list_devices();
+
+// One OpenCL device with its context, queue and compiled programs (cached per context and on
+// disk). Cheap to move, not copyable.
+class Device {
+public:
+    // selector: "" (first GPU, else first device), "P:D" indices, or a case-insensitive substring
+    // of the platform or device name. A selector that matches nothing is a DeviceError.
+    static Device open(const std::string& selector = "");
+    ~Device();
+    Device(Device&&) noexcept;
+    Device& operator=(Device&&) noexcept;
+
+    const DeviceInfo& info() const;
+
+    SparseVoxels voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                          VoxelizeStats* stats = nullptr);
+
+    struct Impl;
+
+private:
+    explicit Device(std::unique_ptr<Impl> impl);
+    std::unique_ptr<Impl> impl_;
+};
+
+// The CPU reference: same triangle preparation, same shared math header, same float arithmetic as
+// the kernels, evaluated on the host. Device output must match it bit for bit.
+SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                                VoxelizeStats* stats = nullptr);
+
+// ---------------------------------------------------------------------------------------------
+// Output
+// ---------------------------------------------------------------------------------------------
+// Writes by extension: .binvox, .npy (+ .json sidecar), .vox (MagicaVoxel), .obj / .ply (cube
+// faces that are exposed). Writes to a temporary file in the same folder, then renames it.
+void write_voxels(const std::string& path, const SparseVoxels& voxels);
+
+}  // namespace oclvox

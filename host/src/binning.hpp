@@ -1,0 +1,24 @@
+// Binning prepared triangles to the bricks of a grid.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "prepare.hpp"
+
+namespace oclvox::detail {
+
+// Active bricks (those at least one triangle may touch) in ascending linear index, and for each
+// the triangles binned to it: pair_triangle[brick_first_pair[b] .. brick_first_pair[b+1]).
+struct Binning {
+    std::vector<uint64_t> bricks;
+    std::vector<uint64_t> brick_first_pair;
+    std::vector<uint32_t> pair_triangle;
+};
+
+// Throws GridError if the binning itself would be absurdly large (more than max_pairs candidate
+// (triangle, brick) pairs).
+Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
+                      uint64_t max_pairs = uint64_t(1) << 31);
+
+}  // namespace oclvox::detail

@@ -1,0 +1,253 @@
+// Device::voxelize: the tiled conservative surface voxelization on an OpenCL device.
+//
+// Phases: prepare and bin triangles on the host; upload them and compute the per-triangle
+// constants on the device once; then process the active bricks in batches that fit the device
+// budget: per batch, upload the (triangle, brick) pairs and their work-item offsets, clear the
+// batch's brick bits, run the voxel kernel over all work items, and merge the bits that come
+// back into the sparse result.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+#include "binning.hpp"
+#include "opencl_runtime.hpp"
+#include "prepare.hpp"
+
+namespace oclvox {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// Work items of one batch are numbered with 32-bit offsets; launches are cut into slices so no
+// single enqueue is enormous (keeps drivers' watchdogs and PoCL's scheduling happy).
+constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
+constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
+
+uint64_t physical_memory() {
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : uint64_t(8) << 30;
+}
+
+std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB"; }
+
+struct Batch {
+    size_t first_brick = 0, brick_count = 0;
+    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item;
+    std::vector<cl_int> slot_brick;
+    uint64_t items = 0;
+};
+
+// Gathers bricks [first, ...) into one batch, limited by slots and work items.
+Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles& prepared,
+                 const Grid& grid, int brick_size, size_t first, size_t max_slots) {
+    const auto nbx = uint64_t((grid.dims[0] + brick_size - 1) / brick_size);
+    const auto nby = uint64_t((grid.dims[1] + brick_size - 1) / brick_size);
+    Batch batch;
+    batch.first_brick = first;
+    for (size_t b = first; b < binning.bricks.size() && batch.brick_count < max_slots; ++b) {
+        const uint64_t index = binning.bricks[b];
+        const int brick[3] = {int(index % nbx), int(index / nbx % nby), int(index / (nbx * nby))};
+        // Count this brick's items before committing it to the batch.
+        uint64_t brick_items = 0;
+        std::vector<cl_uint> counts;
+        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1]; ++p) {
+            detail::OvPairWork work;
+            const int n = detail::ov_pair_work(prepared.ranges[binning.pair_triangle[p]], brick[0],
+                                               brick[1], brick[2], brick_size, int(grid.dims[0]),
+                                               int(grid.dims[1]), int(grid.dims[2]), &work);
+            counts.push_back(cl_uint(n));
+            brick_items += uint64_t(n);
+        }
+        if (batch.items + brick_items > kMaxItemsPerBatch) {
+            if (batch.brick_count == 0)
+                throw GridError("brick " + std::to_string(index) + " needs " +
+                                std::to_string(brick_items) +
+                                " work items, more than one batch can hold: use smaller bricks");
+            break;
+        }
+        const cl_uint slot = cl_uint(batch.brick_count++);
+        for (int k = 0; k < 3; ++k) batch.slot_brick.push_back(brick[k]);
+        size_t i = 0;
+        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1];
+             ++p, ++i) {
+            if (counts[i] == 0) continue;
+            batch.pair_triangle.push_back(binning.pair_triangle[p]);
+            batch.pair_slot.push_back(slot);
+            batch.pair_first_item.push_back(cl_uint(batch.items));
+            batch.items += counts[i];
+        }
+    }
+    return batch;
+}
+
+// A fixed work-group size, queried from the kernel and the device rather than assumed: some
+// drivers (PoCL among them) compile a kernel once per work-group size, so letting the driver pick
+// one per launch size would recompile on almost every launch.
+size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device) {
+    const size_t max = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device);
+    const size_t multiple =
+        std::max<size_t>(1, kernel.getWorkGroupInfo<CL_KERNEL_PREFERRED_WORK_GROUP_SIZE_MULTIPLE>(device));
+    size_t size = multiple * std::max<size_t>(1, 64 / multiple);
+    while (size > max && size > 1) size /= 2;
+    return std::max<size_t>(1, size);
+}
+
+// Launches `kernel` over at least n items in groups of `group` (the kernels skip the padding).
+void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group) {
+    const size_t global = size_t((n + group - 1) / group * group);
+    queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(group));
+}
+
+template <typename T>
+cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
+                  const std::vector<T>& data) {
+    // Zero-length buffers are invalid in OpenCL; a one-element buffer stands in.
+    const size_t bytes = std::max<size_t>(1, data.size()) * sizeof(T);
+    cl::Buffer buffer(context, CL_MEM_READ_ONLY, bytes);
+    if (!data.empty()) queue.enqueueWriteBuffer(buffer, CL_FALSE, 0, data.size() * sizeof(T), data.data());
+    return buffer;
+}
+
+}  // namespace
+
+SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                              VoxelizeStats* stats_out) {
+    VoxelizeStats stats;
+    SparseVoxels result(grid, options.brick_size);
+    const int brick_size = options.brick_size;
+    Impl& cl = *impl_;
+
+    // Phase 1: prepare and bin on the host.
+    auto t = Clock::now();
+    const detail::PreparedTriangles prepared = detail::prepare_triangles(mesh, grid);
+    const detail::Binning binning = detail::bin_triangles(prepared, grid, brick_size);
+    const auto nbricks = result.brick_dims();
+    stats.triangles_in = mesh.triangles.size();
+    stats.triangles_used = prepared.triangles.size();
+    stats.brick_pairs = binning.pair_triangle.size();
+    stats.bricks_total = uint64_t(nbricks[0]) * uint64_t(nbricks[1]) * uint64_t(nbricks[2]);
+    stats.bricks_active = binning.bricks.size();
+    stats.seconds_binning = seconds_since(t);
+
+    // Phase 2: budgets. The sparse result can need every active brick on the host; the device
+    // holds one batch of bricks at a time.
+    const uint64_t brick_bytes = result.blocks_per_brick() * sizeof(uint64_t);
+    const uint64_t host_budget =
+        options.host_budget_bytes ? options.host_budget_bytes : physical_memory() / 2;
+    if (stats.bricks_active * brick_bytes > host_budget)
+        throw GridError("the result may need " + mib(stats.bricks_active * brick_bytes) +
+                        " of host memory for " + std::to_string(stats.bricks_active) +
+                        " active bricks, over the host budget of " + mib(host_budget) +
+                        ": lower the resolution or raise the budget");
+    const uint64_t device_budget = std::min<uint64_t>(
+        {options.device_budget_bytes, cl.info.max_alloc, cl.info.global_memory / 2});
+    if (brick_bytes > device_budget)
+        throw GridError("one brick of " + std::to_string(brick_size) + "^3 voxels needs " +
+                        mib(brick_bytes) + ", over the device budget of " + mib(device_budget) +
+                        ": use smaller bricks");
+    const size_t max_slots = size_t(std::max<uint64_t>(1, device_budget / brick_bytes));
+
+    if (!prepared.triangles.empty()) try {
+            const bool sat = options.test == OverlapTest::SAT;
+            const cl::Program& program = cl.program(detail::kKernel_voxelize);
+
+            // Phase 3: triangles to the device; per-triangle constants once.
+            t = Clock::now();
+            const cl::Buffer triangles = upload(cl.context, cl.queue, prepared.triangles);
+            const cl::Buffer ranges = upload(cl.context, cl.queue, prepared.ranges);
+            const size_t setup_bytes = sat ? sizeof(detail::OvSatTriangle) : sizeof(detail::OvPefTriangle);
+            const cl_uint triangle_count = cl_uint(prepared.triangles.size());
+            cl::Buffer setups(cl.context, CL_MEM_READ_WRITE, setup_bytes * triangle_count);
+            cl.queue.finish();
+            stats.seconds_upload += seconds_since(t);
+
+            t = Clock::now();
+            cl::Kernel setup(program, sat ? "setup_sat" : "setup_pef");
+            setup.setArg(0, triangles);
+            setup.setArg(1, triangle_count);
+            setup.setArg(2, setups);
+            launch(cl.queue, setup, triangle_count, work_group_size(setup, cl.device));
+            cl.queue.finish();
+            stats.seconds_kernels += seconds_since(t);
+
+            cl::Kernel voxelize(program, sat ? "voxelize_sat" : "voxelize_pef");
+            const size_t voxelize_group = work_group_size(voxelize, cl.device);
+            const size_t words_per_brick = 2 * result.blocks_per_brick();
+            cl::Buffer bits(cl.context, CL_MEM_READ_WRITE,
+                            std::min(max_slots, binning.bricks.size()) * words_per_brick * sizeof(cl_uint));
+            std::vector<cl_uint> host_bits;
+            std::vector<uint64_t> blocks(result.blocks_per_brick());
+
+            // Phase 4: batches of bricks.
+            for (size_t done = 0; done < binning.bricks.size();) {
+                t = Clock::now();
+                Batch batch = make_batch(binning, prepared, grid, brick_size, done, max_slots);
+                const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
+                batch.pair_first_item.push_back(cl_uint(batch.items));
+                const size_t bit_words = batch.brick_count * words_per_brick;
+                const cl::Buffer pair_triangle = upload(cl.context, cl.queue, batch.pair_triangle);
+                const cl::Buffer pair_slot = upload(cl.context, cl.queue, batch.pair_slot);
+                const cl::Buffer pair_first = upload(cl.context, cl.queue, batch.pair_first_item);
+                const cl::Buffer slot_brick = upload(cl.context, cl.queue, batch.slot_brick);
+                cl.queue.enqueueFillBuffer(bits, cl_uint(0), 0, bit_words * sizeof(cl_uint));
+                cl.queue.finish();
+                stats.seconds_upload += seconds_since(t);
+
+                t = Clock::now();
+                voxelize.setArg(0, setups);
+                voxelize.setArg(1, ranges);
+                voxelize.setArg(2, pair_triangle);
+                voxelize.setArg(3, pair_slot);
+                voxelize.setArg(4, pair_first);
+                voxelize.setArg(5, pair_count);
+                voxelize.setArg(6, slot_brick);
+                voxelize.setArg(8, cl_uint(batch.items));
+                voxelize.setArg(9, cl_int(brick_size));
+                voxelize.setArg(10, cl_int(grid.dims[0]));
+                voxelize.setArg(11, cl_int(grid.dims[1]));
+                voxelize.setArg(12, cl_int(grid.dims[2]));
+                voxelize.setArg(13, bits);
+                for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
+                    voxelize.setArg(7, cl_uint(base));
+                    const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
+                    launch(cl.queue, voxelize, n, voxelize_group);
+                }
+                cl.queue.finish();
+                stats.seconds_kernels += seconds_since(t);
+                stats.work_items += batch.items;
+
+                // Two 32-bit words per block, low word first.
+                t = Clock::now();
+                host_bits.resize(bit_words);
+                cl.queue.enqueueReadBuffer(bits, CL_TRUE, 0, bit_words * sizeof(cl_uint),
+                                           host_bits.data());
+                for (size_t slot = 0; slot < batch.brick_count; ++slot) {
+                    const cl_uint* words = host_bits.data() + slot * words_per_brick;
+                    for (size_t b = 0; b < blocks.size(); ++b)
+                        blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1]) << 32;
+                    result.merge_brick(binning.bricks[batch.first_brick + slot], blocks.data());
+                }
+                stats.seconds_download += seconds_since(t);
+                ++stats.batches;
+
+                done += batch.brick_count;
+                if (options.progress && !options.progress(done, binning.bricks.size()))
+                    throw Cancelled("voxelization cancelled after " + std::to_string(done) +
+                                    " of " + std::to_string(binning.bricks.size()) + " bricks");
+            }
+        } catch (const cl::Error& e) {
+            detail::throw_device_error(e, "voxelizing on " + cl.info.name);
+        }
+
+    stats.voxels_set = result.count();
+    if (stats_out) *stats_out = stats;
+    return result;
+}
+
+}  // namespace oclvox

@@ -1,0 +1,98 @@
+// Fitting a voxel grid to a mesh, and checking grids for sizes that cannot work.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "oclvox/oclvox.hpp"
+
+namespace oclvox {
+
+namespace {
+std::string dims_text(const std::array<int64_t, 3>& d) {
+    return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
+}
+
+// Bounding box of the vertices that triangles use (unused vertices do not widen the grid).
+void used_bounds(const Mesh& mesh, std::array<double, 3>& lo, std::array<double, 3>& hi) {
+    lo.fill(std::numeric_limits<double>::infinity());
+    hi.fill(-std::numeric_limits<double>::infinity());
+    for (const auto& t : mesh.triangles)
+        for (uint32_t v : t)
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = std::min(lo[k], mesh.positions[v][k]);
+                hi[k] = std::max(hi[k], mesh.positions[v][k]);
+            }
+}
+}  // namespace
+
+void validate_grid(const Grid& grid) {
+    if (!(grid.voxel_size > 0) || !std::isfinite(grid.voxel_size))
+        throw GridError("voxel size must be a positive finite number, got " +
+                        std::to_string(grid.voxel_size));
+    for (int k = 0; k < 3; ++k) {
+        if (!std::isfinite(grid.origin[k])) throw GridError("grid origin is not finite");
+        if (grid.dims[k] < 1)
+            throw GridError("grid dimensions must be at least 1, got " + dims_text(grid.dims));
+        if (grid.dims[k] > kMaxGridAxis)
+            throw GridError("grid dimensions " + dims_text(grid.dims) + " exceed the maximum of " +
+                            std::to_string(kMaxGridAxis) + " voxels per axis");
+    }
+}
+
+Grid fit_grid(const Mesh& mesh, const GridFit& fit) {
+    validate_mesh(mesh);
+    if (fit.pad < 0 || fit.pad > kMaxGridAxis) throw GridError("padding must be in [0, 2^20]");
+    std::array<double, 3> lo, hi;
+    used_bounds(mesh, lo, hi);
+    const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+
+    // Phase 1: the voxel size, from an explicit size or the resolution along the longest axis.
+    Grid grid;
+    if (fit.voxel_size > 0) {
+        grid.voxel_size = fit.voxel_size;
+    } else {
+        if (fit.resolution < 1 || fit.resolution > kMaxGridAxis)
+            throw GridError("resolution " + std::to_string(fit.resolution) +
+                            " is out of range: it must be in [1, " + std::to_string(kMaxGridAxis) +
+                            "]");
+        if (!(extent > 0))
+            throw GridError(
+                "the mesh has zero extent (all vertices coincide): give --voxel-size to voxelize "
+                "it");
+        grid.voxel_size = extent / double(fit.resolution);
+    }
+    if (!std::isfinite(grid.voxel_size) || !(grid.voxel_size > 0))
+        throw GridError("voxel size must be a positive finite number");
+
+    // Phase 2: dimensions. Fitted axes get as many voxels as the mesh needs (at least one); a
+    // cubic grid is resolution^3 with the mesh centred in it.
+    for (int k = 0; k < 3; ++k) {
+        const double cells = std::ceil((hi[k] - lo[k]) / grid.voxel_size);
+        if (!(cells < double(kMaxGridAxis)))
+            throw GridError("the mesh spans " + std::to_string(hi[k] - lo[k]) +
+                            " units, more than the maximum " + std::to_string(kMaxGridAxis) +
+                            " voxels of size " + std::to_string(grid.voxel_size));
+        grid.dims[k] = std::max<int64_t>(1, int64_t(cells));
+        if (fit.cubic && fit.voxel_size <= 0) grid.dims[k] = fit.resolution;
+        if (fit.has_dims) grid.dims[k] = fit.dims[k];
+    }
+
+    // Phase 3: origin: the box minimum, or centred when the grid is larger than the mesh.
+    for (int k = 0; k < 3; ++k) {
+        const double centre = 0.5 * (lo[k] + hi[k]);
+        grid.origin[k] = fit.cubic || fit.has_dims
+                             ? centre - 0.5 * double(grid.dims[k]) * grid.voxel_size
+                             : lo[k];
+        if (fit.has_origin) grid.origin[k] = fit.origin[k];
+    }
+
+    // Phase 4: padding on every side.
+    for (int k = 0; k < 3; ++k) {
+        grid.origin[k] -= double(fit.pad) * grid.voxel_size;
+        grid.dims[k] += 2 * fit.pad;
+    }
+    validate_grid(grid);
+    return grid;
+}
+
+}  // namespace oclvox

@@ -1,0 +1,14 @@
+// OpenCL programs embedded at build time (cmake/embed_kernel.cmake), includes inlined.
+#pragma once
+
+namespace oclvox::detail {
+
+struct KernelSource {
+    const char* name;
+    const char* text;
+    const char* sha256;  // of `text`: part of the on-disk program cache key
+};
+
+extern const KernelSource kKernel_voxelize;
+
+}  // namespace oclvox::detail

@@ -1,0 +1,22 @@
+// Turning a Mesh on a Grid into the triangles the kernels and the reference consume.
+#pragma once
+
+#include <vector>
+
+#include "oclvox/oclvox.hpp"
+#include "voxel_math.h"
+
+namespace oclvox::detail {
+
+struct PreparedTriangles {
+    std::vector<OvTriangle> triangles;
+    std::vector<OvRange> ranges;  // ov_triangle_range of each triangle
+};
+
+// Validates mesh and grid, maps vertices to grid coordinates (voxel units) in double, drops
+// triangles that cannot touch the grid, clips the few that reach far outside it (so huge
+// triangles keep their precision and integer ranges stay bounded), and rounds each triangle once
+// to float relative to an integer anchor.
+PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid);
+
+}  // namespace oclvox::detail

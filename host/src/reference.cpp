@@ -1,0 +1,79 @@
+// The CPU reference voxelizer: the same prepared triangles and the same per-triangle setup and
+// per-voxel test (voxel_math.h) as the kernels, but none of their machinery (no binning, no
+// bricks, no blocks, no atomics): every triangle tests every grid voxel of its range. Device
+// results must equal it bit for bit.
+#include <algorithm>
+#include <chrono>
+
+#include "oclvox/oclvox.hpp"
+#include "prepare.hpp"
+
+namespace oclvox {
+
+namespace {
+
+// The reference tests every voxel of every triangle's range; refuse work no machine can finish.
+constexpr uint64_t kMaxReferenceVoxelTests = uint64_t(1) << 36;
+
+void refuse_absurd_work(const detail::PreparedTriangles& prepared, const Grid& grid) {
+    uint64_t tests = 0;
+    for (const detail::OvRange& r : prepared.ranges) {
+        uint64_t n = 1;
+        for (int k = 0; k < 3; ++k) {
+            const int64_t lo = std::max<int64_t>(r.lo[k], 0);
+            const int64_t hi = std::min<int64_t>(r.hi[k], grid.dims[k] - 1);
+            n *= hi >= lo ? uint64_t(hi - lo + 1) : 0;
+        }
+        tests += n;
+        if (tests > kMaxReferenceVoxelTests)
+            throw GridError("the CPU reference would test more than " +
+                            std::to_string(kMaxReferenceVoxelTests) +
+                            " voxels: lower the resolution");
+    }
+}
+
+template <typename Setup, typename Overlaps>
+void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels& out,
+                        Setup setup, Overlaps overlaps) {
+    const Grid& grid = out.grid();
+    for (size_t t = 0; t < prepared.triangles.size(); ++t) {
+        const auto s = setup(prepared.triangles[t]);
+        const detail::OvRange& r = prepared.ranges[t];
+        int lo[3], hi[3];
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::max<int>(r.lo[k], 0);
+            hi[k] = int(std::min<int64_t>(r.hi[k], grid.dims[k] - 1));
+        }
+        for (int z = lo[2]; z <= hi[2]; ++z)
+            for (int y = lo[1]; y <= hi[1]; ++y)
+                for (int x = lo[0]; x <= hi[0]; ++x)
+                    if (overlaps(&s, float(x - s.anchor[0]), float(y - s.anchor[1]),
+                                 float(z - s.anchor[2])))
+                        out.set(x, y, z);
+    }
+}
+
+}  // namespace
+
+SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                                VoxelizeStats* stats) {
+    const auto start = std::chrono::steady_clock::now();
+    SparseVoxels out(grid, options.brick_size);
+    const detail::PreparedTriangles prepared = detail::prepare_triangles(mesh, grid);
+    refuse_absurd_work(prepared, grid);
+    if (options.test == OverlapTest::SAT)
+        voxelize_triangles(prepared, out, detail::ov_setup_sat, detail::ov_sat_overlaps);
+    else
+        voxelize_triangles(prepared, out, detail::ov_setup_pef, detail::ov_pef_overlaps);
+    if (stats) {
+        *stats = VoxelizeStats{};
+        stats->triangles_in = mesh.triangles.size();
+        stats->triangles_used = prepared.triangles.size();
+        stats->seconds_kernels =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        stats->voxels_set = out.count();
+    }
+    return out;
+}
+
+}  // namespace oclvox

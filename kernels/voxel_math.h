@@ -1,0 +1,243 @@
+// Structs and math shared, token for token, by the OpenCL kernels and the C++ host reference.
+//
+// Determinism contract: everything here is plain IEEE single-precision +, -, *, comparisons,
+// floor, min and max, evaluated in the order written. Kernels are built without fast-math and
+// with FP_CONTRACT OFF; the host is built with -ffp-contract=off. So a kernel and the host
+// reference compute bit-identical results on every conforming device.
+//
+// Coordinates: a triangle arrives as an integer anchor (a voxel corner near it) plus its three
+// vertices relative to that anchor, in voxel units, computed in double on the host and rounded
+// once to float. All tests work in anchor-relative coordinates, so precision does not fall off
+// with the distance from the grid origin, and voxel (i,j,k) is the box [q, q+1] with
+// q = (i,j,k) - anchor, which is exact in float.
+#ifndef OCLVOX_VOXEL_MATH_H
+#define OCLVOX_VOXEL_MATH_H
+
+#ifdef __OPENCL_VERSION__
+#pragma OPENCL FP_CONTRACT OFF
+#define OV_FN static inline
+#define OV_FLOOR floor
+#define OV_CEIL ceil
+#else
+#include <cmath>
+#define OV_FN static inline
+#define OV_FLOOR std::floor
+#define OV_CEIL std::ceil
+namespace oclvox::detail {
+#endif
+
+// A triangle as uploaded: anchor voxel corner and anchor-relative vertices (x0 y0 z0 x1 ...).
+typedef struct {
+    int anchor[3];
+    float u[9];
+} OvTriangle;
+
+// Voxel index range [lo, hi] (inclusive, global voxel indices, not clipped to the grid) of the
+// voxels whose closed boxes meet the triangle's bounding box. Voxel i spans [i, i+1], so it meets
+// [a, b] iff i <= b and i + 1 >= a, i.e. i in [ceil(a) - 1, floor(b)]: touching counts.
+typedef struct {
+    int lo[3];
+    int hi[3];
+} OvRange;
+
+// SAT with per-triangle constants. Box-normal axes are covered by the voxel range. For each of
+// the nine axes e_k x f_j the two non-zero components (on axes k+1, k+2) and the interval
+// [lo, hi]: the voxel at q is separated on that axis iff dot(axis, q) < lo or > hi. Same for the
+// triangle normal.
+typedef struct {
+    int anchor[3];
+    float normal[3];
+    float normal_lo, normal_hi;
+    float axis[9][2];
+    float axis_lo[9], axis_hi[9];
+} OvSatTriangle;
+
+// PEF (Schwarz & Seidel 2010, 26-separating): plane test with the critical-corner offsets d1, d2
+// and, for each projection k (dropping axis k, keeping axes k+1, k+2), three edge functions
+// n . q' + d >= 0.
+typedef struct {
+    int anchor[3];
+    float normal[3];
+    float d1, d2;
+    float edge_normal[3][3][2];
+    float edge_offset[3][3];
+} OvPefTriangle;
+
+OV_FN float ov_min3(float a, float b, float c) { return fmin(fmin(a, b), c); }
+OV_FN float ov_max3(float a, float b, float c) { return fmax(fmax(a, b), c); }
+
+OV_FN OvRange ov_triangle_range(OvTriangle t) {
+    OvRange r;
+    for (int k = 0; k < 3; ++k) {
+        float lo = ov_min3(t.u[k], t.u[3 + k], t.u[6 + k]);
+        float hi = ov_max3(t.u[k], t.u[3 + k], t.u[6 + k]);
+        r.lo[k] = t.anchor[k] + (int)OV_CEIL(lo) - 1;
+        r.hi[k] = t.anchor[k] + (int)OV_FLOOR(hi);
+    }
+    return r;
+}
+
+// Edge j of the triangle: f_j = u_{j+1} - u_j.
+OV_FN float ov_edge(OvTriangle t, int j, int k) {
+    int next = j == 2 ? 0 : j + 1;
+    return t.u[3 * next + k] - t.u[3 * j + k];
+}
+
+OV_FN OvSatTriangle ov_setup_sat(OvTriangle t) {
+    OvSatTriangle s;
+    for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
+
+    // Nine edge-cross axes e_k x f_j: component on axis k+1 is -f[k+2], on axis k+2 it is f[k+1].
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float c0 = -ov_edge(t, j, a2);
+            float c1 = ov_edge(t, j, a1);
+            float p0 = c0 * t.u[a1] + c1 * t.u[a2];
+            float p1 = c0 * t.u[3 + a1] + c1 * t.u[3 + a2];
+            float p2 = c0 * t.u[6 + a1] + c1 * t.u[6 + a2];
+            // Unit box [q, q+1] projects to dot(axis, q) + [sum of negative parts, sum of positive].
+            float box_lo = fmin(c0, 0.0f) + fmin(c1, 0.0f);
+            float box_hi = fmax(c0, 0.0f) + fmax(c1, 0.0f);
+            int i = 3 * k + j;
+            s.axis[i][0] = c0;
+            s.axis[i][1] = c1;
+            s.axis_lo[i] = ov_min3(p0, p1, p2) - box_hi;
+            s.axis_hi[i] = ov_max3(p0, p1, p2) - box_lo;
+        }
+    }
+
+    // Triangle normal f_0 x f_1. For a degenerate triangle it is zero and the test passes, which
+    // leaves the segment (or point) to the edge axes and the range, as a segment/box SAT needs.
+    float n[3];
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        n[k] = ov_edge(t, 0, a1) * ov_edge(t, 1, a2) - ov_edge(t, 0, a2) * ov_edge(t, 1, a1);
+    }
+    float p0 = n[0] * t.u[0] + n[1] * t.u[1] + n[2] * t.u[2];
+    float p1 = n[0] * t.u[3] + n[1] * t.u[4] + n[2] * t.u[5];
+    float p2 = n[0] * t.u[6] + n[1] * t.u[7] + n[2] * t.u[8];
+    float box_lo = fmin(n[0], 0.0f) + fmin(n[1], 0.0f) + fmin(n[2], 0.0f);
+    float box_hi = fmax(n[0], 0.0f) + fmax(n[1], 0.0f) + fmax(n[2], 0.0f);
+    for (int k = 0; k < 3; ++k) s.normal[k] = n[k];
+    s.normal_lo = ov_min3(p0, p1, p2) - box_hi;
+    s.normal_hi = ov_max3(p0, p1, p2) - box_lo;
+    return s;
+}
+
+// q: voxel index minus anchor, as float (exact). Closed boxes: equality means touching, which
+// overlaps.
+OV_FN int ov_sat_overlaps(const OvSatTriangle* s, float qx, float qy, float qz) {
+    float q[3] = {qx, qy, qz};
+    float dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
+    if (dn < s->normal_lo || dn > s->normal_hi) return 0;
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            int i = 3 * k + j;
+            float d = s->axis[i][0] * q[a1] + s->axis[i][1] * q[a2];
+            if (d < s->axis_lo[i] || d > s->axis_hi[i]) return 0;
+        }
+    }
+    return 1;
+}
+
+OV_FN OvPefTriangle ov_setup_pef(OvTriangle t) {
+    OvPefTriangle s;
+    for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
+
+    float n[3];
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        n[k] = ov_edge(t, 0, a1) * ov_edge(t, 1, a2) - ov_edge(t, 0, a2) * ov_edge(t, 1, a1);
+        s.normal[k] = n[k];
+    }
+    // Critical corner c of the unit box: the corner furthest along n. The box meets the plane iff
+    // n.q + d1 and n.q + d2 do not have the same strict sign.
+    float c[3];
+    for (int k = 0; k < 3; ++k) c[k] = n[k] > 0.0f ? 1.0f : 0.0f;
+    s.d1 = n[0] * (c[0] - t.u[0]) + n[1] * (c[1] - t.u[1]) + n[2] * (c[2] - t.u[2]);
+    s.d2 = n[0] * ((1.0f - c[0]) - t.u[0]) + n[1] * ((1.0f - c[1]) - t.u[1]) +
+           n[2] * ((1.0f - c[2]) - t.u[2]);
+
+    // Projection k keeps axes (a1, a2). Edge normals are turned to point inwards using the sign of
+    // n[k], which is exactly the orientation of the projected triangle (same float expression).
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        float sign = n[k] >= 0.0f ? 1.0f : -1.0f;
+        for (int j = 0; j < 3; ++j) {
+            float ex = ov_edge(t, j, a1);
+            float ey = ov_edge(t, j, a2);
+            float nx = -ey * sign;
+            float ny = ex * sign;
+            s.edge_normal[k][j][0] = nx;
+            s.edge_normal[k][j][1] = ny;
+            s.edge_offset[k][j] = -(nx * t.u[3 * j + a1] + ny * t.u[3 * j + a2]) +
+                                  fmax(0.0f, nx) + fmax(0.0f, ny);
+        }
+    }
+    return s;
+}
+
+OV_FN int ov_pef_overlaps(const OvPefTriangle* s, float qx, float qy, float qz) {
+    float q[3] = {qx, qy, qz};
+    float dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
+    float e1 = dn + s->d1;
+    float e2 = dn + s->d2;
+    // Sign test without multiplying (the product can underflow to 0 or overflow to NaN).
+    if ((e1 > 0.0f && e2 > 0.0f) || (e1 < 0.0f && e2 < 0.0f)) return 0;
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
+                      s->edge_offset[k][j];
+            if (e < 0.0f) return 0;
+        }
+    }
+    return 1;
+}
+
+// Bit of voxel (x, y, z) (local to its 4x4x4 block) in the block's 64-bit mask.
+OV_FN int ov_block_bit(int x, int y, int z) { return x + 4 * (y + 4 * z); }
+
+// The work of one (triangle, brick) pair: the voxels of the triangle's range inside both the
+// brick and the grid, covered by 4x4x4 blocks (aligned to the global grid) that become one work
+// item each. Returns the number of blocks (0 if the range misses the brick or the grid); sets the
+// clipped voxel range and the first block. Host and kernel count work items with this function.
+typedef struct {
+    int voxel_lo[3], voxel_hi[3];
+    int block_lo[3], block_count[3];
+} OvPairWork;
+
+OV_FN int ov_pair_work(OvRange r, int bx, int by, int bz, int brick_size, int nx, int ny, int nz,
+                       OvPairWork* w) {
+    int brick[3] = {bx, by, bz};
+    int dims[3] = {nx, ny, nz};
+    int total = 1;
+    for (int k = 0; k < 3; ++k) {
+        int lo = r.lo[k] > brick[k] * brick_size ? r.lo[k] : brick[k] * brick_size;
+        int hi = r.hi[k] < brick[k] * brick_size + brick_size - 1 ? r.hi[k]
+                                                                   : brick[k] * brick_size + brick_size - 1;
+        if (lo < 0) lo = 0;
+        if (hi > dims[k] - 1) hi = dims[k] - 1;
+        if (lo > hi) return 0;
+        w->voxel_lo[k] = lo;
+        w->voxel_hi[k] = hi;
+        w->block_lo[k] = lo / 4;
+        w->block_count[k] = hi / 4 - lo / 4 + 1;
+        total *= w->block_count[k];
+    }
+    return total;
+}
+
+#ifndef __OPENCL_VERSION__
+}  // namespace oclvox::detail
+#endif
+
+#endif  // OCLVOX_VOXEL_MATH_H

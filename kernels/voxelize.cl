@@ -1,0 +1,123 @@
+// Conservative (26-separating) surface voxelization, OpenCL C 1.2.
+//
+// Two phases. setup_*: one work item per triangle computes the per-triangle constants of the
+// overlap test once. voxelize_*: one work item per (triangle, 4x4x4 block) tests the block's
+// voxels, gathers a 64-bit mask privately and ORs it into the brick's bits with at most two
+// 32-bit atomics. Work items are numbered pair by pair; an item finds its (triangle, brick) pair
+// by binary search in the pairs' first-item offsets, so a huge triangle spreads over many items
+// instead of serialising on one.
+#include "voxel_math.h"
+
+__kernel void setup_sat(__global const OvTriangle* triangles, uint count,
+                        __global OvSatTriangle* out) {
+    uint i = get_global_id(0);
+    if (i < count) out[i] = ov_setup_sat(triangles[i]);
+}
+
+__kernel void setup_pef(__global const OvTriangle* triangles, uint count,
+                        __global OvPefTriangle* out) {
+    uint i = get_global_id(0);
+    if (i < count) out[i] = ov_setup_pef(triangles[i]);
+}
+
+// Largest p with first_item[p] <= item (first_item is non-decreasing, first_item[0] == 0).
+static uint find_pair(__global const uint* first_item, uint pair_count, uint item) {
+    uint lo = 0, hi = pair_count - 1;
+    while (lo < hi) {
+        uint mid = lo + (hi - lo + 1) / 2;
+        if (first_item[mid] <= item)
+            lo = mid;
+        else
+            hi = mid - 1;
+    }
+    return lo;
+}
+
+typedef struct {
+    uint triangle, slot;
+    int brick[3];
+    int block[3];  // global block coordinates
+    OvPairWork work;
+} Item;
+
+// Returns 0 for the padding items past the end of the launch.
+static int decode_item(__global const uint* pair_triangle, __global const uint* pair_slot,
+                       __global const uint* pair_first_item, uint pair_count,
+                       __global const int* slot_brick, __global const OvRange* ranges,
+                       uint item_base, uint item_end, int brick_size, int nx, int ny, int nz,
+                       Item* it) {
+    uint item = item_base + (uint)get_global_id(0);
+    if (item >= item_end) return 0;
+    uint p = find_pair(pair_first_item, pair_count, item);
+    it->triangle = pair_triangle[p];
+    it->slot = pair_slot[p];
+    for (int k = 0; k < 3; ++k) it->brick[k] = slot_brick[3 * it->slot + k];
+    OvRange r = ranges[it->triangle];
+    ov_pair_work(r, it->brick[0], it->brick[1], it->brick[2], brick_size, nx, ny, nz, &it->work);
+    uint index_in_pair = item - pair_first_item[p];
+    uint cx = (uint)it->work.block_count[0], cy = (uint)it->work.block_count[1];
+    it->block[0] = it->work.block_lo[0] + (int)(index_in_pair % cx);
+    it->block[1] = it->work.block_lo[1] + (int)((index_in_pair / cx) % cy);
+    it->block[2] = it->work.block_lo[2] + (int)(index_in_pair / (cx * cy));
+    return 1;
+}
+
+static void store_block(__global uint* bits, const Item* it, int brick_size, uint mask_lo,
+                        uint mask_hi) {
+    int nb = brick_size / 4;
+    int bx = it->block[0] - it->brick[0] * nb;
+    int by = it->block[1] - it->brick[1] * nb;
+    int bz = it->block[2] - it->brick[2] * nb;
+    size_t words_per_brick = 2 * (size_t)nb * nb * nb;
+    size_t word = it->slot * words_per_brick + 2 * (size_t)(bx + nb * (by + nb * bz));
+    if (mask_lo) atomic_or(&bits[word], mask_lo);
+    if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
+}
+
+// The voxel loop is written out once per test; OV_TEST names the overlap function.
+#define OV_VOXEL_LOOP(OV_TEST, setup)                                                        \
+    uint mask_lo = 0, mask_hi = 0;                                                           \
+    int lo[3], hi[3];                                                                        \
+    for (int k = 0; k < 3; ++k) {                                                            \
+        lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                                   \
+        hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                               \
+    }                                                                                        \
+    for (int z = lo[2]; z <= hi[2]; ++z)                                                     \
+        for (int y = lo[1]; y <= hi[1]; ++y)                                                 \
+            for (int x = lo[0]; x <= hi[0]; ++x) {                                           \
+                if (!OV_TEST(&setup, (float)(x - setup.anchor[0]), (float)(y - setup.anchor[1]), \
+                             (float)(z - setup.anchor[2])))                                  \
+                    continue;                                                                \
+                int bit = ov_block_bit(x & 3, y & 3, z & 3);                                 \
+                if (bit < 32)                                                                \
+                    mask_lo |= 1u << bit;                                                    \
+                else                                                                         \
+                    mask_hi |= 1u << (bit - 32);                                             \
+            }                                                                                \
+    store_block(bits, &it, brick_size, mask_lo, mask_hi);
+
+__kernel void voxelize_sat(__global const OvSatTriangle* setups, __global const OvRange* ranges,
+                           __global const uint* pair_triangle, __global const uint* pair_slot,
+                           __global const uint* pair_first_item, uint pair_count,
+                           __global const int* slot_brick, uint item_base, uint item_end,
+                           int brick_size, int nx, int ny, int nz, __global uint* bits) {
+    Item it;
+    if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, ranges,
+                     item_base, item_end, brick_size, nx, ny, nz, &it))
+        return;
+    OvSatTriangle s = setups[it.triangle];
+    OV_VOXEL_LOOP(ov_sat_overlaps, s)
+}
+
+__kernel void voxelize_pef(__global const OvPefTriangle* setups, __global const OvRange* ranges,
+                           __global const uint* pair_triangle, __global const uint* pair_slot,
+                           __global const uint* pair_first_item, uint pair_count,
+                           __global const int* slot_brick, uint item_base, uint item_end,
+                           int brick_size, int nx, int ny, int nz, __global uint* bits) {
+    Item it;
+    if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, ranges,
+                     item_base, item_end, brick_size, nx, ny, nz, &it))
+        return;
+    OvPefTriangle s = setups[it.triangle];
+    OV_VOXEL_LOOP(ov_pef_overlaps, s)
+}

@@ -1,0 +1,234 @@
+// The overlap predicates (SAT and PEF, through the CPU reference) on hand-worked cases and
+// against the double-precision SAT on random triangles.
+#include <algorithm>
+
+#include "test_support.hpp"
+
+namespace oclvox::test {
+namespace {
+
+const OverlapTest kTests[] = {OverlapTest::SAT, OverlapTest::PEF};
+
+SparseVoxels reference(const Mesh& m, const Grid& g, OverlapTest test, int brick = 8) {
+    VoxelizeOptions o;
+    o.test = test;
+    o.brick_size = brick;
+    return voxelize_reference(m, g, o);
+}
+
+std::vector<std::array<int64_t, 3>> sorted_voxels(const SparseVoxels& v) {
+    std::vector<std::array<int64_t, 3>> out;
+    v.for_each([&](int64_t i, int64_t j, int64_t k) { out.push_back({i, j, k}); });
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+class HandWorked : public ::testing::TestWithParam<OverlapTest> {};
+
+// Triangle in the plane z = 2 (a voxel face plane): both layers k = 1 and k = 2 are set. Its
+// footprint x, y >= 0.5, x + y <= 3 meets every column (i, j) in {0,1,2}^2 except (2, 2), whose
+// nearest corner has x + y = 4.
+TEST_P(HandWorked, FaceOnVoxelPlaneSetsBothLayers) {
+    Mesh m;
+    add_triangle(m, {0.5, 0.5, 2}, {2.5, 0.5, 2}, {0.5, 2.5, 2});
+    const SparseVoxels v = reference(m, unit_grid(4, 4, 4), GetParam());
+    EXPECT_EQ(v.count(), 16u);
+    for (int k : {1, 2})
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 3; ++i) EXPECT_EQ(v.get(i, j, k), !(i == 2 && j == 2));
+    EXPECT_FALSE(v.get(0, 0, 0));
+    EXPECT_FALSE(v.get(0, 0, 3));
+}
+
+// An edge on the voxel edge x = y = 2 (z from 0.5 to 2.5) touches the four columns around that
+// edge in layers 0..2; the rest of the triangle stays inside column (2, 2).
+TEST_P(HandWorked, EdgeOnVoxelEdgeSetsAllFourNeighbours) {
+    Mesh m;
+    add_triangle(m, {2, 2, 0.5}, {2, 2, 2.5}, {2.5, 2.5, 1.5});
+    const SparseVoxels v = reference(m, unit_grid(4, 4, 4), GetParam());
+    EXPECT_EQ(v.count(), 12u);
+    for (int k = 0; k < 3; ++k)
+        for (int j = 1; j <= 2; ++j)
+            for (int i = 1; i <= 2; ++i) EXPECT_TRUE(v.get(i, j, k)) << i << j << k;
+}
+
+// A vertex on the voxel corner (2, 2, 2) touches all eight voxels sharing it; the small triangle
+// body lies in voxel (2, 2, 2).
+TEST_P(HandWorked, VertexOnVoxelCornerSetsAllEightNeighbours) {
+    Mesh m;
+    add_triangle(m, {2, 2, 2}, {2.3, 2.1, 2.2}, {2.1, 2.3, 2.25});
+    const SparseVoxels v = reference(m, unit_grid(4, 4, 4), GetParam());
+    EXPECT_EQ(v.count(), 8u);
+    for (int k = 1; k <= 2; ++k)
+        for (int j = 1; j <= 2; ++j)
+            for (int i = 1; i <= 2; ++i) EXPECT_TRUE(v.get(i, j, k));
+}
+
+// Closed cube [1, 5]^3 in an 8^3 grid: voxels 0..5 on each axis meet the closed cube (6^3 = 216);
+// the 2^3 voxels inside the open cube do not touch its surface: 208.
+TEST_P(HandWorked, AxisAlignedCubeHasExactCount) {
+    const SparseVoxels v = reference(box_mesh({1, 1, 1}, {5, 5, 5}), unit_grid(8, 8, 8), GetParam());
+    EXPECT_EQ(v.count(), 208u);
+    EXPECT_FALSE(v.get(2, 3, 3));
+    EXPECT_TRUE(v.get(0, 0, 0));  // touches the cube's corner (1, 1, 1)
+    EXPECT_FALSE(v.get(6, 6, 6));
+}
+
+// The same cube scaled by 2^-100 and moved by 2^40 voxels: grid coordinates are computed exactly
+// in double, so the counts do not change.
+TEST_P(HandWorked, TinyAndHugeCoordinatesGiveTheSameCube) {
+    const double tiny = std::ldexp(1.0, -100);
+    Grid g = unit_grid(8, 8, 8);
+    g.voxel_size = tiny;
+    EXPECT_EQ(reference(box_mesh({tiny, tiny, tiny}, {5 * tiny, 5 * tiny, 5 * tiny}), g, GetParam())
+                  .count(),
+              208u);
+    const double far = std::ldexp(1.0, 40);
+    Grid h = unit_grid(8, 8, 8);
+    h.origin = {far, -far, far};
+    EXPECT_EQ(reference(box_mesh({far + 1, -far + 1, far + 1}, {far + 5, -far + 5, far + 5}), h,
+                        GetParam())
+                  .count(),
+              208u);
+}
+
+// Degenerate triangles are still geometry: a point, a segment (repeated vertex) and three
+// collinear points along the diagonal through voxel corners (1,1,1) and (2,2,2).
+TEST_P(HandWorked, DegenerateTrianglesMarkWhatTheyTouch) {
+    Mesh point, point_on_face, segment, diagonal;
+    add_triangle(point, {1.5, 1.5, 1.5}, {1.5, 1.5, 1.5}, {1.5, 1.5, 1.5});
+    add_triangle(point_on_face, {2, 1.5, 1.5}, {2, 1.5, 1.5}, {2, 1.5, 1.5});
+    add_triangle(segment, {0.5, 0.5, 0.5}, {2.5, 0.5, 0.5}, {2.5, 0.5, 0.5});
+    add_triangle(diagonal, {0.5, 0.5, 0.5}, {1.5, 1.5, 1.5}, {2.5, 2.5, 2.5});
+    const Grid g = unit_grid(4, 4, 4);
+    EXPECT_EQ(reference(point, g, GetParam()).count(), 1u);
+    EXPECT_EQ(reference(point_on_face, g, GetParam()).count(), 2u);
+    const SparseVoxels s = reference(segment, g, GetParam());
+    EXPECT_EQ(s.count(), 3u);
+    EXPECT_TRUE(s.get(0, 0, 0) && s.get(1, 0, 0) && s.get(2, 0, 0));
+    // {0,1}^3 around corner (1,1,1) and {1,2}^3 around (2,2,2) share voxel (1,1,1).
+    EXPECT_EQ(reference(diagonal, g, GetParam()).count(), 15u);
+}
+
+INSTANTIATE_TEST_SUITE_P(BothTests, HandWorked, ::testing::ValuesIn(kTests),
+                         [](const auto& info) { return std::string(to_string(info.param)); });
+
+class Random : public ::testing::TestWithParam<OverlapTest> {};
+
+// Random triangles of all sizes (slivers included): within 1e-4 voxels the result is exactly the
+// set of voxels the double-precision SAT finds.
+TEST_P(Random, ResultIsExactUpToRounding) {
+    const Grid g = unit_grid(24, 20, 22);
+    for (uint32_t seed = 1; seed <= 3; ++seed) {
+        const Mesh m = random_triangles(150, -2, 24, seed * 2.5, seed);
+        expect_exact_up_to(reference(m, g, GetParam()), m, 1e-4);
+    }
+}
+
+// Triangles whose vertices sit on a coarse lattice hit voxel faces, edges and corners exactly.
+TEST_P(Random, LatticeTrianglesAreExactUpToRounding) {
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<int> coord(0, 32);
+    Mesh m;
+    for (int t = 0; t < 300; ++t) {
+        Vec3d p[3];
+        for (auto& v : p)
+            for (double& x : v) x = coord(rng) * 0.25;
+        add_triangle(m, p[0], p[1], p[2]);
+    }
+    expect_exact_up_to(reference(m, unit_grid(8, 8, 8), GetParam()), m, 1e-4);
+}
+
+// Every point sampled densely on every triangle lies in a set voxel (or within rounding of one).
+TEST_P(Random, SampledSurfacePointsLieInSetVoxels) {
+    const Grid g = unit_grid(16, 16, 16);
+    const Mesh m = random_triangles(60, 0, 16, 6, 11);
+    const SparseVoxels v = reference(m, g, GetParam());
+    const int n = 40;
+    for (const auto& tri : m.triangles)
+        for (int a = 0; a <= n; ++a)
+            for (int b = 0; a + b <= n; ++b) {
+                Vec3d p;
+                for (int k = 0; k < 3; ++k)
+                    p[k] = (m.positions[tri[0]][k] * (n - a - b) + m.positions[tri[1]][k] * a +
+                            m.positions[tri[2]][k] * b) /
+                           n;
+                bool found = false;
+                for (int dz = -1; dz <= 1 && !found; ++dz)
+                    for (int dy = -1; dy <= 1 && !found; ++dy)
+                        for (int dx = -1; dx <= 1 && !found; ++dx) {
+                            const int64_t i = int64_t(std::floor(p[0])) + dx;
+                            const int64_t j = int64_t(std::floor(p[1])) + dy;
+                            const int64_t k = int64_t(std::floor(p[2])) + dz;
+                            const double e = 1e-5;
+                            found = v.get(i, j, k) && p[0] >= i - e && p[0] <= i + 1 + e &&
+                                    p[1] >= j - e && p[1] <= j + 1 + e && p[2] >= k - e &&
+                                    p[2] <= k + 1 + e;
+                        }
+                if (p[0] < 0 || p[1] < 0 || p[2] < 0 || p[0] > 16 || p[1] > 16 || p[2] > 16)
+                    continue;  // outside the grid
+                ASSERT_TRUE(found) << "sample " << p[0] << "," << p[1] << "," << p[2];
+            }
+}
+
+INSTANTIATE_TEST_SUITE_P(BothTests, Random, ::testing::ValuesIn(kTests),
+                         [](const auto& info) { return std::string(to_string(info.param)); });
+
+// SAT and PEF are the same predicate in exact arithmetic: on random and on lattice triangles
+// they disagree only on voxels that touch a triangle to within rounding.
+TEST(SatVersusPef, DisagreeOnlyOnTouchingVoxels) {
+    const Grid g = unit_grid(24, 24, 24);
+    const Mesh m = random_triangles(400, 0, 24, 5, 21);
+    expect_differ_only_where_touching(reference(m, g, OverlapTest::SAT),
+                                      reference(m, g, OverlapTest::PEF), m, 1e-4);
+}
+
+// Vertex order within a triangle changes the float evaluation but not the set, except at
+// rounding-level touching.
+TEST(Permutation, VertexOrderOnlyMattersAtRounding) {
+    const Grid g = unit_grid(20, 20, 20);
+    const Mesh m = random_triangles(200, 0, 20, 4, 5);
+    Mesh rotated = m;
+    for (auto& t : rotated.triangles) t = {t[1], t[2], t[0]};
+    for (OverlapTest test : kTests)
+        expect_differ_only_where_touching(reference(m, g, test), reference(rotated, g, test), m,
+                                          1e-4);
+}
+
+// Moving a mesh whose coordinates are multiples of 2^-10 by whole voxels moves the anchors and
+// leaves the anchor-relative float triangles bit-identical, so the voxels move exactly.
+TEST(Translation, WholeVoxelShiftMovesVoxelsExactly) {
+    Mesh m = random_triangles(200, 5, 14, 3, 9);
+    for (auto& p : m.positions)
+        for (double& x : p) x = std::round(x * 1024) / 1024;
+    Mesh shifted = m;
+    for (auto& p : shifted.positions) {
+        p[0] += 3;
+        p[1] += 5;
+        p[2] -= 2;
+    }
+    for (OverlapTest test : kTests) {
+        const SparseVoxels a = reference(m, unit_grid(24, 24, 24), test);
+        const SparseVoxels b = reference(shifted, unit_grid(24, 24, 24), test);
+        uint64_t moved = 0;
+        a.for_each([&](int64_t i, int64_t j, int64_t k) {
+            // Voxels shifted out of the grid are lost; all others must reappear shifted.
+            if (i + 3 < 24 && j + 5 < 24 && k - 2 >= 0) {
+                EXPECT_TRUE(b.get(i + 3, j + 5, k - 2));
+                ++moved;
+            }
+        });
+        uint64_t in_b = 0;
+        b.for_each([&](int64_t i, int64_t j, int64_t k) {
+            if (i - 3 >= 0 && j - 5 >= 0 && k + 2 < 24) {
+                EXPECT_TRUE(a.get(i - 3, j - 5, k + 2));
+                ++in_b;
+            }
+        });
+        EXPECT_GT(moved, 100u);
+        EXPECT_EQ(moved, in_b);
+    }
+}
+
+}  // namespace
+}  // namespace oclvox::test

@@ -1,0 +1,156 @@
+// The OpenCL path: device results equal the CPU reference bit for bit, for every brick size,
+// budget and triangle order, on random and real meshes.
+#include <algorithm>
+
+#include "test_support.hpp"
+
+namespace oclvox::test {
+namespace {
+
+const OverlapTest kTests[] = {OverlapTest::SAT, OverlapTest::PEF};
+
+Device& device() {
+    static Device d = Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    return d;
+}
+
+VoxelizeOptions options(OverlapTest test, int brick = 16) {
+    VoxelizeOptions o;
+    o.test = test;
+    o.brick_size = brick;
+    return o;
+}
+
+void expect_same(const SparseVoxels& device_result, const SparseVoxels& reference) {
+    EXPECT_EQ(device_result.count(), reference.count());
+    EXPECT_TRUE(device_result.same_voxels(reference));
+}
+
+class DeviceMatchesReference : public ::testing::TestWithParam<OverlapTest> {};
+
+TEST_P(DeviceMatchesReference, OnRandomTrianglesOfAllSizes) {
+    const Grid g = unit_grid(40, 33, 47);
+    for (uint32_t seed = 1; seed <= 3; ++seed) {
+        const Mesh m = random_triangles(400, -3, 45, seed * seed * 2.0, seed);
+        expect_same(device().voxelize(m, g, options(GetParam())),
+                    voxelize_reference(m, g, options(GetParam())));
+    }
+}
+
+TEST_P(DeviceMatchesReference, OnHandWorkedCube) {
+    const Mesh m = box_mesh({1, 1, 1}, {5, 5, 5});
+    const SparseVoxels v = device().voxelize(m, unit_grid(8, 8, 8), options(GetParam(), 4));
+    EXPECT_EQ(v.count(), 208u);
+}
+
+TEST_P(DeviceMatchesReference, OnSpotAndTheCadPart) {
+    for (const char* name : {"spot.obj", "TR12J_OCC.stl"}) {
+        const Mesh m = load_mesh(mesh_path(name));
+        GridFit fit;
+        fit.resolution = 64;
+        const Grid g = fit_grid(m, fit);
+        expect_same(device().voxelize(m, g, options(GetParam(), 32)),
+                    voxelize_reference(m, g, options(GetParam(), 32)));
+    }
+}
+
+// The result does not depend on brick size or on the device budget (which decides how many
+// bricks share a batch): a 96^3 grid in bricks of 4..96 and with a budget of a single brick.
+TEST_P(DeviceMatchesReference, ForEveryBrickSizeAndBudget) {
+    const Grid g = unit_grid(96, 80, 90);
+    const Mesh m = random_triangles(300, 0, 90, 20, 17);
+    const SparseVoxels ref = voxelize_reference(m, g, options(GetParam()));
+    for (int brick : {4, 8, 12, 32, 96}) {
+        VoxelizeStats stats;
+        expect_same(device().voxelize(m, g, options(GetParam(), brick), &stats), ref);
+        EXPECT_EQ(stats.voxels_set, ref.count());
+    }
+    VoxelizeOptions tight = options(GetParam(), 16);
+    tight.device_budget_bytes = 16 * 16 * 16 / 8;  // exactly one brick per batch
+    VoxelizeStats stats;
+    expect_same(device().voxelize(m, g, tight, &stats), ref);
+    EXPECT_EQ(stats.batches, stats.bricks_active);
+}
+
+// Shuffling the triangle order changes the binning and the order of atomic ORs, never the bits.
+TEST_P(DeviceMatchesReference, ForShuffledTriangles) {
+    const Grid g = unit_grid(32, 32, 32);
+    Mesh m = random_triangles(300, 0, 32, 6, 23);
+    const SparseVoxels before = device().voxelize(m, g, options(GetParam()));
+    std::mt19937 rng(3);
+    std::shuffle(m.triangles.begin(), m.triangles.end(), rng);
+    expect_same(device().voxelize(m, g, options(GetParam())), before);
+}
+
+INSTANTIATE_TEST_SUITE_P(BothTests, DeviceMatchesReference, ::testing::ValuesIn(kTests),
+                         [](const auto& info) { return std::string(to_string(info.param)); });
+
+// A grid whose dense bit array is 64x the device budget still works, in many batches, and the
+// bunny's surface is exact up to rounding against the double-precision test.
+TEST(Tiling, GridLargerThanDeviceBudget) {
+    const Mesh m = load_mesh(mesh_path("bunny00.off"));
+    GridFit fit;
+    fit.resolution = 256;
+    const Grid g = fit_grid(m, fit);
+    VoxelizeOptions o = options(OverlapTest::PEF, 32);
+    o.device_budget_bytes = g.voxel_count() / 8 / 64;
+    VoxelizeStats stats;
+    const SparseVoxels v = device().voxelize(m, g, o, &stats);
+    EXPECT_GT(stats.batches, 8u);
+    EXPECT_LT(stats.bricks_active, stats.bricks_total);  // empty space costs nothing
+    expect_exact_up_to(v, m, 1e-4);
+}
+
+// One huge triangle across a 512^3 grid is spread over many bricks and work items, and the
+// binning culls the bricks it passes by.
+TEST(Tiling, HugeTriangleIsSpreadAndCulled) {
+    Mesh m;
+    add_triangle(m, {0, 0, 0}, {512, 0, 512}, {0, 512, 512});
+    VoxelizeStats stats;
+    const Grid g = unit_grid(512, 512, 512);
+    const SparseVoxels v = device().voxelize(m, g, options(OverlapTest::SAT, 64), &stats);
+    EXPECT_LT(stats.brick_pairs, 8u * 8u * 8u);  // culled below the bounding box's 512 bricks
+    EXPECT_GT(stats.work_items, 1000u);
+    // Plane x + y - z = 0 (restricted to the triangle): sample the known answer on a few voxels.
+    EXPECT_TRUE(v.get(0, 0, 0));
+    EXPECT_TRUE(v.get(100, 100, 200));
+    EXPECT_FALSE(v.get(100, 100, 100));
+    expect_same(v, voxelize_reference(m, g, options(OverlapTest::SAT, 64)));
+}
+
+// Progress is reported per batch and a false return cancels.
+TEST(Progress, ReportsBatchesAndCancels) {
+    const Grid g = unit_grid(64, 64, 64);
+    const Mesh m = random_triangles(200, 0, 64, 10, 2);
+    VoxelizeOptions o = options(OverlapTest::PEF, 8);
+    o.device_budget_bytes = 8 * 8 * 8 / 8 * 4;
+    uint64_t calls = 0, last = 0;
+    o.progress = [&](uint64_t done, uint64_t total) {
+        ++calls;
+        EXPECT_GT(done, last);
+        EXPECT_LE(done, total);
+        last = done;
+        return true;
+    };
+    VoxelizeStats stats;
+    device().voxelize(m, g, o, &stats);
+    EXPECT_EQ(calls, stats.batches);
+    EXPECT_EQ(last, stats.bricks_active);
+    o.progress = [](uint64_t, uint64_t) { return false; };
+    EXPECT_THROW(device().voxelize(m, g, o), Cancelled);
+}
+
+TEST(Tiling, AbsurdGridIsRefusedBeforeAllocating) {
+    const Grid g = unit_grid(kMaxGridAxis, kMaxGridAxis, kMaxGridAxis);
+    const Mesh m = box_mesh({0, 0, 0}, {double(kMaxGridAxis), double(kMaxGridAxis), 1});
+    EXPECT_THROW(device().voxelize(m, g, options(OverlapTest::PEF, 8)), GridError);
+}
+
+TEST(Devices, MissingDeviceIsAnErrorNotAFallback) {
+    EXPECT_THROW(Device::open("no-such-device-anywhere"), DeviceError);
+    EXPECT_FALSE(list_devices().empty());
+    EXPECT_NO_THROW(Device::open(list_devices().front().id));
+}
+
+}  // namespace
+}  // namespace oclvox::test
