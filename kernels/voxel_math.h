@@ -48,6 +48,7 @@ typedef struct {
     int anchor[3];
     float normal[3];
     float normal_lo, normal_hi;
+    float block_lo, block_hi;
     float axis[9][2];
     float axis_lo[9], axis_hi[9];
 } OvSatTriangle;
@@ -59,6 +60,7 @@ typedef struct {
     int anchor[3];
     float normal[3];
     float d1, d2;
+    float block_lo, block_hi;
     float edge_normal[3][3][2];
     float edge_offset[3][3];
 } OvPefTriangle;
@@ -81,6 +83,33 @@ OV_FN OvRange ov_triangle_range(OvTriangle t) {
 OV_FN float ov_edge(OvTriangle t, int j, int k) {
     int next = j == 2 ? 0 : j + 1;
     return t.u[3 * next + k] - t.u[3 * j + k];
+}
+
+// Triangle normal f_0 x f_1 (zero for a degenerate triangle).
+OV_FN void ov_normal(OvTriangle t, float n[3]) {
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        n[k] = ov_edge(t, 0, a1) * ov_edge(t, 1, a2) - ov_edge(t, 0, a2) * ov_edge(t, 1, a1);
+    }
+}
+
+// Block cull: a 4x4x4 block whose minimum corner is q0 is skipped iff dot(n, q0) < *lo or > *hi,
+// i.e. the whole block [q0, q0 + 4] lies on one side of the triangle's plane. The cull only saves
+// work: it is widened by a margin far above float rounding so it never drops a voxel the per-voxel
+// test would set (device == reference tests hold it to that).
+OV_FN void ov_block_cull(OvTriangle t, const float n[3], float* lo, float* hi) {
+    float p0 = n[0] * t.u[0] + n[1] * t.u[1] + n[2] * t.u[2];
+    float p1 = n[0] * t.u[3] + n[1] * t.u[4] + n[2] * t.u[5];
+    float p2 = n[0] * t.u[6] + n[1] * t.u[7] + n[2] * t.u[8];
+    float box_lo = 4.0f * (fmin(n[0], 0.0f) + fmin(n[1], 0.0f) + fmin(n[2], 0.0f));
+    float box_hi = 4.0f * (fmax(n[0], 0.0f) + fmax(n[1], 0.0f) + fmax(n[2], 0.0f));
+    float reach = 8.0f;
+    for (int i = 0; i < 9; ++i) reach = fmax(reach, fabs(t.u[i]) + 8.0f);
+    float tmin = ov_min3(p0, p1, p2), tmax = ov_max3(p0, p1, p2);
+    float margin = 1e-5f * ((box_hi - box_lo) * reach + fabs(tmin) + fabs(tmax));
+    *lo = tmin - box_hi - margin;
+    *hi = tmax - box_lo + margin;
 }
 
 OV_FN OvSatTriangle ov_setup_sat(OvTriangle t) {
@@ -108,14 +137,11 @@ OV_FN OvSatTriangle ov_setup_sat(OvTriangle t) {
         }
     }
 
-    // Triangle normal f_0 x f_1. For a degenerate triangle it is zero and the test passes, which
-    // leaves the segment (or point) to the edge axes and the range, as a segment/box SAT needs.
+    // Triangle normal. For a degenerate triangle it is zero and the test passes, which leaves the
+    // segment (or point) to the edge axes and the range, as a segment/box SAT needs.
     float n[3];
-    for (int k = 0; k < 3; ++k) {
-        int a1 = k == 2 ? 0 : k + 1;
-        int a2 = a1 == 2 ? 0 : a1 + 1;
-        n[k] = ov_edge(t, 0, a1) * ov_edge(t, 1, a2) - ov_edge(t, 0, a2) * ov_edge(t, 1, a1);
-    }
+    ov_normal(t, n);
+    ov_block_cull(t, n, &s.block_lo, &s.block_hi);
     float p0 = n[0] * t.u[0] + n[1] * t.u[1] + n[2] * t.u[2];
     float p1 = n[0] * t.u[3] + n[1] * t.u[4] + n[2] * t.u[5];
     float p2 = n[0] * t.u[6] + n[1] * t.u[7] + n[2] * t.u[8];
@@ -150,12 +176,9 @@ OV_FN OvPefTriangle ov_setup_pef(OvTriangle t) {
     for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
 
     float n[3];
-    for (int k = 0; k < 3; ++k) {
-        int a1 = k == 2 ? 0 : k + 1;
-        int a2 = a1 == 2 ? 0 : a1 + 1;
-        n[k] = ov_edge(t, 0, a1) * ov_edge(t, 1, a2) - ov_edge(t, 0, a2) * ov_edge(t, 1, a1);
-        s.normal[k] = n[k];
-    }
+    ov_normal(t, n);
+    for (int k = 0; k < 3; ++k) s.normal[k] = n[k];
+    ov_block_cull(t, n, &s.block_lo, &s.block_hi);
     // Critical corner c of the unit box: the corner furthest along n. The box meets the plane iff
     // n.q + d1 and n.q + d2 do not have the same strict sign.
     float c[3];

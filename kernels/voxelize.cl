@@ -76,6 +76,10 @@ static void store_block(__global uint* bits, const Item* it, int brick_size, uin
 
 // The voxel loop is written out once per test; OV_TEST names the overlap function.
 #define OV_VOXEL_LOOP(OV_TEST, setup)                                                        \
+    float block_dn = setup.normal[0] * (float)(it.block[0] * 4 - setup.anchor[0]) +          \
+                     setup.normal[1] * (float)(it.block[1] * 4 - setup.anchor[1]) +          \
+                     setup.normal[2] * (float)(it.block[2] * 4 - setup.anchor[2]);           \
+    if (block_dn < setup.block_lo || block_dn > setup.block_hi) return;                      \
     uint mask_lo = 0, mask_hi = 0;                                                           \
     int lo[3], hi[3];                                                                        \
     for (int k = 0; k < 3; ++k) {                                                            \
