@@ -1,0 +1,268 @@
+#!/usr/bin/env bash
+# Behaviour of the oclvox command-line tool: outputs in every format, the stats JSON against the
+# voxels actually written, device against CPU reference, and error cases that must fail with a
+# message naming the problem and leave no output behind.
+#
+# Environment: OCLVOX (the binary), OCLVOX_SAMPLE_DIR (holds spot.obj).
+set -u
+
+: "${OCLVOX:?set OCLVOX to the oclvox binary}"
+: "${OCLVOX_SAMPLE_DIR:?set OCLVOX_SAMPLE_DIR to the folder holding spot.obj}"
+MESH="$OCLVOX_SAMPLE_DIR/spot.obj"
+
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+
+passed=0
+failed=0
+pass() {
+    echo "PASS  $1"
+    passed=$((passed + 1))
+}
+fail() {
+    echo "FAIL  $1"
+    [ $# -gt 1 ] && printf '      %s\n' "$2"
+    failed=$((failed + 1))
+}
+
+# Runs oclvox with the given arguments; leaves its exit code, stdout and stderr in RC, OUT, ERR.
+run() {
+    "$OCLVOX" "$@" >"$WORK/stdout" 2>"$WORK/stderr"
+    RC=$?
+    OUT=$(cat "$WORK/stdout")
+    ERR=$(cat "$WORK/stderr")
+}
+
+# Count of voxels set in a uint8 .npy file; also fails on any value other than 0 or 1.
+npy_ones() {
+    python3 - "$1" <<'EOF'
+import struct, sys
+data = open(sys.argv[1], "rb").read()
+assert data[:6] == b"\x93NUMPY", "not an npy file"
+header_len = struct.unpack("<H", data[8:10])[0]
+body = data[10 + header_len:]
+assert set(body) <= {0, 1}, "values other than 0 and 1"
+print(sum(body))
+EOF
+}
+
+# A JSON field (dotted path; lists come out comma-separated), or "invalid" if the file is not
+# valid JSON.
+json_field() {
+    python3 -c '
+import json, sys
+try:
+    value = json.load(open(sys.argv[1]))
+except Exception:
+    print("invalid"); sys.exit()
+for key in sys.argv[2].split("."):
+    value = value[key]
+print(",".join(map(str, value)) if isinstance(value, list) else value)' "$1" "$2"
+}
+
+# expect_failure NAME OUTPUT PATTERN ARGS...: non-zero exit, stderr matches PATTERN
+# (case-insensitive extended regex), and neither OUTPUT nor a temporary file beside it exists.
+expect_failure() {
+    local name=$1 output=$2 pattern=$3
+    shift 3
+    run "$@"
+    local leftovers
+    leftovers=$(find "$(dirname "$output")" -maxdepth 1 -name "*$(basename "$output")*" 2>/dev/null)
+    if [ "$RC" -eq 0 ]; then
+        fail "$name" "exit code 0"
+    elif ! grep -qiE "$pattern" <<<"$ERR"; then
+        fail "$name" "stderr does not match '$pattern': $ERR"
+    elif [ -n "$leftovers" ]; then
+        fail "$name" "left output behind: $leftovers"
+    else
+        pass "$name (exit $RC: $(head -n1 <<<"$ERR"))"
+    fi
+}
+
+if [ ! -s "$MESH" ]; then
+    fail "sample mesh $MESH exists"
+    echo "$passed passed, $failed failed"
+    exit 1
+fi
+
+# ---- basics -------------------------------------------------------------------------------------
+run --version
+if [ "$RC" -eq 0 ] && grep -qE '^oclvox [0-9]' <<<"$OUT"; then pass "--version ($OUT)"; else
+    fail "--version" "rc=$RC out=$OUT"
+fi
+
+run devices
+if [ "$RC" -eq 0 ] && grep -qE '^[0-9]+:[0-9]+ ' <<<"$OUT" && grep -q 'platform' <<<"$OUT"; then
+    pass "devices lists at least one P:D device"
+else
+    fail "devices" "rc=$RC out=$OUT err=$ERR"
+fi
+
+run
+if [ "$RC" -eq 2 ]; then pass "no command is a usage error (exit 2)"; else fail "no command" "rc=$RC"; fi
+
+# ---- every output format ------------------------------------------------------------------------
+for ext in binvox npy vox obj ply; do
+    out="$WORK/spot.$ext"
+    run voxelize "$MESH" -r 32 -o "$out"
+    if [ "$RC" -eq 0 ] && [ -s "$out" ]; then pass "voxelize to .$ext"; else
+        fail "voxelize to .$ext" "rc=$RC err=$ERR"
+    fi
+done
+head -c 7 "$WORK/spot.binvox" | grep -q '#binvox' && pass ".binvox header" || fail ".binvox header"
+head -c 4 "$WORK/spot.vox" | grep -q 'VOX ' && pass ".vox header" || fail ".vox header"
+grep -q '^v ' "$WORK/spot.obj" && grep -q '^f ' "$WORK/spot.obj" && pass ".obj has cube faces" ||
+    fail ".obj has cube faces"
+if [ "$(json_field "$WORK/spot.npy.json" voxel_size)" != invalid ]; then
+    pass ".npy.json sidecar"
+else
+    fail ".npy.json sidecar"
+fi
+
+# The last run above was not --quiet and its stderr is a file: a summary, no progress bar.
+if grep -qE '\([0-9]+ triangles\)' <<<"$OUT" && grep -qE 'voxels +[1-9][0-9]* set' <<<"$OUT" &&
+    grep -q 'spot.ply' <<<"$OUT" && [ -z "$ERR" ]; then
+    pass "summary on stdout, nothing on a non-terminal stderr"
+else
+    fail "summary" "out=$OUT err=$ERR"
+fi
+
+# ---- stats JSON against the voxels written ------------------------------------------------------
+run voxelize "$MESH" -r 32 -o "$WORK/device.npy" --stats-json "$WORK/device.json" --quiet
+device_ones=$(npy_ones "$WORK/device.npy")
+device_set=$(json_field "$WORK/device.json" voxels_set)
+if [ "$RC" -eq 0 ] && [ -z "$OUT" ]; then pass "--quiet prints nothing"; else
+    fail "--quiet" "rc=$RC out=$OUT"
+fi
+if [ "$device_set" != invalid ] && [ "$device_set" -gt 0 ] 2>/dev/null &&
+    [ "$device_set" = "$device_ones" ]; then
+    pass "--stats-json voxels_set ($device_set) equals the ones in the .npy"
+else
+    fail "--stats-json voxels_set" "json=$device_set npy=$device_ones"
+fi
+dims=$(json_field "$WORK/device.json" grid.dims)
+longest=$(tr , '\n' <<<"$dims" | sort -n | tail -n1)
+if [ "$longest" = 32 ] && [ "$(json_field "$WORK/device.json" backend)" = opencl ]; then
+    pass "--stats-json grid $dims, longest axis 32, backend opencl"
+else
+    fail "--stats-json grid" "dims=$dims"
+fi
+
+run voxelize "$MESH" -r 32 -o "$WORK/reference.npy" --reference --stats-json "$WORK/reference.json"
+reference_ones=$(npy_ones "$WORK/reference.npy")
+if [ "$RC" -eq 0 ] && [ "$reference_ones" = "$device_ones" ] &&
+    cmp -s "$WORK/reference.npy" "$WORK/device.npy"; then
+    pass "--reference sets the same $reference_ones voxels as the device"
+else
+    fail "--reference" "rc=$RC reference=$reference_ones device=$device_ones err=$ERR"
+fi
+grep -q 'CPU reference' <<<"$OUT" && pass "summary names the CPU reference" ||
+    fail "summary names the CPU reference" "$OUT"
+
+run voxelize "$MESH" -r 32 --test sat -o "$WORK/sat.npy" --stats
+sat_ones=$(npy_ones "$WORK/sat.npy")
+if [ "$RC" -eq 0 ] && [ "$sat_ones" -gt 0 ] 2>/dev/null && grep -q 'kernels' <<<"$OUT" &&
+    grep -q 'triangles/s' <<<"$OUT"; then
+    pass "--test sat --stats ($sat_ones voxels; pef set $device_ones)"
+else
+    fail "--test sat --stats" "rc=$RC ones=$sat_ones out=$OUT err=$ERR"
+fi
+
+run voxelize "$MESH" -r 16 --cubic -o "$WORK/cubic.npy" --stats-json "$WORK/cubic.json" -q
+dims=$(json_field "$WORK/cubic.json" grid.dims)
+[ "$dims" = 16,16,16 ] && pass "--cubic -r 16 gives 16x16x16" || fail "--cubic" "dims=$dims"
+
+run voxelize "$MESH" --voxel-size 0.1 --origin -1,-1,-1 --dims 20,20,20 --pad 2 -q \
+    -o "$WORK/explicit.npy" --stats-json "$WORK/explicit.json"
+dims=$(json_field "$WORK/explicit.json" grid.dims)
+origin=$(json_field "$WORK/explicit.json" grid.origin | cut -d, -f1)
+if [ "$dims" = 24,24,24 ] && python3 -c "import sys; sys.exit(abs($origin + 1.2) > 1e-9)"; then
+    pass "--voxel-size --origin --dims --pad give a 24^3 grid at -1.2"
+else
+    fail "explicit grid" "rc=$RC dims=$dims origin=$origin err=$ERR"
+fi
+
+# A terminal gets a progress bar (script(1) gives the command a pseudo-terminal).
+if command -v script >/dev/null; then
+    script -qec "'$OCLVOX' voxelize '$MESH' -r 32 -o '$WORK/tty.binvox'" /dev/null \
+        >"$WORK/tty.log" 2>&1
+    grep -q 'voxelizing \[' "$WORK/tty.log" && pass "progress bar on a terminal" ||
+        fail "progress bar on a terminal" "$(cat "$WORK/tty.log")"
+fi
+
+# ---- errors -------------------------------------------------------------------------------------
+printf 'hello\nthis is not an obj file \x01\x02\xff\n' >"$WORK/garbage.obj"
+: >"$WORK/empty.obj"
+printf 'v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n' >"$WORK/nan.obj"
+cp "$MESH" "$WORK/mesh.xyz"
+o="$WORK/err.binvox"
+
+expect_failure "missing input" "$o" 'no-such-mesh' voxelize "$WORK/no-such-mesh.obj" -o "$o"
+expect_failure "empty input file" "$o" 'empty|triangle' voxelize "$WORK/empty.obj" -o "$o"
+expect_failure "garbage .obj" "$o" 'garbage|triangle|parse' voxelize "$WORK/garbage.obj" -o "$o"
+expect_failure "NaN coordinate" "$o" 'nan|finite' voxelize "$WORK/nan.obj" -o "$o"
+expect_failure "unknown input extension" "$o" 'xyz' voxelize "$WORK/mesh.xyz" -o "$o"
+expect_failure "unknown output extension" "$WORK/out.xyz" 'xyz' voxelize "$MESH" -o "$WORK/out.xyz"
+expect_failure "output into a missing folder" "$WORK/missing/out.binvox" 'missing.*not exist' \
+    voxelize "$MESH" -o "$WORK/missing/out.binvox"
+expect_failure "--stats-json into a missing folder" "$o" 'missing.*not exist' \
+    voxelize "$MESH" -o "$o" --stats-json "$WORK/missing/stats.json"
+expect_failure "-r 0" "$o" 'resolution' voxelize "$MESH" -r 0 -o "$o"
+expect_failure "-r 100000000" "$o" 'resolution' voxelize "$MESH" -r 100000000 -o "$o"
+expect_failure "--resolution=-5" "$o" 'resolution' voxelize "$MESH" --resolution=-5 -o "$o"
+expect_failure "--voxel-size nan" "$o" 'voxel-size' voxelize "$MESH" --voxel-size nan -o "$o"
+expect_failure "--origin 1,2" "$o" 'origin' voxelize "$MESH" --origin 1,2 -o "$o"
+expect_failure "--origin 1,2,nan" "$o" 'origin' voxelize "$MESH" --origin 1,2,nan -o "$o"
+expect_failure "--dims 8,0,8" "$o" 'dims' voxelize "$MESH" --dims 8,0,8 -o "$o"
+expect_failure "--brick-size 6" "$o" 'brick-size' voxelize "$MESH" --brick-size 6 -o "$o"
+expect_failure "--test foo" "$o" 'foo|--test' voxelize "$MESH" --test foo -o "$o"
+expect_failure "--device no-such-device" "$o" 'no-such-device' \
+    voxelize "$MESH" -r 32 --device no-such-device -o "$o"
+OCLVOX_DEVICE=no-such-device expect_failure "OCLVOX_DEVICE=no-such-device" "$o" 'no-such-device' \
+    voxelize "$MESH" -r 32 -o "$o"
+
+# With no OpenCL platform (an empty ICD folder for the ocl-icd loader) devices fail clearly and
+# the CPU reference still works.
+mkdir "$WORK/no-icds"
+OCL_ICD_VENDORS="$WORK/no-icds" expect_failure "devices without an OpenCL platform" "$o" 'platform' \
+    devices
+OCL_ICD_VENDORS="$WORK/no-icds" run voxelize "$MESH" -r 32 --reference -q -o "$WORK/no-icd.npy"
+[ "$RC" -eq 0 ] && [ "$(npy_ones "$WORK/no-icd.npy")" = "$reference_ones" ] &&
+    pass "--reference works without an OpenCL platform" ||
+    fail "--reference without an OpenCL platform" "rc=$RC err=$ERR"
+
+run voxelize "$MESH" -r 0 -o "$o"
+[ "$RC" -eq 2 ] && pass "bad option values are usage errors (exit 2)" || fail "-r 0 exit code" "rc=$RC"
+run voxelize "$WORK/no-such-mesh.obj" -o "$o"
+grep -q '^oclvox: error: ' <<<"$ERR" && [ "$RC" -eq 1 ] && pass "run errors: 'oclvox: error:', exit 1" ||
+    fail "run error format" "rc=$RC err=$ERR"
+
+# ---- Ctrl-C -------------------------------------------------------------------------------------
+# A run that voxelizes for about 3 s on PoCL, in many small batches, gets one SIGINT after 1 s,
+# sent to its whole process group as a terminal's Ctrl-C is (job control gives the run its own
+# group). It must stop cleanly; a watchdog kills it if it ignores the signal.
+(
+    set -m
+    "$OCLVOX" voxelize "$MESH" -r 2048 --device-memory 1 -o "$WORK/cancel.binvox" \
+        >"$WORK/stdout" 2>"$WORK/stderr" &
+    pid=$!
+    (sleep 30 && kill -KILL -- "-$pid") >/dev/null 2>&1 &
+    watchdog=$!
+    sleep 1
+    kill -INT -- "-$pid"
+    wait "$pid"
+    rc=$?
+    kill -- "-$watchdog" 2>/dev/null
+    exit $rc
+)
+RC=$?
+ERR=$(cat "$WORK/stderr")
+if [ "$RC" -eq 130 ] && grep -q 'cancelled' <<<"$ERR" && [ ! -e "$WORK/cancel.binvox" ] &&
+    [ -z "$(find "$WORK" -name '*cancel*')" ]; then
+    pass "SIGINT cancels: exit 130, 'cancelled', no output"
+else
+    fail "SIGINT cancels" "rc=$RC err=$ERR"
+fi
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

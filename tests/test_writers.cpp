@@ -1,0 +1,772 @@
+// Output writers: every format is read back by a minimal reader written here from the format's
+// specification (not from the writer), and must give back exactly the voxels that were written.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "atomic_file.hpp"
+#include "oclvox/oclvox.hpp"
+
+namespace fs = std::filesystem;
+using oclvox::Grid;
+using oclvox::OutputError;
+using oclvox::SparseVoxels;
+
+namespace {
+
+using Voxel = std::array<int64_t, 3>;
+using VoxelSet = std::set<Voxel>;
+
+// ---------------------------------------------------------------------------------------------
+// Fixtures and helpers
+// ---------------------------------------------------------------------------------------------
+
+// A fresh empty folder per test, removed afterwards.
+class WriterTest : public ::testing::Test {
+  protected:
+    void SetUp() override {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() /
+               ("oclvox_test_writers_" + std::to_string(getpid()) + "_" + info->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+
+    std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+    // Names in the folder, sorted: shows leftover temporary files.
+    std::vector<std::string> entries() const {
+        std::vector<std::string> names;
+        for (const auto& entry : fs::directory_iterator(dir_))
+            names.push_back(entry.path().filename().string());
+        std::sort(names.begin(), names.end());
+        return names;
+    }
+
+    fs::path dir_;
+};
+
+std::string read_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw std::runtime_error("cannot open " + path);
+    std::ostringstream text;
+    text << in.rdbuf();
+    return text.str();
+}
+
+SparseVoxels make_voxels(const Grid& grid, const VoxelSet& set, int brick_size = 4) {
+    SparseVoxels voxels(grid, brick_size);
+    for (const Voxel& v : set) voxels.set(v[0], v[1], v[2]);
+    return voxels;
+}
+
+Grid make_grid(std::array<int64_t, 3> dims, std::array<double, 3> origin = {0, 0, 0},
+               double voxel_size = 1.0) {
+    Grid grid;
+    grid.dims = dims;
+    grid.origin = origin;
+    grid.voxel_size = voxel_size;
+    return grid;
+}
+
+// A non-cubic 5x3x7 grid (several 4^3 bricks) with all eight corners, a solid 2x2x3 block
+// (internal faces) and a scattered pattern.
+Grid odd_grid() {
+    return make_grid({5, 3, 7}, {-1.5, 2.0, 0.25}, 0.5);
+}
+VoxelSet odd_pattern() {
+    VoxelSet set;
+    for (int64_t i : {0, 4})
+        for (int64_t j : {0, 2})
+            for (int64_t k : {0, 6}) set.insert({i, j, k});
+    for (int64_t i = 0; i < 2; ++i)
+        for (int64_t j = 0; j < 2; ++j)
+            for (int64_t k = 2; k < 5; ++k) set.insert({i, j, k});
+    for (int64_t i = 0; i < 5; ++i)
+        for (int64_t j = 0; j < 3; ++j)
+            for (int64_t k = 0; k < 7; ++k)
+                if ((i * 7 + j * 3 + k * 5) % 4 == 0) set.insert({i, j, k});
+    return set;
+}
+
+// Little-endian reads from a byte string, with bounds checks.
+struct ByteReader {
+    const std::string& bytes;
+    size_t pos = 0;
+
+    void need(size_t n) const {
+        if (pos + n > bytes.size()) throw std::runtime_error("file ends early");
+    }
+    uint64_t uint(int n) {
+        need(size_t(n));
+        uint64_t value = 0;
+        for (int b = 0; b < n; ++b) value |= uint64_t(uint8_t(bytes[pos + size_t(b)])) << (8 * b);
+        pos += size_t(n);
+        return value;
+    }
+    int32_t i32() { return int32_t(uint32_t(uint(4))); }
+    double f64() {
+        const uint64_t bits = uint(8);
+        double value;
+        std::memcpy(&value, &bits, 8);
+        return value;
+    }
+    std::string text(size_t n) {
+        need(n);
+        std::string s = bytes.substr(pos, n);
+        pos += n;
+        return s;
+    }
+    std::string line() {
+        const size_t end = bytes.find('\n', pos);
+        if (end == std::string::npos) throw std::runtime_error("missing end of line");
+        std::string s = bytes.substr(pos, end - pos);
+        pos = end + 1;
+        return s;
+    }
+};
+
+// ---------------------------------------------------------------------------------------------
+// binvox reader (patrickmin.com/binvox/binvox.html): header lines, then (value, count) pairs in
+// the order index = x*wxh + z*width + y.
+// ---------------------------------------------------------------------------------------------
+struct Binvox {
+    int64_t dim = 0;
+    std::array<double, 3> translate{};
+    double scale = 0;
+    std::vector<std::pair<int, int>> runs;
+    VoxelSet set;
+};
+
+Binvox read_binvox(const std::string& bytes) {
+    ByteReader in{bytes};
+    if (in.line() != "#binvox 1") throw std::runtime_error("bad binvox magic");
+    Binvox file;
+    for (std::string line = in.line(); line != "data"; line = in.line()) {
+        std::istringstream fields(line);
+        std::string key;
+        fields >> key;
+        if (key == "dim") {
+            int64_t d, w, h;
+            fields >> d >> w >> h;
+            if (d != w || d != h) throw std::runtime_error("binvox dims are not cubic");
+            file.dim = d;
+        } else if (key == "translate") {
+            fields >> file.translate[0] >> file.translate[1] >> file.translate[2];
+        } else if (key == "scale") {
+            fields >> file.scale;
+        } else {
+            throw std::runtime_error("unknown binvox header line: " + line);
+        }
+    }
+    const int64_t d = file.dim, total = d * d * d;
+    int64_t index = 0;
+    while (in.pos < bytes.size()) {
+        const int value = int(in.uint(1)), count = int(in.uint(1));
+        if (value > 1 || count < 1) throw std::runtime_error("bad binvox run");
+        file.runs.push_back({value, count});
+        for (int c = 0; c < count; ++c, ++index) {
+            if (index >= total) throw std::runtime_error("binvox runs exceed the grid");
+            if (value) file.set.insert({index / (d * d), index % d, index / d % d});
+        }
+    }
+    if (index != total) throw std::runtime_error("binvox runs do not cover the grid");
+    return file;
+}
+
+// ---------------------------------------------------------------------------------------------
+// NPY reader (NEP 1): magic, version, header length, Python dict, raw data.
+// ---------------------------------------------------------------------------------------------
+struct Npy {
+    size_t data_offset = 0;
+    std::array<int64_t, 3> shape{};
+    VoxelSet set;
+};
+
+Npy read_npy(const std::string& bytes) {
+    ByteReader in{bytes};
+    if (in.text(6) != "\x93NUMPY") throw std::runtime_error("bad npy magic");
+    if (in.uint(1) != 1 || in.uint(1) != 0) throw std::runtime_error("not npy version 1.0");
+    const size_t header_length = size_t(in.uint(2));
+    const std::string header = in.text(header_length);
+    if (header.back() != '\n') throw std::runtime_error("npy header does not end in a newline");
+    if (header.find("'descr': '|u1'") == std::string::npos ||
+        header.find("'fortran_order': True") == std::string::npos)
+        throw std::runtime_error("unexpected npy header " + header);
+    Npy file;
+    file.data_offset = in.pos;
+    const std::string shape_key = "'shape': (";
+    const size_t shape_at = header.find(shape_key);
+    if (shape_at == std::string::npos) throw std::runtime_error("no shape in npy header " + header);
+    std::istringstream shape(header.substr(shape_at + shape_key.size()));
+    char comma1 = 0, comma2 = 0, close = 0;
+    shape >> file.shape[0] >> comma1 >> file.shape[1] >> comma2 >> file.shape[2] >> close;
+    if (!shape || comma1 != ',' || comma2 != ',' || close != ')')
+        throw std::runtime_error("no 3-d shape in npy header " + header);
+    const int64_t nx = file.shape[0], ny = file.shape[1], nz = file.shape[2];
+    if (int64_t(bytes.size() - in.pos) != nx * ny * nz)
+        throw std::runtime_error("npy data size does not match the shape");
+    // Fortran order: the first index varies fastest.
+    for (int64_t k = 0; k < nz; ++k)
+        for (int64_t j = 0; j < ny; ++j)
+            for (int64_t i = 0; i < nx; ++i) {
+                const uint8_t value = uint8_t(bytes[in.pos + size_t(i + nx * j + nx * ny * k)]);
+                if (value > 1) throw std::runtime_error("npy value is not 0 or 1");
+                if (value) file.set.insert({i, j, k});
+            }
+    return file;
+}
+
+// ---------------------------------------------------------------------------------------------
+// MagicaVoxel reader (ephtracy/voxel-model): chunks, models, and the scene graph's translations.
+// A model's voxel v lands at the sum of the _t on its path minus floor(size / 2), plus v.
+// ---------------------------------------------------------------------------------------------
+struct VoxModel {
+    std::array<int64_t, 3> size{};
+    std::vector<std::array<uint8_t, 4>> voxels;  // x, y, z, colour index
+};
+
+struct Vox {
+    std::vector<VoxModel> models;
+    VoxelSet world;
+};
+
+std::map<std::string, std::string> read_dict(ByteReader& in) {
+    std::map<std::string, std::string> dict;
+    for (int32_t n = in.i32(); n > 0; --n) {
+        const std::string key = in.text(size_t(in.i32()));
+        dict[key] = in.text(size_t(in.i32()));
+    }
+    return dict;
+}
+
+Vox read_vox(const std::string& bytes) {
+    ByteReader in{bytes};
+    if (in.text(4) != "VOX ") throw std::runtime_error("bad vox magic");
+    const int32_t version = in.i32();
+    if (version != 150 && version != 200) throw std::runtime_error("unexpected vox version");
+    if (in.text(4) != "MAIN" || in.i32() != 0) throw std::runtime_error("bad MAIN chunk");
+    if (size_t(in.i32()) != bytes.size() - in.pos) throw std::runtime_error("bad MAIN size");
+
+    Vox file;
+    struct Node {
+        char kind;
+        std::array<int64_t, 3> translation{};
+        std::vector<int32_t> children;  // node ids, or the model id for a shape
+    };
+    std::map<int32_t, Node> nodes;
+    while (in.pos < bytes.size()) {
+        const std::string id = in.text(4);
+        const size_t content = size_t(in.i32());
+        if (in.i32() != 0) throw std::runtime_error("unexpected nested chunk in " + id);
+        const size_t end = in.pos + content;
+        if (id == "SIZE") {
+            VoxModel model;
+            for (auto& s : model.size) s = in.i32();
+            file.models.push_back(model);
+        } else if (id == "XYZI") {
+            if (file.models.empty()) throw std::runtime_error("XYZI before SIZE");
+            for (int32_t n = in.i32(); n > 0; --n) {
+                std::array<uint8_t, 4> v;
+                for (auto& b : v) b = uint8_t(in.uint(1));
+                file.models.back().voxels.push_back(v);
+            }
+        } else if (id == "nTRN") {
+            const int32_t node = in.i32();
+            read_dict(in);
+            Node transform{'T', {}, {}};
+            transform.children.push_back(in.i32());
+            if (in.i32() != -1) throw std::runtime_error("nTRN reserved id is not -1");
+            in.i32();  // layer
+            if (in.i32() != 1) throw std::runtime_error("nTRN must have one frame");
+            const auto frame = read_dict(in);
+            if (frame.count("_t")) {
+                std::istringstream t(frame.at("_t"));
+                t >> transform.translation[0] >> transform.translation[1] >>
+                    transform.translation[2];
+            }
+            nodes[node] = transform;
+        } else if (id == "nGRP") {
+            const int32_t node = in.i32();
+            read_dict(in);
+            Node group{'G', {}, {}};
+            for (int32_t n = in.i32(); n > 0; --n) group.children.push_back(in.i32());
+            nodes[node] = group;
+        } else if (id == "nSHP") {
+            const int32_t node = in.i32();
+            read_dict(in);
+            if (in.i32() != 1) throw std::runtime_error("nSHP must have one model");
+            Node shape{'S', {}, {}};
+            shape.children.push_back(in.i32());
+            read_dict(in);
+            nodes[node] = shape;
+        }
+        if (in.pos > end) throw std::runtime_error(id + " content overruns its size");
+        in.pos = end;
+    }
+
+    // Walk the scene graph from the root transform (node 0), adding translations.
+    std::vector<int> placed(file.models.size(), 0);
+    std::function<void(int32_t, std::array<int64_t, 3>)> walk = [&](int32_t id,
+                                                                    std::array<int64_t, 3> t) {
+        const Node& node = nodes.at(id);
+        if (node.kind == 'T') {
+            for (int a = 0; a < 3; ++a) t[size_t(a)] += node.translation[size_t(a)];
+            walk(node.children.at(0), t);
+        } else if (node.kind == 'G') {
+            for (int32_t child : node.children) walk(child, t);
+        } else {
+            const VoxModel& model = file.models.at(size_t(node.children.at(0)));
+            ++placed[size_t(node.children.at(0))];
+            for (const auto& v : model.voxels) {
+                if (v[3] != 1) throw std::runtime_error("voxel colour index is not 1");
+                Voxel world;
+                for (int a = 0; a < 3; ++a) {
+                    if (v[size_t(a)] >= model.size[size_t(a)])
+                        throw std::runtime_error("voxel outside its model");
+                    world[size_t(a)] = t[size_t(a)] - model.size[size_t(a)] / 2 + v[size_t(a)];
+                }
+                if (!file.world.insert(world).second)
+                    throw std::runtime_error("voxel placed twice");
+            }
+        }
+    };
+    walk(0, {0, 0, 0});
+    if (std::count(placed.begin(), placed.end(), 1) != int64_t(placed.size()))
+        throw std::runtime_error("a model is not placed exactly once");
+    return file;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mesh readers (OBJ text; PLY binary little-endian) and an exposed-face check by brute force.
+// ---------------------------------------------------------------------------------------------
+struct PolygonMesh {
+    std::vector<std::array<double, 3>> positions;
+    std::vector<std::vector<size_t>> faces;  // 0-based
+};
+
+PolygonMesh read_obj(const std::string& bytes) {
+    PolygonMesh mesh;
+    std::istringstream in(bytes);
+    for (std::string line; std::getline(in, line);) {
+        std::istringstream fields(line);
+        std::string tag;
+        fields >> tag;
+        if (tag == "v") {
+            std::array<double, 3> p;
+            fields >> p[0] >> p[1] >> p[2];
+            mesh.positions.push_back(p);
+        } else if (tag == "f") {
+            std::vector<size_t> face;
+            for (long index; fields >> index;) {
+                if (index < 1 || size_t(index) > mesh.positions.size())
+                    throw std::runtime_error("OBJ face index out of range");
+                face.push_back(size_t(index - 1));
+            }
+            mesh.faces.push_back(face);
+        } else if (!tag.empty() && tag != "#") {
+            throw std::runtime_error("unexpected OBJ line: " + line);
+        }
+    }
+    return mesh;
+}
+
+PolygonMesh read_ply(const std::string& bytes) {
+    ByteReader in{bytes};
+    const std::vector<std::string> expected_header = {"ply",
+                                                      "format binary_little_endian 1.0",
+                                                      "element vertex #",
+                                                      "property double x",
+                                                      "property double y",
+                                                      "property double z",
+                                                      "element face #",
+                                                      "property list uchar int vertex_indices",
+                                                      "end_header"};
+    size_t vertices = 0, faces = 0;
+    size_t expected = 0;
+    for (std::string line = in.line(); expected < expected_header.size(); line = in.line()) {
+        if (line.rfind("comment", 0) == 0) continue;
+        const std::string& want = expected_header[expected++];
+        if (want.back() == '#') {
+            const std::string prefix = want.substr(0, want.size() - 1);
+            if (line.rfind(prefix, 0) != 0) throw std::runtime_error("bad PLY line " + line);
+            (prefix == "element vertex " ? vertices : faces) =
+                std::stoul(line.substr(prefix.size()));
+        } else if (line != want) {
+            throw std::runtime_error("bad PLY line " + line);
+        }
+        if (want == "end_header") break;
+    }
+    PolygonMesh mesh;
+    for (size_t v = 0; v < vertices; ++v) mesh.positions.push_back({in.f64(), in.f64(), in.f64()});
+    for (size_t f = 0; f < faces; ++f) {
+        std::vector<size_t> face(in.uint(1));
+        for (auto& index : face) {
+            const int32_t i = in.i32();
+            if (i < 0 || size_t(i) >= vertices) throw std::runtime_error("PLY index out of range");
+            index = size_t(i);
+        }
+        mesh.faces.push_back(face);
+    }
+    if (in.pos != bytes.size()) throw std::runtime_error("trailing bytes after PLY data");
+    return mesh;
+}
+
+// (i, j, k, direction), direction = 2*axis + (0 for +axis, 1 for -axis).
+using Face = std::array<int64_t, 4>;
+
+std::set<Face> exposed_faces_by_brute_force(const VoxelSet& set) {
+    std::set<Face> faces;
+    for (const Voxel& v : set)
+        for (int64_t direction = 0; direction < 6; ++direction) {
+            Voxel n = v;
+            n[size_t(direction / 2)] += direction % 2 == 0 ? 1 : -1;
+            if (!set.count(n)) faces.insert({v[0], v[1], v[2], direction});
+        }
+    return faces;
+}
+
+// Every polygon must be a unit lattice square, wound so its normal points from a set voxel to an
+// empty one, and each exposed face must appear exactly once. Returns the faces found.
+std::set<Face> check_exposed_face_mesh(const PolygonMesh& mesh, const Grid& grid,
+                                       const VoxelSet& set) {
+    // Vertices are shared: no position appears twice.
+    std::set<std::array<double, 3>> unique(mesh.positions.begin(), mesh.positions.end());
+    EXPECT_EQ(unique.size(), mesh.positions.size()) << "duplicate vertex positions";
+
+    auto lattice = [&](const std::array<double, 3>& p) {
+        Voxel l;
+        for (int a = 0; a < 3; ++a) {
+            const double x = (p[size_t(a)] - grid.origin[size_t(a)]) / grid.voxel_size;
+            l[size_t(a)] = std::llround(x);
+            if (std::abs(x - double(l[size_t(a)])) > 1e-9)
+                throw std::runtime_error("vertex is not on the voxel lattice");
+        }
+        return l;
+    };
+    auto cross = [](const Voxel& a, const Voxel& b) {
+        return Voxel{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]};
+    };
+    auto minus = [](const Voxel& a, const Voxel& b) {
+        return Voxel{a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+    };
+
+    std::set<Face> found;
+    for (const auto& polygon : mesh.faces) {
+        if (polygon.size() != 4) throw std::runtime_error("face is not a quad");
+        std::array<Voxel, 4> c;
+        for (int q = 0; q < 4; ++q) c[size_t(q)] = lattice(mesh.positions[polygon[size_t(q)]]);
+        // Edges of length one, and both triangles (0,1,2), (0,2,3) with the same unit normal.
+        for (int q = 0; q < 4; ++q) {
+            const Voxel e = minus(c[size_t((q + 1) % 4)], c[size_t(q)]);
+            if (std::abs(e[0]) + std::abs(e[1]) + std::abs(e[2]) != 1)
+                throw std::runtime_error("quad edge is not one voxel long");
+        }
+        const Voxel normal = cross(minus(c[1], c[0]), minus(c[2], c[0]));
+        if (normal != cross(minus(c[2], c[0]), minus(c[3], c[0])))
+            throw std::runtime_error("quad is twisted");
+        int axis = -1;
+        for (int a = 0; a < 3; ++a)
+            if (normal[size_t(a)] != 0) axis = a;
+        if (axis < 0 || std::abs(normal[size_t(axis)]) != 1)
+            throw std::runtime_error("quad normal is not axis aligned");
+        const bool positive = normal[size_t(axis)] > 0;
+        // The voxel behind the face: the corners' minimum, stepped back along a +axis normal.
+        Voxel behind = c[0];
+        for (const Voxel& corner : c)
+            for (int a = 0; a < 3; ++a)
+                behind[size_t(a)] = std::min(behind[size_t(a)], corner[size_t(a)]);
+        if (positive) behind[size_t(axis)] -= 1;
+        const Face face{behind[0], behind[1], behind[2], 2 * axis + (positive ? 0 : 1)};
+        if (!found.insert(face).second) throw std::runtime_error("face emitted twice");
+    }
+    EXPECT_EQ(found, exposed_faces_by_brute_force(set));
+    return found;
+}
+
+// ---------------------------------------------------------------------------------------------
+// binvox
+// ---------------------------------------------------------------------------------------------
+TEST_F(WriterTest, BinvoxNonCubicGridIsPaddedToACubeWithTheSameVoxels) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.binvox"), make_voxels(odd_grid(), set));
+
+    const Binvox file = read_binvox(read_bytes(path("out.binvox")));
+    EXPECT_EQ(file.dim, 7);  // max(5, 3, 7)
+    EXPECT_EQ(file.set, set);
+    // Hand-worked: translate = origin, scale = dim * voxel_size = 7 * 0.5.
+    EXPECT_EQ(file.translate, (std::array<double, 3>{-1.5, 2.0, 0.25}));
+    EXPECT_EQ(file.scale, 3.5);
+    EXPECT_EQ(entries(), std::vector<std::string>{"out.binvox"});
+}
+
+TEST_F(WriterTest, BinvoxRunsLongerThan255AreSplit) {
+    // The whole x = 0 slab of a 20^3 grid is 400 consecutive voxels in binvox order (x slowest),
+    // followed by 7600 empty ones: runs 255 + 145 set, then 29 * 255 + 205 empty.
+    VoxelSet set;
+    for (int64_t j = 0; j < 20; ++j)
+        for (int64_t k = 0; k < 20; ++k) set.insert({0, j, k});
+    oclvox::write_voxels(path("slab.binvox"), make_voxels(make_grid({20, 20, 20}), set, 8));
+
+    const Binvox file = read_binvox(read_bytes(path("slab.binvox")));
+    EXPECT_EQ(file.set, set);
+    ASSERT_EQ(file.runs.size(), 2u + 30u);
+    EXPECT_EQ(file.runs[0], std::make_pair(1, 255));
+    EXPECT_EQ(file.runs[1], std::make_pair(1, 145));
+    EXPECT_EQ(file.runs.back(), std::make_pair(0, 205));
+}
+
+TEST_F(WriterTest, BinvoxVoxelOrderIsYFastestThenZThenX) {
+    // A single voxel at (x, y, z) = (1, 2, 3) in a 4^3 grid has binvox index 1*16 + 3*4 + 2 = 30.
+    oclvox::write_voxels(path("one.binvox"), make_voxels(make_grid({4, 4, 4}), {{1, 2, 3}}));
+    const Binvox file = read_binvox(read_bytes(path("one.binvox")));
+    ASSERT_EQ(file.runs.size(), 3u);
+    EXPECT_EQ(file.runs[0], std::make_pair(0, 30));
+    EXPECT_EQ(file.runs[1], std::make_pair(1, 1));
+    EXPECT_EQ(file.runs[2], std::make_pair(0, 64 - 31));
+}
+
+// ---------------------------------------------------------------------------------------------
+// npy
+// ---------------------------------------------------------------------------------------------
+TEST_F(WriterTest, NpyIndexIJKIsVoxelXYZAndDataIs64ByteAligned) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.npy"), make_voxels(odd_grid(), set));
+
+    const Npy file = read_npy(read_bytes(path("out.npy")));
+    EXPECT_EQ(file.shape, (std::array<int64_t, 3>{5, 3, 7}));
+    EXPECT_EQ(file.data_offset % 64, 0u);
+    EXPECT_EQ(file.set, set);
+    EXPECT_EQ(entries(), (std::vector<std::string>{"out.npy", "out.npy.json"}));
+}
+
+TEST_F(WriterTest, NpySidecarRecordsGridPlacement) {
+    oclvox::write_voxels(path("out.npy"), make_voxels(odd_grid(), odd_pattern()));
+
+    const auto sidecar = nlohmann::json::parse(read_bytes(path("out.npy.json")));
+    EXPECT_EQ(sidecar.at("file"), "out.npy");
+    EXPECT_EQ(sidecar.at("dims").get<std::vector<int64_t>>(), (std::vector<int64_t>{5, 3, 7}));
+    EXPECT_EQ(sidecar.at("origin").get<std::vector<double>>(),
+              (std::vector<double>{-1.5, 2.0, 0.25}));
+    EXPECT_EQ(sidecar.at("voxel_size").get<double>(), 0.5);
+    EXPECT_EQ(sidecar.at("voxels_set").get<uint64_t>(), odd_pattern().size());
+    EXPECT_NE(sidecar.at("axis_order").get<std::string>().find("arr[i, j, k]"), std::string::npos);
+    EXPECT_NE(sidecar.at("voxel_box").get<std::string>().find("closed box"), std::string::npos);
+}
+
+TEST_F(WriterTest, NpyIsRemovedWhenItsSidecarCannotBeWritten) {
+    // A folder where the sidecar should go makes its rename fail.
+    fs::create_directories(path("out.npy.json") + "/blocker");
+    EXPECT_THROW(oclvox::write_voxels(path("out.npy"), make_voxels(odd_grid(), odd_pattern())),
+                 OutputError);
+    EXPECT_EQ(entries(), std::vector<std::string>{"out.npy.json"});
+}
+
+// ---------------------------------------------------------------------------------------------
+// MagicaVoxel
+// ---------------------------------------------------------------------------------------------
+TEST_F(WriterTest, VoxSmallGridIsOneModelCentredByTranslation) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.vox"), make_voxels(odd_grid(), set));
+
+    const Vox file = read_vox(read_bytes(path("out.vox")));
+    ASSERT_EQ(file.models.size(), 1u);
+    EXPECT_EQ(file.models[0].size, (std::array<int64_t, 3>{5, 3, 7}));
+    EXPECT_EQ(file.world, set);
+}
+
+TEST_F(WriterTest, VoxLargeGridIsSplitInto256CubedModelsThatLineUp) {
+    // 300x260x520 spans 2x2x3 tiles; these voxels touch six of them (hand-counted).
+    const VoxelSet set = {{0, 0, 0},     {255, 255, 255}, {299, 259, 519}, {256, 0, 0},
+                          {299, 0, 519}, {0, 259, 0},     {128, 130, 300}};
+    oclvox::write_voxels(path("big.vox"), make_voxels(make_grid({300, 260, 520}), set, 64));
+
+    const Vox file = read_vox(read_bytes(path("big.vox")));
+    EXPECT_EQ(file.models.size(), 6u);
+    std::set<std::array<int64_t, 3>> sizes;
+    for (const VoxModel& model : file.models) {
+        for (int64_t s : model.size) EXPECT_LE(s, 256);
+        sizes.insert(model.size);
+    }
+    // The far corner tile is what is left of the grid: 300-256, 260-256, 520-512.
+    EXPECT_TRUE(sizes.count({44, 4, 8}));
+    EXPECT_EQ(file.world, set);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cube meshes
+// ---------------------------------------------------------------------------------------------
+TEST_F(WriterTest, CubeOf8VoxelsGives24QuadsOn26Vertices) {
+    // 2x2x2 voxels: 4 quads per cube side, and a 3x3x3 lattice minus its hidden centre point.
+    VoxelSet set;
+    for (int64_t i = 1; i < 3; ++i)
+        for (int64_t j = 1; j < 3; ++j)
+            for (int64_t k = 1; k < 3; ++k) set.insert({i, j, k});
+    const SparseVoxels voxels = make_voxels(make_grid({4, 4, 4}), set);
+    oclvox::write_voxels(path("cube.obj"), voxels);
+    oclvox::write_voxels(path("cube.ply"), voxels);
+
+    for (const PolygonMesh& mesh :
+         {read_obj(read_bytes(path("cube.obj"))), read_ply(read_bytes(path("cube.ply")))}) {
+        EXPECT_EQ(mesh.faces.size(), 24u);
+        EXPECT_EQ(mesh.positions.size(), 26u);
+        EXPECT_EQ(check_exposed_face_mesh(mesh, make_grid({4, 4, 4}), set).size(), 24u);
+    }
+}
+
+TEST_F(WriterTest, ObjHasExactlyTheExposedFacesInWorldCoordinates) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.obj"), make_voxels(odd_grid(), set));
+    check_exposed_face_mesh(read_obj(read_bytes(path("out.obj"))), odd_grid(), set);
+}
+
+TEST_F(WriterTest, PlyHasExactlyTheExposedFacesInWorldCoordinates) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.ply"), make_voxels(odd_grid(), set));
+    check_exposed_face_mesh(read_ply(read_bytes(path("out.ply"))), odd_grid(), set);
+}
+
+TEST_F(WriterTest, MeshFileDoesNotDependOnBrickSize) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("a.obj"), make_voxels(odd_grid(), set, 4));
+    oclvox::write_voxels(path("b.obj"), make_voxels(odd_grid(), set, 8));
+    EXPECT_EQ(read_bytes(path("a.obj")), read_bytes(path("b.obj")));
+}
+
+TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
+    const SparseVoxels empty(make_grid({3, 4, 5}), 4);
+    for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply"})
+        oclvox::write_voxels(path(name), empty);
+
+    EXPECT_TRUE(read_binvox(read_bytes(path("e.binvox"))).set.empty());
+    EXPECT_TRUE(read_npy(read_bytes(path("e.npy"))).set.empty());
+    const Vox vox = read_vox(read_bytes(path("e.vox")));
+    ASSERT_EQ(vox.models.size(), 1u);  // readers expect at least one model
+    EXPECT_EQ(vox.models[0].size, (std::array<int64_t, 3>{3, 4, 5}));
+    EXPECT_TRUE(vox.world.empty());
+    EXPECT_TRUE(read_obj(read_bytes(path("e.obj"))).faces.empty());
+    EXPECT_TRUE(read_ply(read_bytes(path("e.ply"))).faces.empty());
+}
+
+TEST_F(WriterTest, HugeSparseGridWorksForSparseFormatsAndFailsCleanlyForDenseOnes) {
+    // 2^20 x 2^20 x 64 voxels: far too many for a dense copy, two set voxels far apart.
+    const Grid grid = make_grid({int64_t(1) << 20, int64_t(1) << 20, 64});
+    const VoxelSet set = {{0, 0, 0}, {(int64_t(1) << 20) - 1, (int64_t(1) << 20) - 1, 63}};
+    const SparseVoxels voxels = make_voxels(grid, set, 64);
+
+    for (const char* name : {"huge.binvox", "huge.npy"})
+        EXPECT_THROW(oclvox::write_voxels(path(name), voxels), OutputError) << name;
+    EXPECT_TRUE(entries().empty());
+
+    oclvox::write_voxels(path("huge.vox"), voxels);
+    EXPECT_EQ(read_vox(read_bytes(path("huge.vox"))).world, set);
+    oclvox::write_voxels(path("huge.obj"), voxels);
+    EXPECT_EQ(read_obj(read_bytes(path("huge.obj"))).faces.size(), 12u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Choosing the format, and failures
+// ---------------------------------------------------------------------------------------------
+TEST_F(WriterTest, ExtensionIsCaseInsensitive) {
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("OUT.BinVox"), make_voxels(odd_grid(), set));
+    EXPECT_EQ(read_binvox(read_bytes(path("OUT.BinVox"))).set, set);
+}
+
+TEST_F(WriterTest, UnknownExtensionThrowsOutputErrorListingSupportedOnes) {
+    try {
+        oclvox::write_voxels(path("out.xyz"), make_voxels(odd_grid(), odd_pattern()));
+        FAIL() << "no exception";
+    } catch (const OutputError& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find(".xyz"), std::string::npos) << what;
+        for (const char* supported : {".binvox", ".npy", ".vox", ".obj", ".ply"})
+            EXPECT_NE(what.find(supported), std::string::npos) << what;
+    }
+    EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(WriterTest, EmptyGridThrowsOutputError) {
+    EXPECT_THROW(oclvox::write_voxels(path("out.binvox"), SparseVoxels()), OutputError);
+    EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(WriterTest, MissingFolderThrowsOutputErrorAndLeavesNothing) {
+    for (const char* name : {"out.binvox", "out.npy", "out.vox", "out.obj", "out.ply"}) {
+        const std::string target = path("missing/") + name;
+        try {
+            oclvox::write_voxels(target, make_voxels(odd_grid(), odd_pattern()));
+            FAIL() << "no exception for " << name;
+        } catch (const OutputError& e) {
+            EXPECT_NE(std::string(e.what()).find(target), std::string::npos) << e.what();
+            EXPECT_NE(std::string(e.what()).find(std::strerror(ENOENT)), std::string::npos)
+                << e.what();
+        }
+    }
+    EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(WriterTest, ExceptionInsideWriteLeavesNoTemporaryAndNoFinalFile) {
+    try {
+        oclvox::detail::write_file_atomically(path("out.bin"), [](std::ostream& out) {
+            out << std::string(100000, 'x');  // more than one stream buffer reaches the disk
+            throw std::runtime_error("format failed halfway");
+        });
+        FAIL() << "no exception";
+    } catch (const OutputError& e) {
+        EXPECT_NE(std::string(e.what()).find("format failed halfway"), std::string::npos);
+    }
+    EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(WriterTest, FailedWriteKeepsThePreviousFile) {
+    oclvox::detail::write_file_atomically(path("out.bin"), [](std::ostream& out) { out << "old"; });
+    EXPECT_THROW(oclvox::detail::write_file_atomically(path("out.bin"),
+                                                       [](std::ostream& out) {
+                                                           out << "new";
+                                                           throw std::runtime_error("stop");
+                                                       }),
+                 OutputError);
+    EXPECT_EQ(read_bytes(path("out.bin")), "old");
+    EXPECT_EQ(entries(), std::vector<std::string>{"out.bin"});
+}
+
+TEST_F(WriterTest, OverwritingReplacesTheWholeFile) {
+    oclvox::detail::write_file_atomically(path("out.bin"),
+                                          [](std::ostream& out) { out << std::string(5000, 'o'); });
+    oclvox::detail::write_file_atomically(path("out.bin"), [](std::ostream& out) { out << "new"; });
+    EXPECT_EQ(read_bytes(path("out.bin")), "new");
+
+    // The same through a format: the reader rejects any byte left over from the old file.
+    std::ofstream(path("out.binvox")) << std::string(100000, 'z');
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.binvox"), make_voxels(odd_grid(), set));
+    EXPECT_EQ(read_binvox(read_bytes(path("out.binvox"))).set, set);
+    EXPECT_EQ(entries(), (std::vector<std::string>{"out.bin", "out.binvox"}));
+}
+
+TEST_F(WriterTest, FailedRenameRemovesTheTemporaryFile) {
+    // A non-empty folder cannot be replaced by a file.
+    fs::create_directories(path("out.obj") + "/inside");
+    EXPECT_THROW(oclvox::write_voxels(path("out.obj"), make_voxels(odd_grid(), odd_pattern())),
+                 OutputError);
+    EXPECT_EQ(entries(), std::vector<std::string>{"out.obj"});
+    EXPECT_TRUE(fs::is_directory(path("out.obj")));
+}
+
+}  // namespace
