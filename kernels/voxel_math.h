@@ -23,6 +23,10 @@
 #define OV_FN static inline
 #define OV_FLOOR std::floor
 #define OV_CEIL std::ceil
+using std::fabs;
+using std::fmax;
+using std::fmin;
+using std::nextafter;
 namespace oclvox::detail {
 #endif
 
@@ -33,8 +37,9 @@ typedef struct {
 } OvTriangle;
 
 // Voxel index range [lo, hi] (inclusive, global voxel indices, not clipped to the grid) of the
-// voxels whose closed boxes meet the triangle's bounding box. Voxel i spans [i, i+1], so it meets
-// [a, b] iff i <= b and i + 1 >= a, i.e. i in [ceil(a) - 1, floor(b)]: touching counts.
+// voxels whose boxes meet the triangle's bounding box. A closed voxel i spans [i, i+1], so it
+// meets [a, b] iff i <= b and i + 1 >= a, i.e. i in [ceil(a) - 1, floor(b)]: touching counts. A
+// half-open voxel [i, i+1) meets [a, b] iff i <= b and i + 1 > a, i.e. i in [floor(a), floor(b)].
 typedef struct {
     int lo[3];
     int hi[3];
@@ -63,17 +68,21 @@ typedef struct {
     float block_lo, block_hi;
     float edge_normal[3][3][2];
     float edge_offset[3][3];
+    // Half-open boxes: bit 3k+j set means edge function (k, j) must be > 0 rather than >= 0 (its
+    // critical corner lies on an open face); bits 9 and 10 do the same for the plane test's
+    // n.q + d2 < 0 and n.q + d1 > 0.
+    int strict;
 } OvPefTriangle;
 
 OV_FN float ov_min3(float a, float b, float c) { return fmin(fmin(a, b), c); }
 OV_FN float ov_max3(float a, float b, float c) { return fmax(fmax(a, b), c); }
 
-OV_FN OvRange ov_triangle_range(OvTriangle t) {
+OV_FN OvRange ov_triangle_range(OvTriangle t, int half_open) {
     OvRange r;
     for (int k = 0; k < 3; ++k) {
         float lo = ov_min3(t.u[k], t.u[3 + k], t.u[6 + k]);
         float hi = ov_max3(t.u[k], t.u[3 + k], t.u[6 + k]);
-        r.lo[k] = t.anchor[k] + (int)OV_CEIL(lo) - 1;
+        r.lo[k] = t.anchor[k] + (half_open ? (int)OV_FLOOR(lo) : (int)OV_CEIL(lo) - 1);
         r.hi[k] = t.anchor[k] + (int)OV_FLOOR(hi);
     }
     return r;
@@ -112,7 +121,16 @@ OV_FN void ov_block_cull(OvTriangle t, const float n[3], float* lo, float* hi) {
     *hi = tmax - box_lo + margin;
 }
 
-OV_FN OvSatTriangle ov_setup_sat(OvTriangle t) {
+// Half-open boxes [q, q+1): on an axis a the box projects to an interval whose upper end is open
+// if a has a positive component and whose lower end is open if it has a negative one. "d < lo"
+// (box entirely below the triangle) must then become "d <= lo", which for floats is exactly
+// "d < nextafter(lo, +inf)"; likewise for hi. So the per-voxel test stays the same.
+OV_FN void ov_half_open_axis(float c_neg, float c_pos, float* lo, float* hi) {
+    if (c_pos > 0.0f) *lo = nextafter(*lo, INFINITY);
+    if (c_neg < 0.0f) *hi = nextafter(*hi, -INFINITY);
+}
+
+OV_FN OvSatTriangle ov_setup_sat(OvTriangle t, int half_open) {
     OvSatTriangle s;
     for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
 
@@ -134,6 +152,7 @@ OV_FN OvSatTriangle ov_setup_sat(OvTriangle t) {
             s.axis[i][1] = c1;
             s.axis_lo[i] = ov_min3(p0, p1, p2) - box_hi;
             s.axis_hi[i] = ov_max3(p0, p1, p2) - box_lo;
+            if (half_open) ov_half_open_axis(box_lo, box_hi, &s.axis_lo[i], &s.axis_hi[i]);
         }
     }
 
@@ -150,6 +169,7 @@ OV_FN OvSatTriangle ov_setup_sat(OvTriangle t) {
     for (int k = 0; k < 3; ++k) s.normal[k] = n[k];
     s.normal_lo = ov_min3(p0, p1, p2) - box_hi;
     s.normal_hi = ov_max3(p0, p1, p2) - box_lo;
+    if (half_open) ov_half_open_axis(box_lo, box_hi, &s.normal_lo, &s.normal_hi);
     return s;
 }
 
@@ -171,8 +191,9 @@ OV_FN int ov_sat_overlaps(const OvSatTriangle* s, float qx, float qy, float qz) 
     return 1;
 }
 
-OV_FN OvPefTriangle ov_setup_pef(OvTriangle t) {
+OV_FN OvPefTriangle ov_setup_pef(OvTriangle t, int half_open) {
     OvPefTriangle s;
+    s.strict = 0;
     for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
 
     float n[3];
@@ -186,6 +207,10 @@ OV_FN OvPefTriangle ov_setup_pef(OvTriangle t) {
     s.d1 = n[0] * (c[0] - t.u[0]) + n[1] * (c[1] - t.u[1]) + n[2] * (c[2] - t.u[2]);
     s.d2 = n[0] * ((1.0f - c[0]) - t.u[0]) + n[1] * ((1.0f - c[1]) - t.u[1]) +
            n[2] * ((1.0f - c[2]) - t.u[2]);
+    // The corner furthest along n (d1) is on an open face if n has a positive component; the
+    // nearest one (d2) if n has a negative component.
+    if (half_open && (n[0] < 0.0f || n[1] < 0.0f || n[2] < 0.0f)) s.strict |= 1 << 9;
+    if (half_open && (n[0] > 0.0f || n[1] > 0.0f || n[2] > 0.0f)) s.strict |= 1 << 10;
 
     // Projection k keeps axes (a1, a2). Edge normals are turned to point inwards using the sign of
     // n[k], which is exactly the orientation of the projected triangle (same float expression).
@@ -202,6 +227,7 @@ OV_FN OvPefTriangle ov_setup_pef(OvTriangle t) {
             s.edge_normal[k][j][1] = ny;
             s.edge_offset[k][j] = -(nx * t.u[3 * j + a1] + ny * t.u[3 * j + a2]) +
                                   fmax(0.0f, nx) + fmax(0.0f, ny);
+            if (half_open && (nx > 0.0f || ny > 0.0f)) s.strict |= 1 << (3 * k + j);
         }
     }
     return s;
@@ -212,8 +238,65 @@ OV_FN int ov_pef_overlaps(const OvPefTriangle* s, float qx, float qy, float qz) 
     float dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
     float e1 = dn + s->d1;
     float e2 = dn + s->d2;
-    // Sign test without multiplying (the product can underflow to 0 or overflow to NaN).
-    if ((e1 > 0.0f && e2 > 0.0f) || (e1 < 0.0f && e2 < 0.0f)) return 0;
+    // The box meets the plane iff e2 <= 0 <= e1 (strict where the corner is on an open face).
+    // Compared one by one: the product e1 * e2 could underflow to 0 or overflow to NaN.
+    if (e2 > 0.0f || (e2 == 0.0f && (s->strict >> 9 & 1))) return 0;
+    if (e1 < 0.0f || (e1 == 0.0f && (s->strict >> 10 & 1))) return 0;
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
+                      s->edge_offset[k][j];
+            if (e < 0.0f || (e == 0.0f && (s->strict >> (3 * k + j) & 1))) return 0;
+        }
+    }
+    return 1;
+}
+
+// Thin (6-separating) surface voxelization, Schwarz & Seidel 2010: the plane must cross the
+// voxel's centre segment along the normal's dominant axis, |n.(c - u0)| <= max|n_k| / 2, and in
+// each of the three projections the triangle must meet the voxel's inscribed diamond (support
+// max(|m_x|, |m_y|) / 2 around the centre) instead of the whole square. A subset of the
+// conservative voxels that still leaves no 6-connected gap.
+typedef struct {
+    int anchor[3];
+    float normal[3];
+    float plane_offset, plane_half;  // n.q + plane_offset is the plane function at the centre
+    float block_lo, block_hi;
+    float edge_normal[3][3][2];
+    float edge_offset[3][3];
+} OvThinTriangle;
+
+OV_FN OvThinTriangle ov_setup_thin(OvTriangle t) {
+    OvThinTriangle s;
+    for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
+    float n[3];
+    ov_normal(t, n);
+    for (int k = 0; k < 3; ++k) s.normal[k] = n[k];
+    ov_block_cull(t, n, &s.block_lo, &s.block_hi);
+    s.plane_offset = n[0] * (0.5f - t.u[0]) + n[1] * (0.5f - t.u[1]) + n[2] * (0.5f - t.u[2]);
+    s.plane_half = 0.5f * ov_max3(fabs(n[0]), fabs(n[1]), fabs(n[2]));
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        float sign = n[k] >= 0.0f ? 1.0f : -1.0f;
+        for (int j = 0; j < 3; ++j) {
+            float nx = -ov_edge(t, j, a2) * sign;
+            float ny = ov_edge(t, j, a1) * sign;
+            s.edge_normal[k][j][0] = nx;
+            s.edge_normal[k][j][1] = ny;
+            s.edge_offset[k][j] = nx * (0.5f - t.u[3 * j + a1]) + ny * (0.5f - t.u[3 * j + a2]) +
+                                  0.5f * fmax(fabs(nx), fabs(ny));
+        }
+    }
+    return s;
+}
+
+OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz) {
+    float q[3] = {qx, qy, qz};
+    float dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset;
+    if (dn > s->plane_half || dn < -s->plane_half) return 0;
     for (int k = 0; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;

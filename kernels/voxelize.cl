@@ -8,16 +8,23 @@
 // instead of serialising on one.
 #include "voxel_math.h"
 
-__kernel void setup_sat(__global const OvTriangle* triangles, uint count,
+__kernel void setup_sat(__global const OvTriangle* triangles, uint count, int half_open,
                         __global OvSatTriangle* out) {
     uint i = get_global_id(0);
-    if (i < count) out[i] = ov_setup_sat(triangles[i]);
+    if (i < count) out[i] = ov_setup_sat(triangles[i], half_open);
 }
 
-__kernel void setup_pef(__global const OvTriangle* triangles, uint count,
+__kernel void setup_pef(__global const OvTriangle* triangles, uint count, int half_open,
                         __global OvPefTriangle* out) {
     uint i = get_global_id(0);
-    if (i < count) out[i] = ov_setup_pef(triangles[i]);
+    if (i < count) out[i] = ov_setup_pef(triangles[i], half_open);
+}
+
+// Thin voxelization has no half-open variant (the host refuses the combination).
+__kernel void setup_thin(__global const OvTriangle* triangles, uint count, int half_open,
+                         __global OvThinTriangle* out) {
+    uint i = get_global_id(0);
+    if (i < count && !half_open) out[i] = ov_setup_thin(triangles[i]);
 }
 
 // Largest p with first_item[p] <= item (first_item is non-decreasing, first_item[0] == 0).
@@ -111,6 +118,19 @@ __kernel void voxelize_sat(__global const OvSatTriangle* setups, __global const 
         return;
     OvSatTriangle s = setups[it.triangle];
     OV_VOXEL_LOOP(ov_sat_overlaps, s)
+}
+
+__kernel void voxelize_thin(__global const OvThinTriangle* setups, __global const OvRange* ranges,
+                            __global const uint* pair_triangle, __global const uint* pair_slot,
+                            __global const uint* pair_first_item, uint pair_count,
+                            __global const int* slot_brick, uint item_base, uint item_end,
+                            int brick_size, int nx, int ny, int nz, __global uint* bits) {
+    Item it;
+    if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, ranges,
+                     item_base, item_end, brick_size, nx, ny, nz, &it))
+        return;
+    OvThinTriangle s = setups[it.triangle];
+    OV_VOXEL_LOOP(ov_thin_overlaps, s)
 }
 
 __kernel void voxelize_pef(__global const OvPefTriangle* setups, __global const OvRange* ranges,

@@ -9,11 +9,42 @@ namespace {
 
 const OverlapTest kTests[] = {OverlapTest::SAT, OverlapTest::PEF};
 
-SparseVoxels reference(const Mesh& m, const Grid& g, OverlapTest test, int brick = 8) {
+SparseVoxels reference(const Mesh& m, const Grid& g, OverlapTest test, int brick = 8,
+                       Boundary boundary = Boundary::Closed,
+                       VoxelizeMode mode = VoxelizeMode::Surface) {
     VoxelizeOptions o;
     o.test = test;
     o.brick_size = brick;
+    o.boundary = boundary;
+    o.mode = mode;
     return voxelize_reference(m, g, o);
+}
+
+SparseVoxels half_open(const Mesh& m, const Grid& g, OverlapTest test) {
+    return reference(m, g, test, 8, Boundary::HalfOpen);
+}
+
+SparseVoxels thin(const Mesh& m, const Grid& g) {
+    return reference(m, g, OverlapTest::PEF, 8, Boundary::Closed, VoxelizeMode::Thin);
+}
+
+// A square [0, n]^2 in the plane x[axis] = at, as two triangles.
+void add_plane(Mesh& m, int axis, double at, double n) {
+    auto p = [&](double a, double b) {
+        Vec3d v;
+        v[axis] = at;
+        v[(axis + 1) % 3] = a;
+        v[(axis + 2) % 3] = b;
+        return v;
+    };
+    add_triangle(m, p(0, 0), p(n, 0), p(n, n));
+    add_triangle(m, p(0, 0), p(n, n), p(0, n));
+}
+
+bool subset(const SparseVoxels& a, const SparseVoxels& b) {
+    bool inside = true;
+    a.for_each([&](int64_t i, int64_t j, int64_t k) { inside = inside && b.get(i, j, k); });
+    return inside;
 }
 
 std::vector<std::array<int64_t, 3>> sorted_voxels(const SparseVoxels& v) {
@@ -110,6 +141,41 @@ TEST_P(HandWorked, DegenerateTrianglesMarkWhatTheyTouch) {
     EXPECT_EQ(reference(diagonal, g, GetParam()).count(), 15u);
 }
 
+// Three grid-aligned parallel planes at resolution N: closed boxes mark both neighbouring layers
+// of each (4 layers in all), half-open boxes exactly one layer each: 3 N^2.
+TEST_P(HandWorked, HalfOpenPlanesMarkExactlyOneLayer) {
+    const int n = 8;
+    Mesh m;
+    for (double z : {1.0, 2.0, 3.0}) add_plane(m, 2, z, n);
+    EXPECT_EQ(reference(m, unit_grid(n, n, n), GetParam()).count(), uint64_t(4 * n * n));
+    EXPECT_EQ(half_open(m, unit_grid(n, n, n), GetParam()).count(), uint64_t(3 * n * n));
+    // Three perpendicular planes: inclusion-exclusion gives 3 N^2 - 3 N + 1.
+    Mesh cross;
+    add_plane(cross, 0, 2, n);
+    add_plane(cross, 1, 3, n);
+    add_plane(cross, 2, 4, n);
+    EXPECT_EQ(half_open(cross, unit_grid(n, n, n), GetParam()).count(),
+              uint64_t(3 * n * n - 3 * n + 1));
+}
+
+// Cube [1, 5]^3 with half-open voxels: voxels 1..5 on each axis meet it, and those with an index
+// of 1 or 5 on some axis meet its surface: 5^3 - 3^3 = 98.
+TEST_P(HandWorked, HalfOpenCubeHasExactCount) {
+    const SparseVoxels v = half_open(box_mesh({1, 1, 1}, {5, 5, 5}), unit_grid(8, 8, 8), GetParam());
+    EXPECT_EQ(v.count(), 98u);
+    EXPECT_TRUE(v.get(1, 1, 1) && v.get(5, 5, 5) && v.get(1, 3, 3));
+    EXPECT_FALSE(v.get(0, 0, 0) || v.get(3, 3, 3));
+}
+
+// A point on a voxel face belongs to one half-open voxel, not two.
+TEST_P(HandWorked, HalfOpenPointBelongsToOneVoxel) {
+    Mesh m;
+    add_triangle(m, {2, 1.5, 1.5}, {2, 1.5, 1.5}, {2, 1.5, 1.5});
+    const SparseVoxels v = half_open(m, unit_grid(4, 4, 4), GetParam());
+    EXPECT_EQ(v.count(), 1u);
+    EXPECT_TRUE(v.get(2, 1, 1));
+}
+
 INSTANTIATE_TEST_SUITE_P(BothTests, HandWorked, ::testing::ValuesIn(kTests),
                          [](const auto& info) { return std::string(to_string(info.param)); });
 
@@ -171,6 +237,18 @@ TEST_P(Random, SampledSurfacePointsLieInSetVoxels) {
             }
 }
 
+// Half-open voxels are a subset of the closed ones, and still contain every voxel the double
+// test finds with the voxel shrunk by a margin.
+TEST_P(Random, HalfOpenIsASubsetOfClosed) {
+    const Grid g = unit_grid(20, 20, 20);
+    const Mesh m = random_triangles(200, 0, 20, 4, 31);
+    const SparseVoxels open = half_open(m, g, GetParam());
+    EXPECT_TRUE(subset(open, reference(m, g, GetParam())));
+    for_each_nearby_voxel(g, m, 0, [&](size_t t, int64_t i, int64_t j, int64_t k) {
+        if (voxel_meets_triangle(g, m, t, i, j, k, -1e-4)) EXPECT_TRUE(open.get(i, j, k));
+    });
+}
+
 INSTANTIATE_TEST_SUITE_P(BothTests, Random, ::testing::ValuesIn(kTests),
                          [](const auto& info) { return std::string(to_string(info.param)); });
 
@@ -228,6 +306,105 @@ TEST(Translation, WholeVoxelShiftMovesVoxelsExactly) {
         EXPECT_GT(moved, 100u);
         EXPECT_EQ(moved, in_b);
     }
+}
+
+}  // namespace
+}  // namespace oclvox::test
+
+namespace oclvox::test {
+namespace {
+
+// Thin voxels are conservative voxels, and fewer of them.
+TEST(Thin, IsASubsetOfConservative) {
+    const Grid g = unit_grid(24, 24, 24);
+    const Mesh m = random_triangles(300, 0, 24, 5, 41);
+    const SparseVoxels t = thin(m, g);
+    EXPECT_TRUE(subset(t, reference(m, g, OverlapTest::PEF)));
+    EXPECT_LT(t.count(), reference(m, g, OverlapTest::PEF).count());
+}
+
+// Counts the voxels whose centre lies in `inside` that a 6-connected flood fill through empty
+// voxels, started from the grid's border, reaches.
+template <typename Inside>
+uint64_t leaked_voxels(const SparseVoxels& v, Inside inside) {
+    const Grid& g = v.grid();
+    std::vector<uint8_t> seen(g.voxel_count(), 0);
+    std::vector<std::array<int64_t, 3>> stack;
+    auto index = [&](int64_t i, int64_t j, int64_t k) {
+        return size_t(i + g.dims[0] * (j + g.dims[1] * k));
+    };
+    auto push = [&](int64_t i, int64_t j, int64_t k) {
+        if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return;
+        if (seen[index(i, j, k)] || v.get(i, j, k)) return;
+        seen[index(i, j, k)] = 1;
+        stack.push_back({i, j, k});
+    };
+    for (int64_t k = 0; k < g.dims[2]; ++k)
+        for (int64_t j = 0; j < g.dims[1]; ++j)
+            for (int64_t i = 0; i < g.dims[0]; ++i)
+                if (i == 0 || j == 0 || k == 0 || i == g.dims[0] - 1 || j == g.dims[1] - 1 ||
+                    k == g.dims[2] - 1)
+                    push(i, j, k);
+    uint64_t leaked = 0;
+    while (!stack.empty()) {
+        const auto [i, j, k] = stack.back();
+        stack.pop_back();
+        leaked += inside(i + 0.5, j + 0.5, k + 0.5) ? 1 : 0;
+        push(i + 1, j, k);
+        push(i - 1, j, k);
+        push(i, j + 1, k);
+        push(i, j - 1, k);
+        push(i, j, k + 1);
+        push(i, j, k - 1);
+    }
+    return leaked;
+}
+
+// 6-separating: on a closed surface no 6-connected path of empty voxels joins outside to inside.
+// A sphere of radius 9.3 off the voxel lattice, and a tilted cube.
+TEST(Thin, ClosedSurfacesLeaveNoSixConnectedGap) {
+    const Vec3d c{12.2, 11.7, 12.45};
+    const Mesh sphere = sphere_mesh(c, 9.3, 4);
+    const SparseVoxels s = thin(sphere, unit_grid(25, 25, 25));
+    EXPECT_EQ(leaked_voxels(s, [&](double x, double y, double z) {
+                  return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.3 * 0.98 - 0.01;
+              }),
+              0u);
+    // The inside is really there: the flood fill without the surface reaches it.
+    EXPECT_GT(leaked_voxels(SparseVoxels(s.grid(), 8), [&](double x, double y, double z) {
+                  return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.0;
+              }),
+              1000u);
+
+    // A cube rotated about two axes.
+    Mesh cube = box_mesh({-6, -6, -6}, {6, 6, 6});
+    const double a = 0.5, b = 0.3;
+    for (auto& p : cube.positions) {
+        const double x = p[0] * std::cos(a) - p[1] * std::sin(a);
+        const double y = p[0] * std::sin(a) + p[1] * std::cos(a);
+        const double z = p[2];
+        p = {12.3 + x, 12.1 + y * std::cos(b) - z * std::sin(b), 12.2 + y * std::sin(b) + z * std::cos(b)};
+    }
+    const SparseVoxels t = thin(cube, unit_grid(25, 25, 25));
+    EXPECT_EQ(leaked_voxels(t, [&](double x, double y, double z) {
+                  // Undo the rotation and ask whether the centre is well inside the cube.
+                  const double dx = x - 12.3, dy = y - 12.1, dz = z - 12.2;
+                  const double y1 = dy * std::cos(b) + dz * std::sin(b);
+                  const double z1 = -dy * std::sin(b) + dz * std::cos(b);
+                  const double x0 = dx * std::cos(a) + y1 * std::sin(a);
+                  const double y0 = -dx * std::sin(a) + y1 * std::cos(a);
+                  return std::max({std::abs(x0), std::abs(y0), std::abs(z1)}) < 5.9;
+              }),
+              0u);
+    EXPECT_LT(t.count(), reference(cube, unit_grid(25, 25, 25), OverlapTest::PEF).count());
+}
+
+TEST(Thin, HalfOpenIsRefused) {
+    Mesh m;
+    add_triangle(m, {1, 1, 1}, {2, 1, 1}, {1, 2, 1});
+    EXPECT_THROW(reference(m, unit_grid(4, 4, 4), OverlapTest::PEF, 8, Boundary::HalfOpen,
+                           VoxelizeMode::Thin),
+                 GridError);
 }
 
 }  // namespace

@@ -43,6 +43,39 @@ inline Mesh box_mesh(const Vec3d& lo, const Vec3d& hi) {
     return m;
 }
 
+// A closed sphere: an octahedron subdivided `levels` times, vertices pushed onto the sphere.
+inline Mesh sphere_mesh(const Vec3d& centre, double radius, int levels) {
+    std::vector<std::array<Vec3d, 3>> tris;
+    const Vec3d px{1, 0, 0}, nx{-1, 0, 0}, py{0, 1, 0}, ny{0, -1, 0}, pz{0, 0, 1}, nz{0, 0, -1};
+    tris = {{px, py, pz}, {py, nx, pz}, {nx, ny, pz}, {ny, px, pz},
+            {py, px, nz}, {nx, py, nz}, {ny, nx, nz}, {px, ny, nz}};
+    auto unit_mid = [](const Vec3d& a, const Vec3d& b) {
+        Vec3d m{a[0] + b[0], a[1] + b[1], a[2] + b[2]};
+        const double l = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        return Vec3d{m[0] / l, m[1] / l, m[2] / l};
+    };
+    for (int level = 0; level < levels; ++level) {
+        std::vector<std::array<Vec3d, 3>> finer;
+        for (const auto& t : tris) {
+            const Vec3d ab = unit_mid(t[0], t[1]), bc = unit_mid(t[1], t[2]),
+                        ca = unit_mid(t[2], t[0]);
+            finer.push_back({t[0], ab, ca});
+            finer.push_back({ab, t[1], bc});
+            finer.push_back({ca, bc, t[2]});
+            finer.push_back({ab, bc, ca});
+        }
+        tris.swap(finer);
+    }
+    Mesh m;
+    for (const auto& t : tris) {
+        Vec3d p[3];
+        for (int i = 0; i < 3; ++i)
+            for (int k = 0; k < 3; ++k) p[i][k] = centre[k] + radius * t[i][k];
+        add_triangle(m, p[0], p[1], p[2]);
+    }
+    return m;
+}
+
 // Triangles with vertices uniform in [lo, hi)^3, each of size up to `span`.
 inline Mesh random_triangles(int count, double lo, double hi, double span, uint32_t seed) {
     std::mt19937 rng(seed);

@@ -2,6 +2,7 @@
 // budget and triangle order, on random and real meshes.
 #include <algorithm>
 
+#include "opencl_runtime.hpp"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -85,6 +86,27 @@ TEST_P(DeviceMatchesReference, ForShuffledTriangles) {
 INSTANTIATE_TEST_SUITE_P(BothTests, DeviceMatchesReference, ::testing::ValuesIn(kTests),
                          [](const auto& info) { return std::string(to_string(info.param)); });
 
+// Thin voxelization and the half-open boundary rule run the same tiled path with other setup and
+// test functions: device == reference for every brick size.
+TEST(DeviceMatchesReferenceForModes, ThinAndHalfOpen) {
+    const Grid g = unit_grid(48, 40, 44);
+    Mesh m = random_triangles(300, 0, 44, 6, 29);
+    // A box puts faces exactly on voxel planes, where the boundary rule matters.
+    const Mesh box = box_mesh({4, 4, 4}, {20, 12, 30});
+    for (const auto& t : box.triangles)
+        add_triangle(m, box.positions[t[0]], box.positions[t[1]], box.positions[t[2]]);
+    for (int brick : {8, 16, 48}) {
+        VoxelizeOptions thin = options(OverlapTest::PEF, brick);
+        thin.mode = VoxelizeMode::Thin;
+        expect_same(device().voxelize(m, g, thin), voxelize_reference(m, g, thin));
+        for (OverlapTest test : kTests) {
+            VoxelizeOptions open = options(test, brick);
+            open.boundary = Boundary::HalfOpen;
+            expect_same(device().voxelize(m, g, open), voxelize_reference(m, g, open));
+        }
+    }
+}
+
 // A grid whose dense bit array is 64x the device budget still works, in many batches, and the
 // bunny's surface is exact up to rounding against the double-precision test.
 TEST(Tiling, GridLargerThanDeviceBudget) {
@@ -144,6 +166,29 @@ TEST(Tiling, AbsurdGridIsRefusedBeforeAllocating) {
     const Grid g = unit_grid(kMaxGridAxis, kMaxGridAxis, kMaxGridAxis);
     const Mesh m = box_mesh({0, 0, 0}, {double(kMaxGridAxis), double(kMaxGridAxis), 1});
     EXPECT_THROW(device().voxelize(m, g, options(OverlapTest::PEF, 8)), GridError);
+}
+
+// A kernel that does not compile raises KernelBuildError carrying the compiler's log.
+TEST(Devices, KernelBuildFailureCarriesTheBuildLog) {
+    std::vector<cl::Platform> platforms;
+    cl::Platform::get(&platforms);
+    std::vector<cl::Device> devices;
+    platforms.at(0).getDevices(CL_DEVICE_TYPE_ALL, &devices);
+    Device::Impl impl;
+    impl.device = devices.at(0);
+    impl.info.name = "test device";
+    impl.context = cl::Context(impl.device);
+    const detail::KernelSource broken{"broken", "__kernel void f() { this is not C; }",
+                                      "0000000000000000000000000000000000000000000000000000000000000000"};
+    setenv("OCLVOX_CACHE_DIR", "off", 1);
+    try {
+        impl.program(broken);
+        FAIL() << "a broken kernel built";
+    } catch (const KernelBuildError& e) {
+        EXPECT_NE(std::string(e.what()).find("CL_BUILD_PROGRAM_FAILURE"), std::string::npos);
+        EXPECT_NE(e.build_log().find("error"), std::string::npos) << e.build_log();
+    }
+    unsetenv("OCLVOX_CACHE_DIR");
 }
 
 TEST(Devices, MissingDeviceIsAnErrorNotAFallback) {

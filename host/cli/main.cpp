@@ -81,6 +81,9 @@ struct VoxelizeArgs {
     std::string input, output;
     oclvox::GridFit fit;
     std::string test = "pef";
+    std::string mode = "surface";
+    std::string inside = "auto";
+    std::string boundary = "closed";
     std::string device;
     bool reference = false;
     int brick_size = oclvox::VoxelizeOptions{}.brick_size;
@@ -259,7 +262,14 @@ void print_summary(const RunReport& r) {
     std::printf("input    %s (%zu triangles)\n", r.args.input.c_str(), r.mesh.triangles.size());
     std::printf("grid     %s voxels of size %g, origin (%g, %g, %g)\n", dims_text(g).c_str(),
                 g.voxel_size, g.origin[0], g.origin[1], g.origin[2]);
-    std::printf("test     %s\n", r.args.test.c_str());
+    if (r.args.mode == "thin")
+        std::printf("mode     thin (6-separating), boundary %s\n", r.args.boundary.c_str());
+    else
+        std::printf("mode     %s, test %s, boundary %s\n", r.args.mode.c_str(), r.args.test.c_str(),
+                    r.args.boundary.c_str());
+    if (!r.stats.inside_test.empty())
+        std::printf("inside   %s (%s)\n", r.stats.inside_test.c_str(),
+                    r.stats.inside_test_reason.c_str());
     if (r.device)
         std::printf("device   %s (%s)\n", r.device->name.c_str(), r.device->platform.c_str());
     else
@@ -318,6 +328,10 @@ nlohmann::ordered_json stats_json(const RunReport& r) {
     else
         j["device"] = nullptr;
     j["test"] = r.args.test;
+    j["mode"] = r.args.mode;
+    j["boundary"] = r.args.boundary;
+    if (!r.stats.inside_test.empty())
+        j["inside"] = {{"test", r.stats.inside_test}, {"reason", r.stats.inside_test_reason}};
     j["brick_size"] = r.args.brick_size;
     j["grid"] = {{"dims", r.grid.dims},
                  {"voxel_size", r.grid.voxel_size},
@@ -386,6 +400,9 @@ int run_voxelize(const VoxelizeArgs& args) {
     // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
     oclvox::VoxelizeOptions options;
     options.test = oclvox::overlap_test_from_string(args.test);
+    options.mode = oclvox::voxelize_mode_from_string(args.mode);
+    options.inside = oclvox::inside_test_from_string(args.inside);
+    options.boundary = oclvox::boundary_from_string(args.boundary);
     options.brick_size = args.brick_size;
     options.device_budget_bytes = args.device_mib << 20;
     options.host_budget_bytes = args.host_mib << 20;
@@ -484,6 +501,31 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
                     "and projected edge functions) or sat (separating axes)")
         ->type_name("TEST")
         ->check(CLI::IsMember({"pef", "sat"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--mode", args.mode,
+                    "surface (conservative, 26-separating: every voxel touching a triangle), "
+                    "thin (6-separating, Schwarz & Seidel), solid (voxel centres inside the "
+                    "mesh) or filled (solid and surface)")
+        ->type_name("MODE")
+        ->check(CLI::IsMember({"surface", "thin", "solid", "filled"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--inside", args.inside,
+                    "inside test for solid/filled: auto (parity for closed meshes, winding "
+                    "number otherwise), parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--boundary", args.boundary,
+                    "closed (voxels are closed boxes: a face on a voxel face marks both voxels) "
+                    "or half-open ([i, i+1): it marks exactly one layer)")
+        ->type_name("RULE")
+        ->check(CLI::IsMember({"closed", "half-open"}))
         ->capture_default_str()
         ->group("Voxelization");
     if (const char* selector = std::getenv("OCLVOX_DEVICE")) args.device = selector;

@@ -14,6 +14,7 @@
 #include "binning.hpp"
 #include "opencl_runtime.hpp"
 #include "prepare.hpp"
+#include "surface_tests.hpp"
 
 namespace oclvox {
 
@@ -118,14 +119,18 @@ cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
 
 SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                               VoxelizeStats* stats_out) {
+    if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled)
+        throw GridError(std::string("mode ") + to_string(options.mode) + " is not implemented yet");
     VoxelizeStats stats;
+    const detail::SurfaceKernels kernels = detail::surface_kernels(detail::surface_test_for(options));
     SparseVoxels result(grid, options.brick_size);
     const int brick_size = options.brick_size;
     Impl& cl = *impl_;
 
     // Phase 1: prepare and bin on the host.
     auto t = Clock::now();
-    const detail::PreparedTriangles prepared = detail::prepare_triangles(mesh, grid);
+    const detail::PreparedTriangles prepared =
+        detail::prepare_triangles(mesh, grid, options.boundary);
     const detail::Binning binning = detail::bin_triangles(prepared, grid, brick_size);
     const auto nbricks = result.brick_dims();
     stats.triangles_in = mesh.triangles.size();
@@ -154,29 +159,28 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     const size_t max_slots = size_t(std::max<uint64_t>(1, device_budget / brick_bytes));
 
     if (!prepared.triangles.empty()) try {
-            const bool sat = options.test == OverlapTest::SAT;
             const cl::Program& program = cl.program(detail::kKernel_voxelize);
 
             // Phase 3: triangles to the device; per-triangle constants once.
             t = Clock::now();
             const cl::Buffer triangles = upload(cl.context, cl.queue, prepared.triangles);
             const cl::Buffer ranges = upload(cl.context, cl.queue, prepared.ranges);
-            const size_t setup_bytes = sat ? sizeof(detail::OvSatTriangle) : sizeof(detail::OvPefTriangle);
             const cl_uint triangle_count = cl_uint(prepared.triangles.size());
-            cl::Buffer setups(cl.context, CL_MEM_READ_WRITE, setup_bytes * triangle_count);
+            cl::Buffer setups(cl.context, CL_MEM_READ_WRITE, kernels.setup_bytes * triangle_count);
             cl.queue.finish();
             stats.seconds_upload += seconds_since(t);
 
             t = Clock::now();
-            cl::Kernel setup(program, sat ? "setup_sat" : "setup_pef");
+            cl::Kernel setup(program, kernels.setup);
             setup.setArg(0, triangles);
             setup.setArg(1, triangle_count);
-            setup.setArg(2, setups);
+            setup.setArg(2, cl_int(options.boundary == Boundary::HalfOpen));
+            setup.setArg(3, setups);
             launch(cl.queue, setup, triangle_count, work_group_size(setup, cl.device));
             cl.queue.finish();
             stats.seconds_kernels += seconds_since(t);
 
-            cl::Kernel voxelize(program, sat ? "voxelize_sat" : "voxelize_pef");
+            cl::Kernel voxelize(program, kernels.voxelize);
             const size_t voxelize_group = work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
             cl::Buffer bits(cl.context, CL_MEM_READ_WRITE,

@@ -50,7 +50,7 @@ OvTriangle round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
 
 }  // namespace
 
-PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid) {
+PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary boundary) {
     validate_mesh(mesh);
     validate_grid(grid);
     PreparedTriangles out;
@@ -97,7 +97,8 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid) {
     }
 
     out.ranges.reserve(out.triangles.size());
-    for (const OvTriangle& t : out.triangles) out.ranges.push_back(ov_triangle_range(t));
+    const int half_open = boundary == Boundary::HalfOpen;
+    for (const OvTriangle& t : out.triangles) out.ranges.push_back(ov_triangle_range(t, half_open));
     return out;
 }
 

@@ -17,6 +17,8 @@ struct PreparedTriangles {
 // triangles that cannot touch the grid, clips the few that reach far outside it (so huge
 // triangles keep their precision and integer ranges stay bounded), and rounds each triangle once
 // to float relative to an integer anchor.
-PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid);
+// `boundary` decides the voxel ranges (closed or half-open voxel boxes).
+PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid,
+                                    Boundary boundary = Boundary::Closed);
 
 }  // namespace oclvox::detail

@@ -7,6 +7,7 @@
 
 #include "oclvox/oclvox.hpp"
 #include "prepare.hpp"
+#include "surface_tests.hpp"
 
 namespace oclvox {
 
@@ -57,14 +58,17 @@ void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels&
 
 SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                                 VoxelizeStats* stats) {
+    if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled)
+        throw GridError(std::string("mode ") + to_string(options.mode) + " is not implemented yet");
     const auto start = std::chrono::steady_clock::now();
+    const detail::SurfaceTest test = detail::surface_test_for(options);
     SparseVoxels out(grid, options.brick_size);
-    const detail::PreparedTriangles prepared = detail::prepare_triangles(mesh, grid);
+    const detail::PreparedTriangles prepared =
+        detail::prepare_triangles(mesh, grid, options.boundary);
     refuse_absurd_work(prepared, grid);
-    if (options.test == OverlapTest::SAT)
-        voxelize_triangles(prepared, out, detail::ov_setup_sat, detail::ov_sat_overlaps);
-    else
-        voxelize_triangles(prepared, out, detail::ov_setup_pef, detail::ov_pef_overlaps);
+    detail::with_host_surface_test(test, options.boundary, [&](auto setup, auto overlaps) {
+        voxelize_triangles(prepared, out, setup, overlaps);
+    });
     if (stats) {
         *stats = VoxelizeStats{};
         stats->triangles_in = mesh.triangles.size();

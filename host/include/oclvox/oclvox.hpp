@@ -159,10 +159,40 @@ enum class OverlapTest {
 const char* to_string(OverlapTest test);
 OverlapTest overlap_test_from_string(const std::string& name);  // "sat" / "pef"
 
+// What a voxel set means.
+enum class VoxelizeMode {
+    Surface,  // conservative, 26-separating: every voxel whose closed box touches a triangle
+    Thin,     // 6-separating surface (Schwarz & Seidel 2010): thinner, still 6-gap-free
+    Solid,    // voxels whose centre is inside the mesh
+    Filled,   // Solid united with Surface
+};
+const char* to_string(VoxelizeMode mode);
+VoxelizeMode voxelize_mode_from_string(const std::string& name);
+
+// How Solid decides "inside".
+enum class InsideTest {
+    Auto,     // Parity for closed, consistently oriented meshes, Winding otherwise
+    Parity,   // crossing parity along voxel columns (Schwarz & Seidel)
+    Winding,  // generalized winding number > 0.5 (Jacobson et al. 2013)
+};
+const char* to_string(InsideTest test);
+InsideTest inside_test_from_string(const std::string& name);
+
+// Voxel boxes for faces that lie exactly on voxel faces.
+enum class Boundary {
+    Closed,    // [i, i+1]: a face on a voxel face marks both voxels (the conservative definition)
+    HalfOpen,  // [i, i+1): such a face marks exactly one layer
+};
+const char* to_string(Boundary boundary);
+Boundary boundary_from_string(const std::string& name);
+
 // Called after each batch of bricks; return false to cancel (the run throws Cancelled).
 using ProgressCallback = std::function<bool(uint64_t bricks_done, uint64_t bricks_total)>;
 
 struct VoxelizeOptions {
+    VoxelizeMode mode = VoxelizeMode::Surface;
+    InsideTest inside = InsideTest::Auto;
+    Boundary boundary = Boundary::Closed;
     OverlapTest test = OverlapTest::PEF;
     int brick_size = 64;                        // voxels per brick edge, a multiple of 4 in [4, 1024]
     uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
@@ -181,6 +211,8 @@ struct VoxelizeStats {
     uint64_t bricks_active = 0;        // bricks with at least one triangle
     uint64_t batches = 0;              // device batches
     uint64_t voxels_set = 0;
+    std::string inside_test;         // Solid/Filled: "parity" or "winding"
+    std::string inside_test_reason;  // why (e.g. "forced by options", "mesh is closed")
 };
 
 struct DeviceInfo {
@@ -209,7 +241,9 @@ public:
     SparseVoxels voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                           VoxelizeStats* stats = nullptr);
 
+    // The OpenCL objects, for the library's own algorithms (an opaque type to users).
     struct Impl;
+    Impl& impl() { return *impl_; }
 
 private:
     explicit Device(std::unique_ptr<Impl> impl);
