@@ -4,14 +4,13 @@
 //
 //   oclvox_bench [--device SEL] [--repeat N] [--brick B] [--json FILE] [--commit HASH]
 //                MESH... -- RES...
-#include <oclvox/oclvox.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <oclvox/oclvox.hpp>
 #include <string>
 #include <vector>
 
@@ -26,7 +25,9 @@ std::string cpu_model() {
     return "unknown";
 }
 
-std::string base_name(const std::string& path) { return path.substr(path.find_last_of('/') + 1); }
+std::string base_name(const std::string& path) {
+    return path.substr(path.find_last_of('/') + 1);
+}
 
 struct Run {
     std::string mesh, test;
@@ -47,14 +48,22 @@ int main(int argc, char** argv) {
     bool after_separator = false;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
-        if (a == "--device" && i + 1 < argc) selector = argv[++i];
-        else if (a == "--repeat" && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
-        else if (a == "--brick" && i + 1 < argc) brick = std::atoi(argv[++i]);
-        else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-        else if (a == "--commit" && i + 1 < argc) commit = argv[++i];
-        else if (a == "--") after_separator = true;
-        else if (after_separator) resolutions.push_back(std::atoll(a.c_str()));
-        else meshes.push_back(a);
+        if (a == "--device" && i + 1 < argc)
+            selector = argv[++i];
+        else if (a == "--repeat" && i + 1 < argc)
+            repeat = std::max(1, std::atoi(argv[++i]));
+        else if (a == "--brick" && i + 1 < argc)
+            brick = std::atoi(argv[++i]);
+        else if (a == "--json" && i + 1 < argc)
+            json_path = argv[++i];
+        else if (a == "--commit" && i + 1 < argc)
+            commit = argv[++i];
+        else if (a == "--")
+            after_separator = true;
+        else if (after_separator)
+            resolutions.push_back(std::atoll(a.c_str()));
+        else
+            meshes.push_back(a);
     }
     if (meshes.empty() || resolutions.empty()) {
         std::fprintf(stderr, "usage: oclvox_bench [options] MESH... -- RES...\n");
@@ -63,13 +72,14 @@ int main(int argc, char** argv) {
     try {
         oclvox::Device device = oclvox::Device::open(selector);
         const auto& info = device.info();
-        std::printf("machine: %s\ndevice: %s (%s, %s), driver %s\ncommit: %s\n", cpu_model().c_str(),
-                    info.name.c_str(), info.platform.c_str(), info.type.c_str(),
-                    info.driver_version.c_str(), commit.c_str());
+        std::printf("machine: %s\ndevice: %s (%s, %s), driver %s\ncommit: %s\n",
+                    cpu_model().c_str(), info.name.c_str(), info.platform.c_str(),
+                    info.type.c_str(), info.driver_version.c_str(), commit.c_str());
         std::printf("brick %d, median of %d runs after one warm-up\n\n", brick, repeat);
-        std::printf("| mesh | tris | res | grid | test | bin s | upload s | kernel s | download s | "
-                    "total s | Mtri/s | Mvox/s (kernel) | voxels | bricks active |\n"
-                    "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+        std::printf(
+            "| mesh | tris | res | grid | test | bin s | upload s | kernel s | download s | "
+            "total s | Mtri/s | Mvox/s (kernel) | voxels | bricks active |\n"
+            "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
         std::vector<Run> runs;
         for (const std::string& path : meshes) {
             const oclvox::Mesh mesh = oclvox::load_mesh(path);
@@ -92,20 +102,23 @@ int main(int argc, char** argv) {
                     }
                     std::sort(samples.begin(), samples.end(),
                               [](const auto& a, const auto& b) { return a.first < b.first; });
-                    Run run{base_name(path), oclvox::to_string(test), res, grid.dims,
-                            mesh.triangles.size(), samples[samples.size() / 2].second,
+                    Run run{base_name(path),
+                            oclvox::to_string(test),
+                            res,
+                            grid.dims,
+                            mesh.triangles.size(),
+                            samples[samples.size() / 2].second,
                             samples[samples.size() / 2].first};
                     const auto& s = run.stats;
-                    std::printf("| %s | %llu | %lld | %lldx%lldx%lld | %s | %.3f | %.3f | %.3f | "
-                                "%.3f | %.3f | %.2f | %.1f | %llu | %llu |\n",
-                                run.mesh.c_str(), (unsigned long long)run.triangles,
-                                (long long)res, (long long)grid.dims[0], (long long)grid.dims[1],
-                                (long long)grid.dims[2], run.test.c_str(), s.seconds_binning,
-                                s.seconds_upload, s.seconds_kernels, s.seconds_download, run.total,
-                                double(run.triangles) / run.total / 1e6,
-                                double(s.voxels_set) / s.seconds_kernels / 1e6,
-                                (unsigned long long)s.voxels_set,
-                                (unsigned long long)s.bricks_active);
+                    std::printf(
+                        "| %s | %llu | %lld | %lldx%lldx%lld | %s | %.3f | %.3f | %.3f | "
+                        "%.3f | %.3f | %.2f | %.1f | %llu | %llu |\n",
+                        run.mesh.c_str(), (unsigned long long)run.triangles, (long long)res,
+                        (long long)grid.dims[0], (long long)grid.dims[1], (long long)grid.dims[2],
+                        run.test.c_str(), s.seconds_binning, s.seconds_upload, s.seconds_kernels,
+                        s.seconds_download, run.total, double(run.triangles) / run.total / 1e6,
+                        double(s.voxels_set) / s.seconds_kernels / 1e6,
+                        (unsigned long long)s.voxels_set, (unsigned long long)s.bricks_active);
                     std::fflush(stdout);
                     runs.push_back(run);
                 }
@@ -114,8 +127,10 @@ int main(int argc, char** argv) {
         if (!json_path.empty()) {
             nlohmann::json j;
             j["machine"] = cpu_model();
-            j["device"] = {{"name", info.name}, {"platform", info.platform},
-                           {"type", info.type}, {"driver", info.driver_version}};
+            j["device"] = {{"name", info.name},
+                           {"platform", info.platform},
+                           {"type", info.type},
+                           {"driver", info.driver_version}};
             j["commit"] = commit;
             j["brick"] = brick;
             for (const Run& r : runs)

@@ -74,8 +74,12 @@ typedef struct {
     int strict;
 } OvPefTriangle;
 
-OV_FN float ov_min3(float a, float b, float c) { return fmin(fmin(a, b), c); }
-OV_FN float ov_max3(float a, float b, float c) { return fmax(fmax(a, b), c); }
+OV_FN float ov_min3(float a, float b, float c) {
+    return fmin(fmin(a, b), c);
+}
+OV_FN float ov_max3(float a, float b, float c) {
+    return fmax(fmax(a, b), c);
+}
 
 OV_FN OvRange ov_triangle_range(OvTriangle t, int half_open) {
     OvRange r;
@@ -144,7 +148,8 @@ OV_FN OvSatTriangle ov_setup_sat(OvTriangle t, int half_open) {
             float p0 = c0 * t.u[a1] + c1 * t.u[a2];
             float p1 = c0 * t.u[3 + a1] + c1 * t.u[3 + a2];
             float p2 = c0 * t.u[6 + a1] + c1 * t.u[6 + a2];
-            // Unit box [q, q+1] projects to dot(axis, q) + [sum of negative parts, sum of positive].
+            // Unit box [q, q+1] projects to dot(axis, q) + [sum of negative parts, sum of
+            // positive].
             float box_lo = fmin(c0, 0.0f) + fmin(c1, 0.0f);
             float box_hi = fmax(c0, 0.0f) + fmax(c1, 0.0f);
             int i = 3 * k + j;
@@ -225,8 +230,8 @@ OV_FN OvPefTriangle ov_setup_pef(OvTriangle t, int half_open) {
             float ny = ex * sign;
             s.edge_normal[k][j][0] = nx;
             s.edge_normal[k][j][1] = ny;
-            s.edge_offset[k][j] = -(nx * t.u[3 * j + a1] + ny * t.u[3 * j + a2]) +
-                                  fmax(0.0f, nx) + fmax(0.0f, ny);
+            s.edge_offset[k][j] =
+                -(nx * t.u[3 * j + a1] + ny * t.u[3 * j + a2]) + fmax(0.0f, nx) + fmax(0.0f, ny);
             if (half_open && (nx > 0.0f || ny > 0.0f)) s.strict |= 1 << (3 * k + j);
         }
     }
@@ -310,7 +315,9 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
 }
 
 // Bit of voxel (x, y, z) (local to its 4x4x4 block) in the block's 64-bit mask.
-OV_FN int ov_block_bit(int x, int y, int z) { return x + 4 * (y + 4 * z); }
+OV_FN int ov_block_bit(int x, int y, int z) {
+    return x + 4 * (y + 4 * z);
+}
 
 // The work of one (triangle, brick) pair: the voxels of the triangle's range inside both the
 // brick and the grid, covered by 4x4x4 blocks (aligned to the global grid) that become one work
@@ -328,8 +335,9 @@ OV_FN int ov_pair_work(OvRange r, int bx, int by, int bz, int brick_size, int nx
     int total = 1;
     for (int k = 0; k < 3; ++k) {
         int lo = r.lo[k] > brick[k] * brick_size ? r.lo[k] : brick[k] * brick_size;
-        int hi = r.hi[k] < brick[k] * brick_size + brick_size - 1 ? r.hi[k]
-                                                                   : brick[k] * brick_size + brick_size - 1;
+        int hi = r.hi[k] < brick[k] * brick_size + brick_size - 1
+                     ? r.hi[k]
+                     : brick[k] * brick_size + brick_size - 1;
         if (lo < 0) lo = 0;
         if (hi > dims[k] - 1) hi = dims[k] - 1;
         if (lo > hi) return 0;

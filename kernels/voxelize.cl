@@ -81,67 +81,45 @@ static void store_block(__global uint* bits, const Item* it, int brick_size, uin
     if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
 }
 
-// The voxel loop is written out once per test; OV_TEST names the overlap function.
-#define OV_VOXEL_LOOP(OV_TEST, setup)                                                        \
-    float block_dn = setup.normal[0] * (float)(it.block[0] * 4 - setup.anchor[0]) +          \
-                     setup.normal[1] * (float)(it.block[1] * 4 - setup.anchor[1]) +          \
-                     setup.normal[2] * (float)(it.block[2] * 4 - setup.anchor[2]);           \
-    if (block_dn < setup.block_lo || block_dn > setup.block_hi) return;                      \
-    uint mask_lo = 0, mask_hi = 0;                                                           \
-    int lo[3], hi[3];                                                                        \
-    for (int k = 0; k < 3; ++k) {                                                            \
-        lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                                   \
-        hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                               \
-    }                                                                                        \
-    for (int z = lo[2]; z <= hi[2]; ++z)                                                     \
-        for (int y = lo[1]; y <= hi[1]; ++y)                                                 \
-            for (int x = lo[0]; x <= hi[0]; ++x) {                                           \
-                if (!OV_TEST(&setup, (float)(x - setup.anchor[0]), (float)(y - setup.anchor[1]), \
-                             (float)(z - setup.anchor[2])))                                  \
-                    continue;                                                                \
-                int bit = ov_block_bit(x & 3, y & 3, z & 3);                                 \
-                if (bit < 32)                                                                \
-                    mask_lo |= 1u << bit;                                                    \
-                else                                                                         \
-                    mask_hi |= 1u << (bit - 32);                                             \
-            }                                                                                \
-    store_block(bits, &it, brick_size, mask_lo, mask_hi);
+// One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS its
+// per-voxel test.
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS)                                           \
+    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,        \
+                       __global const uint* pair_triangle, __global const uint* pair_slot,  \
+                       __global const uint* pair_first_item, uint pair_count,               \
+                       __global const int* slot_brick, uint item_base, uint item_end,       \
+                       int brick_size, int nx, int ny, int nz, __global uint* bits) {       \
+        Item it;                                                                            \
+        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, \
+                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))         \
+            return;                                                                         \
+        SETUP s = setups[it.triangle];                                                      \
+        /* Skip the block if it lies entirely on one side of the triangle's plane. */       \
+        float block_dn = s.normal[0] * (float)(it.block[0] * 4 - s.anchor[0]) +             \
+                         s.normal[1] * (float)(it.block[1] * 4 - s.anchor[1]) +             \
+                         s.normal[2] * (float)(it.block[2] * 4 - s.anchor[2]);              \
+        if (block_dn < s.block_lo || block_dn > s.block_hi) return;                         \
+        uint mask_lo = 0, mask_hi = 0;                                                      \
+        int lo[3], hi[3];                                                                   \
+        for (int k = 0; k < 3; ++k) {                                                       \
+            lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                              \
+            hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                          \
+        }                                                                                   \
+        for (int z = lo[2]; z <= hi[2]; ++z)                                                \
+            for (int y = lo[1]; y <= hi[1]; ++y)                                            \
+                for (int x = lo[0]; x <= hi[0]; ++x) {                                      \
+                    if (!OVERLAPS(&s, (float)(x - s.anchor[0]), (float)(y - s.anchor[1]),   \
+                                  (float)(z - s.anchor[2])))                                \
+                        continue;                                                           \
+                    int bit = ov_block_bit(x & 3, y & 3, z & 3);                            \
+                    if (bit < 32)                                                           \
+                        mask_lo |= 1u << bit;                                               \
+                    else                                                                    \
+                        mask_hi |= 1u << (bit - 32);                                        \
+                }                                                                           \
+        store_block(bits, &it, brick_size, mask_lo, mask_hi);                               \
+    }
 
-__kernel void voxelize_sat(__global const OvSatTriangle* setups, __global const OvRange* ranges,
-                           __global const uint* pair_triangle, __global const uint* pair_slot,
-                           __global const uint* pair_first_item, uint pair_count,
-                           __global const int* slot_brick, uint item_base, uint item_end,
-                           int brick_size, int nx, int ny, int nz, __global uint* bits) {
-    Item it;
-    if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, ranges,
-                     item_base, item_end, brick_size, nx, ny, nz, &it))
-        return;
-    OvSatTriangle s = setups[it.triangle];
-    OV_VOXEL_LOOP(ov_sat_overlaps, s)
-}
-
-__kernel void voxelize_thin(__global const OvThinTriangle* setups, __global const OvRange* ranges,
-                            __global const uint* pair_triangle, __global const uint* pair_slot,
-                            __global const uint* pair_first_item, uint pair_count,
-                            __global const int* slot_brick, uint item_base, uint item_end,
-                            int brick_size, int nx, int ny, int nz, __global uint* bits) {
-    Item it;
-    if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, ranges,
-                     item_base, item_end, brick_size, nx, ny, nz, &it))
-        return;
-    OvThinTriangle s = setups[it.triangle];
-    OV_VOXEL_LOOP(ov_thin_overlaps, s)
-}
-
-__kernel void voxelize_pef(__global const OvPefTriangle* setups, __global const OvRange* ranges,
-                           __global const uint* pair_triangle, __global const uint* pair_slot,
-                           __global const uint* pair_first_item, uint pair_count,
-                           __global const int* slot_brick, uint item_base, uint item_end,
-                           int brick_size, int nx, int ny, int nz, __global uint* bits) {
-    Item it;
-    if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, ranges,
-                     item_base, item_end, brick_size, nx, ny, nz, &it))
-        return;
-    OvPefTriangle s = setups[it.triangle];
-    OV_VOXEL_LOOP(ov_pef_overlaps, s)
-}
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps)

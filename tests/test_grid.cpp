@@ -4,7 +4,9 @@
 namespace oclvox::test {
 namespace {
 
-Mesh long_box() { return box_mesh({-1, 0, 2}, {3, 1, 2.5}); }  // extents 4 x 1 x 0.5
+Mesh long_box() {
+    return box_mesh({-1, 0, 2}, {3, 1, 2.5});
+}  // extents 4 x 1 x 0.5
 
 TEST(FitGrid, DefaultFitsBoundingBoxWithResolutionOnLongestAxis) {
     GridFit fit;

@@ -98,7 +98,8 @@ TEST_P(HandWorked, VertexOnVoxelCornerSetsAllEightNeighbours) {
 // Closed cube [1, 5]^3 in an 8^3 grid: voxels 0..5 on each axis meet the closed cube (6^3 = 216);
 // the 2^3 voxels inside the open cube do not touch its surface: 208.
 TEST_P(HandWorked, AxisAlignedCubeHasExactCount) {
-    const SparseVoxels v = reference(box_mesh({1, 1, 1}, {5, 5, 5}), unit_grid(8, 8, 8), GetParam());
+    const SparseVoxels v =
+        reference(box_mesh({1, 1, 1}, {5, 5, 5}), unit_grid(8, 8, 8), GetParam());
     EXPECT_EQ(v.count(), 208u);
     EXPECT_FALSE(v.get(2, 3, 3));
     EXPECT_TRUE(v.get(0, 0, 0));  // touches the cube's corner (1, 1, 1)
@@ -161,7 +162,8 @@ TEST_P(HandWorked, HalfOpenPlanesMarkExactlyOneLayer) {
 // Cube [1, 5]^3 with half-open voxels: voxels 1..5 on each axis meet it, and those with an index
 // of 1 or 5 on some axis meet its surface: 5^3 - 3^3 = 98.
 TEST_P(HandWorked, HalfOpenCubeHasExactCount) {
-    const SparseVoxels v = half_open(box_mesh({1, 1, 1}, {5, 5, 5}), unit_grid(8, 8, 8), GetParam());
+    const SparseVoxels v =
+        half_open(box_mesh({1, 1, 1}, {5, 5, 5}), unit_grid(8, 8, 8), GetParam());
     EXPECT_EQ(v.count(), 98u);
     EXPECT_TRUE(v.get(1, 1, 1) && v.get(5, 5, 5) && v.get(1, 3, 3));
     EXPECT_FALSE(v.get(0, 0, 0) || v.get(3, 3, 3));
@@ -366,14 +368,16 @@ TEST(Thin, ClosedSurfacesLeaveNoSixConnectedGap) {
     const Vec3d c{12.2, 11.7, 12.45};
     const Mesh sphere = sphere_mesh(c, 9.3, 4);
     const SparseVoxels s = thin(sphere, unit_grid(25, 25, 25));
-    EXPECT_EQ(leaked_voxels(s, [&](double x, double y, double z) {
-                  return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.3 * 0.98 - 0.01;
-              }),
+    EXPECT_EQ(leaked_voxels(s,
+                            [&](double x, double y, double z) {
+                                return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.3 * 0.98 - 0.01;
+                            }),
               0u);
     // The inside is really there: the flood fill without the surface reaches it.
-    EXPECT_GT(leaked_voxels(SparseVoxels(s.grid(), 8), [&](double x, double y, double z) {
-                  return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.0;
-              }),
+    EXPECT_GT(leaked_voxels(SparseVoxels(s.grid(), 8),
+                            [&](double x, double y, double z) {
+                                return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.0;
+                            }),
               1000u);
 
     // A cube rotated about two axes.
@@ -383,18 +387,21 @@ TEST(Thin, ClosedSurfacesLeaveNoSixConnectedGap) {
         const double x = p[0] * std::cos(a) - p[1] * std::sin(a);
         const double y = p[0] * std::sin(a) + p[1] * std::cos(a);
         const double z = p[2];
-        p = {12.3 + x, 12.1 + y * std::cos(b) - z * std::sin(b), 12.2 + y * std::sin(b) + z * std::cos(b)};
+        p = {12.3 + x, 12.1 + y * std::cos(b) - z * std::sin(b),
+             12.2 + y * std::sin(b) + z * std::cos(b)};
     }
     const SparseVoxels t = thin(cube, unit_grid(25, 25, 25));
-    EXPECT_EQ(leaked_voxels(t, [&](double x, double y, double z) {
-                  // Undo the rotation and ask whether the centre is well inside the cube.
-                  const double dx = x - 12.3, dy = y - 12.1, dz = z - 12.2;
-                  const double y1 = dy * std::cos(b) + dz * std::sin(b);
-                  const double z1 = -dy * std::sin(b) + dz * std::cos(b);
-                  const double x0 = dx * std::cos(a) + y1 * std::sin(a);
-                  const double y0 = -dx * std::sin(a) + y1 * std::cos(a);
-                  return std::max({std::abs(x0), std::abs(y0), std::abs(z1)}) < 5.9;
-              }),
+    EXPECT_EQ(leaked_voxels(t,
+                            [&](double x, double y, double z) {
+                                // Undo the rotation and ask whether the centre is well inside the
+                                // cube.
+                                const double dx = x - 12.3, dy = y - 12.1, dz = z - 12.2;
+                                const double y1 = dy * std::cos(b) + dz * std::sin(b);
+                                const double z1 = -dy * std::sin(b) + dz * std::cos(b);
+                                const double x0 = dx * std::cos(a) + y1 * std::sin(a);
+                                const double y0 = -dx * std::sin(a) + y1 * std::cos(a);
+                                return std::max({std::abs(x0), std::abs(y0), std::abs(z1)}) < 5.9;
+                            }),
               0u);
     EXPECT_LT(t.count(), reference(cube, unit_grid(25, 25, 25), OverlapTest::PEF).count());
 }

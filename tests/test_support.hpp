@@ -33,7 +33,8 @@ inline void add_triangle(Mesh& m, const Vec3d& a, const Vec3d& b, const Vec3d& c
 inline Mesh box_mesh(const Vec3d& lo, const Vec3d& hi) {
     Mesh m;
     for (int i = 0; i < 8; ++i)
-        m.positions.push_back({i & 1 ? hi[0] : lo[0], i & 2 ? hi[1] : lo[1], i & 4 ? hi[2] : lo[2]});
+        m.positions.push_back(
+            {i & 1 ? hi[0] : lo[0], i & 2 ? hi[1] : lo[1], i & 4 ? hi[2] : lo[2]});
     const uint32_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
                                   {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
     for (const auto& q : quads) {

@@ -11,7 +11,8 @@ namespace {
 const OverlapTest kTests[] = {OverlapTest::SAT, OverlapTest::PEF};
 
 Device& device() {
-    static Device d = Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    static Device d =
+        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
     return d;
 }
 
@@ -178,8 +179,9 @@ TEST(Devices, KernelBuildFailureCarriesTheBuildLog) {
     impl.device = devices.at(0);
     impl.info.name = "test device";
     impl.context = cl::Context(impl.device);
-    const detail::KernelSource broken{"broken", "__kernel void f() { this is not C; }",
-                                      "0000000000000000000000000000000000000000000000000000000000000000"};
+    const detail::KernelSource broken{
+        "broken", "__kernel void f() { this is not C; }",
+        "0000000000000000000000000000000000000000000000000000000000000000"};
     setenv("OCLVOX_CACHE_DIR", "off", 1);
     try {
         impl.program(broken);

@@ -58,8 +58,7 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
     if (candidates > max_pairs)
         throw GridError("binning would examine " + std::to_string(candidates) +
                         " (triangle, brick) pairs, more than the limit of " +
-                        std::to_string(max_pairs) +
-                        ": lower the resolution or use larger bricks");
+                        std::to_string(max_pairs) + ": lower the resolution or use larger bricks");
 
     // Phase 2: (brick, triangle) pairs, culling bricks of multi-brick triangles.
     std::vector<std::pair<uint64_t, uint32_t>> pairs;

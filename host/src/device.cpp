@@ -35,7 +35,9 @@ uint64_t physical_memory() {
     return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : uint64_t(8) << 30;
 }
 
-std::string mib(uint64_t bytes) { return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB"; }
+std::string mib(uint64_t bytes) {
+    return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB";
+}
 
 struct Batch {
     size_t first_brick = 0, brick_count = 0;
@@ -87,34 +89,6 @@ Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles
     return batch;
 }
 
-// A fixed work-group size, queried from the kernel and the device rather than assumed: some
-// drivers (PoCL among them) compile a kernel once per work-group size, so letting the driver pick
-// one per launch size would recompile on almost every launch.
-size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device) {
-    const size_t max = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device);
-    const size_t multiple =
-        std::max<size_t>(1, kernel.getWorkGroupInfo<CL_KERNEL_PREFERRED_WORK_GROUP_SIZE_MULTIPLE>(device));
-    size_t size = multiple * std::max<size_t>(1, 64 / multiple);
-    while (size > max && size > 1) size /= 2;
-    return std::max<size_t>(1, size);
-}
-
-// Launches `kernel` over at least n items in groups of `group` (the kernels skip the padding).
-void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group) {
-    const size_t global = size_t((n + group - 1) / group * group);
-    queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(group));
-}
-
-template <typename T>
-cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
-                  const std::vector<T>& data) {
-    // Zero-length buffers are invalid in OpenCL; a one-element buffer stands in.
-    const size_t bytes = std::max<size_t>(1, data.size()) * sizeof(T);
-    cl::Buffer buffer(context, CL_MEM_READ_ONLY, bytes);
-    if (!data.empty()) queue.enqueueWriteBuffer(buffer, CL_FALSE, 0, data.size() * sizeof(T), data.data());
-    return buffer;
-}
-
 }  // namespace
 
 SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
@@ -122,7 +96,8 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled)
         throw GridError(std::string("mode ") + to_string(options.mode) + " is not implemented yet");
     VoxelizeStats stats;
-    const detail::SurfaceKernels kernels = detail::surface_kernels(detail::surface_test_for(options));
+    const detail::SurfaceKernels kernels =
+        detail::surface_kernels(detail::surface_test_for(options));
     SparseVoxels result(grid, options.brick_size);
     const int brick_size = options.brick_size;
     Impl& cl = *impl_;
@@ -163,8 +138,8 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
 
             // Phase 3: triangles to the device; per-triangle constants once.
             t = Clock::now();
-            const cl::Buffer triangles = upload(cl.context, cl.queue, prepared.triangles);
-            const cl::Buffer ranges = upload(cl.context, cl.queue, prepared.ranges);
+            const cl::Buffer triangles = detail::upload(cl.context, cl.queue, prepared.triangles);
+            const cl::Buffer ranges = detail::upload(cl.context, cl.queue, prepared.ranges);
             const cl_uint triangle_count = cl_uint(prepared.triangles.size());
             cl::Buffer setups(cl.context, CL_MEM_READ_WRITE, kernels.setup_bytes * triangle_count);
             cl.queue.finish();
@@ -176,15 +151,17 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             setup.setArg(1, triangle_count);
             setup.setArg(2, cl_int(options.boundary == Boundary::HalfOpen));
             setup.setArg(3, setups);
-            launch(cl.queue, setup, triangle_count, work_group_size(setup, cl.device));
+            detail::launch(cl.queue, setup, triangle_count,
+                           detail::work_group_size(setup, cl.device));
             cl.queue.finish();
             stats.seconds_kernels += seconds_since(t);
 
             cl::Kernel voxelize(program, kernels.voxelize);
-            const size_t voxelize_group = work_group_size(voxelize, cl.device);
+            const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
-            cl::Buffer bits(cl.context, CL_MEM_READ_WRITE,
-                            std::min(max_slots, binning.bricks.size()) * words_per_brick * sizeof(cl_uint));
+            cl::Buffer bits(
+                cl.context, CL_MEM_READ_WRITE,
+                std::min(max_slots, binning.bricks.size()) * words_per_brick * sizeof(cl_uint));
             std::vector<cl_uint> host_bits;
             std::vector<uint64_t> blocks(result.blocks_per_brick());
 
@@ -195,10 +172,13 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
                 batch.pair_first_item.push_back(cl_uint(batch.items));
                 const size_t bit_words = batch.brick_count * words_per_brick;
-                const cl::Buffer pair_triangle = upload(cl.context, cl.queue, batch.pair_triangle);
-                const cl::Buffer pair_slot = upload(cl.context, cl.queue, batch.pair_slot);
-                const cl::Buffer pair_first = upload(cl.context, cl.queue, batch.pair_first_item);
-                const cl::Buffer slot_brick = upload(cl.context, cl.queue, batch.slot_brick);
+                const cl::Buffer pair_triangle =
+                    detail::upload(cl.context, cl.queue, batch.pair_triangle);
+                const cl::Buffer pair_slot = detail::upload(cl.context, cl.queue, batch.pair_slot);
+                const cl::Buffer pair_first =
+                    detail::upload(cl.context, cl.queue, batch.pair_first_item);
+                const cl::Buffer slot_brick =
+                    detail::upload(cl.context, cl.queue, batch.slot_brick);
                 cl.queue.enqueueFillBuffer(bits, cl_uint(0), 0, bit_words * sizeof(cl_uint));
                 cl.queue.finish();
                 stats.seconds_upload += seconds_since(t);
@@ -220,7 +200,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
                     voxelize.setArg(7, cl_uint(base));
                     const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
-                    launch(cl.queue, voxelize, n, voxelize_group);
+                    detail::launch(cl.queue, voxelize, n, voxelize_group);
                 }
                 cl.queue.finish();
                 stats.seconds_kernels += seconds_since(t);

@@ -1,13 +1,14 @@
 // Device discovery, selection, error reporting and program caching.
 #include "opencl_runtime.hpp"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
 #include <sstream>
-#include <sys/stat.h>
 
 #include "atomic_file.hpp"
 
@@ -85,6 +86,20 @@ std::string cl_status_name(cl_int status) {
     }
 }
 
+size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device) {
+    const size_t max = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device);
+    const size_t multiple = std::max<size_t>(
+        1, kernel.getWorkGroupInfo<CL_KERNEL_PREFERRED_WORK_GROUP_SIZE_MULTIPLE>(device));
+    size_t size = multiple * std::max<size_t>(1, 64 / multiple);
+    while (size > max && size > 1) size /= 2;
+    return std::max<size_t>(1, size);
+}
+
+void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group) {
+    const size_t global = size_t((n + group - 1) / group * group);
+    queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(group));
+}
+
 void throw_device_error(const cl::Error& error, const std::string& doing) {
     throw DeviceError("OpenCL error while " + doing + ": " + (error.what() ? error.what() : "?") +
                       " returned " + cl_status_name(error.err()));
@@ -155,8 +170,8 @@ std::vector<Found> all_devices() {
                 info.id = std::to_string(p) + ":" + std::to_string(d);
                 found.push_back({platforms[p], devices[d], info});
             } catch (const cl::Error& e) {
-                throw_device_error(e, "querying device " + std::to_string(p) + ":" +
-                                          std::to_string(d));
+                throw_device_error(
+                    e, "querying device " + std::to_string(p) + ":" + std::to_string(d));
             }
         }
     }
@@ -184,8 +199,8 @@ const Found& select_device(const std::vector<Found>& found, const std::string& s
     const std::string needle = lower(selector);
     for (const Found& f : found)
         if (lower(f.info.platform + " " + f.info.name).find(needle) != std::string::npos) return f;
-    throw DeviceError("no OpenCL device matches '" + selector + "'; available:" +
-                      device_list_text(found));
+    throw DeviceError("no OpenCL device matches '" + selector +
+                      "'; available:" + device_list_text(found));
 }
 
 // ---- on-disk program cache -----------------------------------------------------------------
@@ -252,8 +267,7 @@ void store_cached(const cl::Program& program, const std::string& path) {
         const std::string folder = path.substr(0, path.rfind('/'));
         std::string mkdir = folder;  // create parents one by one
         for (size_t i = 1; i <= mkdir.size(); ++i)
-            if (i == mkdir.size() || mkdir[i] == '/')
-                ::mkdir(mkdir.substr(0, i).c_str(), 0755);
+            if (i == mkdir.size() || mkdir[i] == '/') ::mkdir(mkdir.substr(0, i).c_str(), 0755);
         detail::write_file_atomically(path, [&](std::ostream& os) {
             os.write(reinterpret_cast<const char*>(binaries[0].data()),
                      std::streamsize(binaries[0].size()));
@@ -275,7 +289,9 @@ Device::Device(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Device::~Device() = default;
 Device::Device(Device&&) noexcept = default;
 Device& Device::operator=(Device&&) noexcept = default;
-const DeviceInfo& Device::info() const { return impl_->info; }
+const DeviceInfo& Device::info() const {
+    return impl_->info;
+}
 
 Device Device::open(const std::string& selector) {
     const std::vector<Found> found = all_devices();

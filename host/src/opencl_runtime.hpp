@@ -4,6 +4,7 @@
 
 #define CL_HPP_ENABLE_EXCEPTIONS
 #include <CL/opencl.hpp>
+#include <algorithm>
 #include <map>
 #include <string>
 
@@ -17,6 +18,26 @@ std::string cl_status_name(cl_int status);
 
 // DeviceError naming the failed call, its status and what oclvox was doing.
 [[noreturn]] void throw_device_error(const cl::Error& error, const std::string& doing);
+
+// A fixed work-group size for `kernel`, queried from the kernel and the device rather than
+// assumed. Some drivers (PoCL among them) compile a kernel once per work-group size, so letting
+// the driver pick one per launch size would recompile on almost every launch.
+size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device);
+
+// Launches `kernel` over at least n items in groups of `group`; kernels skip the padding items.
+void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group);
+
+// A read-only buffer holding `data` (written without blocking). Zero-length buffers are invalid
+// in OpenCL, so an empty vector gets a one-element buffer.
+template <typename T>
+cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
+                  const std::vector<T>& data) {
+    const size_t bytes = std::max<size_t>(1, data.size()) * sizeof(T);
+    cl::Buffer buffer(context, CL_MEM_READ_ONLY, bytes);
+    if (!data.empty())
+        queue.enqueueWriteBuffer(buffer, CL_FALSE, 0, data.size() * sizeof(T), data.data());
+    return buffer;
+}
 
 }  // namespace oclvox::detail
 

@@ -28,8 +28,8 @@ inline bool triangle_box_overlap_double(const Vec3d& a, const Vec3d& b, const Ve
         double p0 = axis[0] * v[0][0] + axis[1] * v[0][1] + axis[2] * v[0][2];
         double p1 = axis[0] * v[1][0] + axis[1] * v[1][1] + axis[2] * v[1][2];
         double p2 = axis[0] * v[2][0] + axis[1] * v[2][1] + axis[2] * v[2][2];
-        double r = half[0] * std::abs(axis[0]) + half[1] * std::abs(axis[1]) +
-                   half[2] * std::abs(axis[2]);
+        double r =
+            half[0] * std::abs(axis[0]) + half[1] * std::abs(axis[1]) + half[2] * std::abs(axis[2]);
         return std::min({p0, p1, p2}) > r || std::max({p0, p1, p2}) < -r;
     };
     // Box normals.

@@ -75,8 +75,8 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
             const double lo = std::min({g[0][k], g[1][k], g[2][k]});
             const double hi = std::max({g[0][k], g[1][k], g[2][k]});
             misses = misses || hi < 0 || lo > double(grid.dims[k]);
-            inside_margin = inside_margin && lo >= -kClipMargin &&
-                            hi <= double(grid.dims[k]) + kClipMargin;
+            inside_margin =
+                inside_margin && lo >= -kClipMargin && hi <= double(grid.dims[k]) + kClipMargin;
         }
         if (misses) continue;
         if (inside_margin) {

@@ -34,8 +34,8 @@ void refuse_absurd_work(const detail::PreparedTriangles& prepared, const Grid& g
 }
 
 template <typename Setup, typename Overlaps>
-void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels& out,
-                        Setup setup, Overlaps overlaps) {
+void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels& out, Setup setup,
+                        Overlaps overlaps) {
     const Grid& grid = out.grid();
     for (size_t t = 0; t < prepared.triangles.size(); ++t) {
         const auto s = setup(prepared.triangles[t]);

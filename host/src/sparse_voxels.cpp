@@ -6,10 +6,13 @@
 namespace oclvox {
 
 namespace {
-int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
+int64_t ceil_div(int64_t a, int64_t b) {
+    return (a + b - 1) / b;
+}
 }  // namespace
 
-SparseVoxels::SparseVoxels(const Grid& grid, int brick_size) : grid_(grid), brick_size_(brick_size) {
+SparseVoxels::SparseVoxels(const Grid& grid, int brick_size)
+    : grid_(grid), brick_size_(brick_size) {
     if (brick_size < 4 || brick_size > 1024 || brick_size % kBlock != 0)
         throw GridError("brick size " + std::to_string(brick_size) +
                         " is invalid: it must be a multiple of 4 in [4, 1024]");
@@ -35,7 +38,9 @@ struct Address {
 Address address_of(const SparseVoxels& v, int64_t i, int64_t j, int64_t k) {
     const int b = v.brick_size();
     const auto nbricks = v.brick_dims();
-    const uint64_t brick = uint64_t(i / b) + uint64_t(nbricks[0]) * (uint64_t(j / b) + uint64_t(nbricks[1]) * uint64_t(k / b));
+    const uint64_t brick =
+        uint64_t(i / b) +
+        uint64_t(nbricks[0]) * (uint64_t(j / b) + uint64_t(nbricks[1]) * uint64_t(k / b));
     const int64_t li = i % b, lj = j % b, lk = k % b;
     const int64_t nb = v.blocks_per_brick_axis();
     const size_t word = size_t(li / 4 + nb * (lj / 4 + nb * (lk / 4)));

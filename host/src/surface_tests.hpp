@@ -28,9 +28,12 @@ struct SurfaceKernels {
 
 inline SurfaceKernels surface_kernels(SurfaceTest test) {
     switch (test) {
-        case SurfaceTest::SAT: return {"setup_sat", "voxelize_sat", sizeof(OvSatTriangle)};
-        case SurfaceTest::PEF: return {"setup_pef", "voxelize_pef", sizeof(OvPefTriangle)};
-        case SurfaceTest::Thin: break;
+        case SurfaceTest::SAT:
+            return {"setup_sat", "voxelize_sat", sizeof(OvSatTriangle)};
+        case SurfaceTest::PEF:
+            return {"setup_pef", "voxelize_pef", sizeof(OvPefTriangle)};
+        case SurfaceTest::Thin:
+            break;
     }
     return {"setup_thin", "voxelize_thin", sizeof(OvThinTriangle)};
 }

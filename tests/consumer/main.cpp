@@ -1,8 +1,7 @@
 // Voxelizes a unit cube through the installed library and checks the hand-worked count. The
 // public header compiles without any OpenCL header on the include path.
-#include <oclvox/oclvox.hpp>
-
 #include <cstdio>
+#include <oclvox/oclvox.hpp>
 
 int main() {
     oclvox::Mesh cube;

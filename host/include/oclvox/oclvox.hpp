@@ -41,7 +41,7 @@ struct KernelBuildError : DeviceError {
         : DeviceError(what + "\n--- build log ---\n" + log), log_(std::move(log)) {}
     const std::string& build_log() const { return log_; }
 
-private:
+  private:
     std::string log_;
 };
 // Writing an output file failed (nothing is left under the final name).
@@ -80,20 +80,22 @@ struct Grid {
     double voxel_size = 1.0;
     std::array<int64_t, 3> dims{0, 0, 0};
 
-    uint64_t voxel_count() const { return uint64_t(dims[0]) * uint64_t(dims[1]) * uint64_t(dims[2]); }
+    uint64_t voxel_count() const {
+        return uint64_t(dims[0]) * uint64_t(dims[1]) * uint64_t(dims[2]);
+    }
 };
 
 // How to fit a grid to a mesh. Defaults: the mesh bounding box with `resolution` voxels along the
 // longest axis, cubic voxels, the other axes as many voxels as they need.
 struct GridFit {
-    int64_t resolution = 256;        // voxels along the longest axis (ignored if voxel_size > 0)
-    bool cubic = false;              // resolution^3 grid, mesh centred (binvox convention)
-    double voxel_size = 0;           // > 0: use this voxel size instead of resolution
-    bool has_origin = false;         // use `origin` instead of the fitted one
+    int64_t resolution = 256;  // voxels along the longest axis (ignored if voxel_size > 0)
+    bool cubic = false;        // resolution^3 grid, mesh centred (binvox convention)
+    double voxel_size = 0;     // > 0: use this voxel size instead of resolution
+    bool has_origin = false;   // use `origin` instead of the fitted one
     std::array<double, 3> origin{0, 0, 0};
-    bool has_dims = false;           // use `dims` instead of the fitted ones
+    bool has_dims = false;  // use `dims` instead of the fitted ones
     std::array<int64_t, 3> dims{0, 0, 0};
-    int64_t pad = 0;                 // empty voxels added on every side
+    int64_t pad = 0;  // empty voxels added on every side
 };
 
 // Largest number of voxels along one axis that any grid may have.
@@ -110,7 +112,7 @@ void validate_grid(const Grid& grid);
 // voxel are stored. Inside a brick, voxels are grouped in 4x4x4 blocks, one uint64_t each (bit
 // x + 4*(y + 4*z) of the block), blocks ordered x-fastest. Voxels outside the grid are never set.
 class SparseVoxels {
-public:
+  public:
     static constexpr int kBlock = 4;
 
     SparseVoxels() = default;
@@ -141,7 +143,7 @@ public:
     // Same grid and same set voxels (brick size may differ).
     bool same_voxels(const SparseVoxels& other) const;
 
-private:
+  private:
     Grid grid_{};
     int brick_size_ = 0;
     std::unordered_map<uint64_t, std::vector<uint64_t>> bricks_;
@@ -194,7 +196,7 @@ struct VoxelizeOptions {
     InsideTest inside = InsideTest::Auto;
     Boundary boundary = Boundary::Closed;
     OverlapTest test = OverlapTest::PEF;
-    int brick_size = 64;                        // voxels per brick edge, a multiple of 4 in [4, 1024]
+    int brick_size = 64;  // voxels per brick edge, a multiple of 4 in [4, 1024]
     uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
     uint64_t host_budget_bytes = 0;             // 0: half of physical memory
     ProgressCallback progress;
@@ -203,13 +205,13 @@ struct VoxelizeOptions {
 // Timing breakdown and counts of one run (seconds).
 struct VoxelizeStats {
     double seconds_binning = 0, seconds_upload = 0, seconds_kernels = 0, seconds_download = 0;
-    uint64_t triangles_in = 0;         // triangles in the mesh
-    uint64_t triangles_used = 0;       // after dropping those outside the grid (after clipping)
-    uint64_t brick_pairs = 0;          // (triangle, brick) pairs after binning
-    uint64_t work_items = 0;           // (triangle, 4^3 block) work items launched
-    uint64_t bricks_total = 0;         // bricks in the grid
-    uint64_t bricks_active = 0;        // bricks with at least one triangle
-    uint64_t batches = 0;              // device batches
+    uint64_t triangles_in = 0;    // triangles in the mesh
+    uint64_t triangles_used = 0;  // after dropping those outside the grid (after clipping)
+    uint64_t brick_pairs = 0;     // (triangle, brick) pairs after binning
+    uint64_t work_items = 0;      // (triangle, 4^3 block) work items launched
+    uint64_t bricks_total = 0;    // bricks in the grid
+    uint64_t bricks_active = 0;   // bricks with at least one triangle
+    uint64_t batches = 0;         // device batches
     uint64_t voxels_set = 0;
     std::string inside_test;         // Solid/Filled: "parity" or "winding"
     std::string inside_test_reason;  // why (e.g. "forced by options", "mesh is closed")
@@ -228,7 +230,7 @@ std::vector<DeviceInfo> list_devices();
 // One OpenCL device with its context, queue and compiled programs (cached per context and on
 // disk). Cheap to move, not copyable.
 class Device {
-public:
+  public:
     // selector: "" (first GPU, else first device), "P:D" indices, or a case-insensitive substring
     // of the platform or device name. A selector that matches nothing is a DeviceError.
     static Device open(const std::string& selector = "");
@@ -245,7 +247,7 @@ public:
     struct Impl;
     Impl& impl() { return *impl_; }
 
-private:
+  private:
     explicit Device(std::unique_ptr<Impl> impl);
     std::unique_ptr<Impl> impl_;
 };
