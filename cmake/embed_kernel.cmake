@@ -21,6 +21,7 @@ endwhile()
 file(WRITE ${OUT}.tmp "// Generated from kernels/${KERNEL}.cl by cmake/embed_kernel.cmake. Do not edit.
 #include \"kernel_sources.hpp\"
 namespace oclvox::detail {
+extern const KernelSource kKernel_${KERNEL};
 const KernelSource kKernel_${KERNEL} = {
     \"${KERNEL}\",
 ${pieces}    ,

@@ -7,6 +7,7 @@ packages=(
   cmake g++ make python3
   ocl-icd-opencl-dev opencl-c-headers opencl-clhpp-headers pocl-opencl-icd clinfo
   libtinyobjloader-dev libassimp-dev nlohmann-json3-dev libcli11-dev
+  libopenvdb-dev libboost-iostreams-dev
   libgtest-dev libgmock-dev
 )
 

@@ -14,6 +14,7 @@
 #include "binning.hpp"
 #include "opencl_runtime.hpp"
 #include "prepare.hpp"
+#include "solid.hpp"
 #include "surface_tests.hpp"
 
 namespace oclvox {
@@ -93,8 +94,18 @@ Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles
 
 SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                               VoxelizeStats* stats_out) {
-    if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled)
-        throw GridError(std::string("mode ") + to_string(options.mode) + " is not implemented yet");
+    // Solid and filled: the inside voxels, plus (filled) the conservative surface.
+    if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled) {
+        VoxelizeStats stats;
+        SparseVoxels out = detail::solid_device(*impl_, mesh, grid, options, stats);
+        if (options.mode == VoxelizeMode::Filled) {
+            VoxelizeOptions surface = options;
+            surface.mode = VoxelizeMode::Surface;
+            detail::add_surface(out, voxelize(mesh, grid, surface), stats);
+        }
+        if (stats_out) *stats_out = stats;
+        return out;
+    }
     VoxelizeStats stats;
     const detail::SurfaceKernels kernels =
         detail::surface_kernels(detail::surface_test_for(options));

@@ -10,5 +10,8 @@ struct KernelSource {
 };
 
 extern const KernelSource kKernel_voxelize;
+extern const KernelSource kKernel_solid;
+extern const KernelSource kKernel_sdf;
+extern const KernelSource kKernel_meshing;
 
 }  // namespace oclvox::detail

@@ -7,6 +7,7 @@
 
 #include "oclvox/oclvox.hpp"
 #include "prepare.hpp"
+#include "solid.hpp"
 #include "surface_tests.hpp"
 
 namespace oclvox {
@@ -58,8 +59,17 @@ void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels&
 
 SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                                 VoxelizeStats* stats) {
-    if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled)
-        throw GridError(std::string("mode ") + to_string(options.mode) + " is not implemented yet");
+    if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled) {
+        VoxelizeStats solid_stats;
+        SparseVoxels out = detail::solid_reference(mesh, grid, options, solid_stats);
+        if (options.mode == VoxelizeMode::Filled) {
+            VoxelizeOptions surface = options;
+            surface.mode = VoxelizeMode::Surface;
+            detail::add_surface(out, voxelize_reference(mesh, grid, surface), solid_stats);
+        }
+        if (stats) *stats = solid_stats;
+        return out;
+    }
     const auto start = std::chrono::steady_clock::now();
     const detail::SurfaceTest test = detail::surface_test_for(options);
     SparseVoxels out(grid, options.brick_size);

@@ -1,0 +1,101 @@
+// oclvox distance fields: exact narrow-band (optionally full-grid) distances from a mesh sampled
+// at voxel centres, their sign from the solid voxelization, CSG on fields and on voxel sets, and
+// field files (.npy + JSON sidecar, OpenVDB .vdb).
+#pragma once
+
+#include <string>
+
+#include "oclvox/field.hpp"
+#include "oclvox/oclvox.hpp"
+
+namespace oclvox {
+
+struct SdfOptions {
+    // Half-width of the band of exact distances, in voxels (> 0). Narrow-band fields hold
+    // +-band * voxel_size outside it.
+    double band_voxels = 3.0;
+    // Extend the distances from the band to every voxel (jump flooding, see signed_distance).
+    bool full_grid = false;
+    // How the sign decides "inside" (the Solid voxelization's test).
+    InsideTest inside = InsideTest::Auto;
+    // Bricks of the solid voxelization that gives the sign.
+    int brick_size = 64;
+};
+
+// Distance in world units from each voxel centre to the nearest point of the mesh's triangles.
+//
+// Inside the band (distance < band_voxels voxels) the value is the exact point-to-triangle
+// distance, evaluated in float on triangles stored relative to an integer anchor near them
+// (so the error is a few float ulps of the triangle's size in voxels, independent of where the
+// grid is), and rounded once to float in world units. Outside the band a narrow-band field holds
+// band_voxels * voxel_size.
+//
+// full_grid: jump flooding (Rong & Tan 2006, with one extra pass of step 1, "JFA+1") carries
+// the nearest triangle of each band voxel outwards, and every voxel takes the exact distance to
+// the best triangle its neighbours know about. Every value is therefore the exact distance to a
+// real triangle of the mesh: never below the true distance, exact in the band, and beyond it
+// wrong only where jump flooding's known failure (a triangle's region of nearest voxels cut in
+// two by the step pattern) picks a near-nearest triangle; the tests bound the measured error.
+// Only triangles within the band of the grid box seed the flood, so a mesh part farther outside
+// the grid than the band cannot be nearest to anything.
+//
+// stats: triangles_in, triangles_used (those within the band of the grid), work_items (the
+// (triangle, 4x4x4 block) items of the band pass) and the seconds_* timings.
+//
+// The device result equals unsigned_distance_reference bit for bit. Throws GridError for bad
+// options or a grid whose dense field does not fit the device, DeviceError on OpenCL failures.
+ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& grid,
+                              const SdfOptions& options, VoxelizeStats* stats = nullptr);
+ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
+                                        const SdfOptions& options, VoxelizeStats* stats = nullptr);
+
+// The unsigned distance, negated at the voxels whose centres the Solid voxelization (with
+// options.inside) puts inside the mesh: negative inside, positive outside (OpenVDB's
+// convention). The device version uses Device::voxelize, the reference voxelize_reference, so
+// the two agree bit for bit. stats add the solid run's timings, inside_test and its reason, and
+// voxels_set = the number of inside voxels.
+ScalarField signed_distance(Device& device, const Mesh& mesh, const Grid& grid,
+                            const SdfOptions& options, VoxelizeStats* stats = nullptr);
+ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const SdfOptions& options,
+                                      VoxelizeStats* stats = nullptr);
+
+// ---------------------------------------------------------------------------------------------
+// CSG
+// ---------------------------------------------------------------------------------------------
+enum class CsgOp { Union, Intersection, Difference };
+const char* to_string(CsgOp op);
+CsgOp csg_op_from_string(const std::string& name);  // "union" / "intersection" / "difference"
+
+// Per sample: Union min(a, b), Intersection max(a, b), Difference (a minus b) max(a, -b). Exact
+// on the zero level set; away from it the result is a bound on the distance, not the distance.
+// Throws GridError unless both fields have the same grid and the right number of values.
+ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op);
+
+// The same on occupancy: a | b, a & b, a & ~b, with a's brick size. Throws GridError unless the
+// grids match.
+SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b, CsgOp op);
+
+// One grid fitted (as fit_grid(mesh, fit)) to the union of both meshes' boxes, so their fields
+// can be combined.
+Grid fit_grid(const Mesh& a, const Mesh& b, const GridFit& fit);
+
+// ---------------------------------------------------------------------------------------------
+// Field files
+// ---------------------------------------------------------------------------------------------
+// By extension (case-insensitive):
+//  .npy  float32, shape (nx, ny, nz), Fortran order, so arr[i, j, k] is voxel (i, j, k); plus
+//        `<path>.json` with origin, voxel size, dims, where samples are (voxel centres), the sign
+//        convention and the band;
+//  .vdb  an OpenVDB level set (FloatGrid, class GRID_LEVEL_SET, named "sdf") in world units,
+//        its transform placing voxel (i, j, k)'s sample at the centre of the voxel, background
+//        band * voxel_size; only samples with |value| < background are stored.
+// band_voxels <= 0 takes the band as the largest |value| / voxel_size, which is the band of a
+// narrow-band field. Written to a temporary file and renamed into place; throws OutputError.
+void write_field(const std::string& path, const ScalarField& field, double band_voxels = 0);
+
+// Reads a .npy field with its JSON sidecar (written by write_field, or any float32 or float64
+// 3-D array in either order with a sidecar giving origin and voxel_size). Throws InputError
+// naming the file and the problem.
+ScalarField read_field(const std::string& path);
+
+}  // namespace oclvox

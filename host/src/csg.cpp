@@ -1,0 +1,139 @@
+// Constructive solid geometry on distance fields (min / max / max(a, -b)) and on voxel sets
+// (bitwise or / and / and-not, brick by brick), and one grid fitted to two meshes.
+#include <algorithm>
+#include <cctype>
+#include <cstdint>
+
+#include "oclvox/sdf.hpp"
+
+namespace oclvox {
+
+namespace {
+
+bool same_grid(const Grid& a, const Grid& b) {
+    return a.origin == b.origin && a.voxel_size == b.voxel_size && a.dims == b.dims;
+}
+
+std::string describe(const Grid& g) {
+    return std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
+           std::to_string(g.dims[2]) + " voxels of " + std::to_string(g.voxel_size) + " at (" +
+           std::to_string(g.origin[0]) + ", " + std::to_string(g.origin[1]) + ", " +
+           std::to_string(g.origin[2]) + ")";
+}
+
+void require_same_grid(const Grid& a, const Grid& b, const char* what) {
+    if (!same_grid(a, b))
+        throw GridError(std::string("CSG needs both ") + what + " on the same grid, got " +
+                        describe(a) + " and " + describe(b) +
+                        ": compute both on one grid (fit_grid of both meshes)");
+}
+
+// b's voxels re-bricked to `brick_size` (a copy only when the sizes differ).
+SparseVoxels with_brick_size(const SparseVoxels& b, int brick_size) {
+    if (b.brick_size() == brick_size) return b;
+    SparseVoxels out(b.grid(), brick_size);
+    b.for_each([&](int64_t i, int64_t j, int64_t k) { out.set(i, j, k); });
+    return out;
+}
+
+}  // namespace
+
+const char* to_string(CsgOp op) {
+    switch (op) {
+        case CsgOp::Union:
+            return "union";
+        case CsgOp::Intersection:
+            return "intersection";
+        case CsgOp::Difference:
+            return "difference";
+    }
+    return "?";
+}
+
+CsgOp csg_op_from_string(const std::string& name) {
+    std::string lower = name;
+    std::transform(lower.begin(), lower.end(), lower.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    if (lower == "union") return CsgOp::Union;
+    if (lower == "intersection") return CsgOp::Intersection;
+    if (lower == "difference") return CsgOp::Difference;
+    throw GridError("unknown CSG operation '" + name +
+                    "' (expected union, intersection or difference)");
+}
+
+ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op) {
+    require_same_grid(a.grid, b.grid, "fields");
+    if (a.values.size() != a.grid.voxel_count() || b.values.size() != b.grid.voxel_count())
+        throw GridError("CSG on a field whose value count (" + std::to_string(a.values.size()) +
+                        ", " + std::to_string(b.values.size()) + ") does not match its grid's " +
+                        std::to_string(a.grid.voxel_count()) + " voxels");
+    ScalarField out;
+    out.grid = a.grid;
+    out.values.resize(a.values.size());
+    for (size_t v = 0; v < a.values.size(); ++v) {
+        const float x = a.values[v], y = b.values[v];
+        switch (op) {
+            case CsgOp::Union:
+                out.values[v] = std::min(x, y);
+                break;
+            case CsgOp::Intersection:
+                out.values[v] = std::max(x, y);
+                break;
+            case CsgOp::Difference:
+                out.values[v] = std::max(x, -y);
+                break;
+        }
+    }
+    return out;
+}
+
+SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b_in, CsgOp op) {
+    require_same_grid(a.grid(), b_in.grid(), "voxel sets");
+    const SparseVoxels b = with_brick_size(b_in, a.brick_size());
+    SparseVoxels out(a.grid(), a.brick_size());
+    const std::vector<uint64_t> empty(a.blocks_per_brick(), 0);
+    std::vector<uint64_t> blocks(a.blocks_per_brick());
+
+    // Every brick of the result is a brick of a, or (union only) of b.
+    for (const auto& [index, a_blocks] : a.bricks()) {
+        const auto found = b.bricks().find(index);
+        const std::vector<uint64_t>& b_blocks = found == b.bricks().end() ? empty : found->second;
+        for (size_t w = 0; w < blocks.size(); ++w) {
+            switch (op) {
+                case CsgOp::Union:
+                    blocks[w] = a_blocks[w] | b_blocks[w];
+                    break;
+                case CsgOp::Intersection:
+                    blocks[w] = a_blocks[w] & b_blocks[w];
+                    break;
+                case CsgOp::Difference:
+                    blocks[w] = a_blocks[w] & ~b_blocks[w];
+                    break;
+            }
+        }
+        out.merge_brick(index, blocks.data());
+    }
+    if (op == CsgOp::Union)
+        for (const auto& [index, b_blocks] : b.bricks())
+            if (!a.bricks().count(index)) out.merge_brick(index, b_blocks.data());
+    return out;
+}
+
+Grid fit_grid(const Mesh& a, const Mesh& b, const GridFit& fit) {
+    // The fitted grid depends only on the box of the used vertices, so one mesh holding both
+    // (b's indices shifted past a's vertices) has the box of the union.
+    validate_mesh(a);
+    validate_mesh(b);
+    Mesh both;
+    both.positions = a.positions;
+    both.positions.insert(both.positions.end(), b.positions.begin(), b.positions.end());
+    both.triangles = a.triangles;
+    if (a.positions.size() + b.positions.size() > uint64_t(UINT32_MAX))
+        throw InputError("the two meshes together have more vertices than 32-bit indices reach");
+    const auto offset = uint32_t(a.positions.size());
+    for (const auto& t : b.triangles)
+        both.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    return fit_grid(both, fit);
+}
+
+}  // namespace oclvox

@@ -1,0 +1,13 @@
+// The OpenVDB writer behind write_field (kept apart so only one file needs OpenVDB's headers).
+#pragma once
+
+#include <string>
+
+#include "oclvox/field.hpp"
+
+namespace oclvox::detail {
+
+// A level-set FloatGrid named "sdf" (see write_field in oclvox/sdf.hpp). Throws OutputError.
+void write_field_vdb(const std::string& path, const ScalarField& field, double band_voxels);
+
+}  // namespace oclvox::detail

@@ -1,0 +1,44 @@
+// Internals shared by the host and device meshing (Surface Nets, Marching Cubes): the method
+// switch, input checks, the Marching Cubes case table, and the conversion of the per-sample
+// records of kernels/meshing_math.h into a Mesh.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "kernel_sources.hpp"
+#include "oclvox/field.hpp"
+
+namespace oclvox::detail {
+
+enum class MeshingMethod { SurfaceNets, MarchingCubes };
+
+// Throws GridError if the values do not match the grid or exceed the 32-bit sample indices of
+// the meshing code, InputError for a non-finite sample or iso. `who` names the caller.
+void validate_field(const ScalarField& field, float iso, const char* who);
+
+// The Marching Cubes case table (OM_MC_ENTRIES entries of OM_MC_ENTRY_BYTES), derived once.
+const std::vector<uint8_t>& marching_cubes_table();
+
+// The lowest sample of every cubic brick of `brick_size` samples that can hold surface: one
+// whose samples, with the one-sample halo its cells and edges reach into, are not all on the same
+// side of iso. Bricks in x-fastest order.
+std::vector<std::array<int, 3>> active_bricks(const ScalarField& field, float iso, int brick_size);
+
+// The host reference, processing the grid in cubic bricks of `brick_size` samples; the result
+// does not depend on brick_size (>= 1).
+Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod method,
+                          int brick_size);
+
+// Replaces counts by their exclusive prefix sum and returns the total; throws GridError naming
+// `what` when the total does not fit the 32-bit indices (3 per triangle) of the meshing code.
+uint32_t exclusive_scan(std::vector<uint32_t>& counts, const char* what);
+
+// World-space mesh from vertex records (owner sample + position relative to it in voxel units)
+// and triangles.
+Mesh records_to_mesh(const ScalarField& field, const std::vector<uint32_t>& vertex_sample,
+                     const std::vector<float>& vertex_local,
+                     const std::vector<uint32_t>& triangles);
+
+}  // namespace oclvox::detail

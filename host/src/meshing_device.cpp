@@ -1,0 +1,180 @@
+// Surface Nets and Marching Cubes on an OpenCL device, identical to the host reference.
+//
+// Phases: find the bricks that can hold surface on the host (as the reference does); upload the
+// field, the brick list (and the Marching Cubes table); run the count kernel over the samples of
+// those bricks in launch slices, into zeroed per-sample counts; read the counts back and turn
+// them into exclusive prefix sums over the whole grid on the host; upload the offsets; run the
+// emit kernel over the same bricks; read the vertex records and triangles back and convert them
+// to world coordinates exactly as the reference does. The kernels run the same per-sample
+// functions as the reference (kernels/meshing_math.h), so the result equals it bit for bit.
+#include <algorithm>
+#include <limits>
+
+#include "meshing.hpp"
+#include "opencl_runtime.hpp"
+
+namespace oclvox {
+
+namespace {
+
+// Launch slices bound each enqueue, as in device.cpp.
+constexpr uint32_t kItemsPerLaunch = uint32_t(1) << 22;
+// Bricks of 16^3 samples: finer than the host's, since the device pays per item launched, not
+// per brick visited.
+constexpr int kBrickSize = 16;
+
+// A fixed work-group size queried from the kernel and device: PoCL compiles a kernel once per
+// work-group size, so leaving the choice to the driver would recompile for every slice size.
+size_t group_size(const cl::Kernel& kernel, const cl::Device& device) {
+    const size_t max = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device);
+    const size_t multiple = std::max<size_t>(
+        1, kernel.getWorkGroupInfo<CL_KERNEL_PREFERRED_WORK_GROUP_SIZE_MULTIPLE>(device));
+    size_t size = multiple * std::max<size_t>(1, 64 / multiple);
+    while (size > max && size > 1) size /= 2;
+    return std::max<size_t>(1, size);
+}
+
+// Runs `kernel` over items [0, n) in slices; `slice_arg` is the index of its (first, count)
+// argument pair.
+void run_over_items(Device::Impl& cl, cl::Kernel& kernel, int slice_arg, uint32_t n) {
+    const size_t group = group_size(kernel, cl.device);
+    for (uint32_t first = 0; first < n; first += std::min(kItemsPerLaunch, n - first)) {
+        const uint32_t count = std::min(kItemsPerLaunch, n - first);
+        kernel.setArg(slice_arg, cl_uint(first));
+        kernel.setArg(slice_arg + 1, cl_uint(count));
+        const size_t global = (size_t(count) + group - 1) / group * group;
+        cl.queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global),
+                                      cl::NDRange(group));
+    }
+}
+
+cl::Buffer buffer(Device::Impl& cl, cl_mem_flags flags, size_t bytes) {
+    // Zero-length buffers are invalid in OpenCL.
+    return cl::Buffer(cl.context, flags, std::max<size_t>(bytes, 4));
+}
+
+Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
+                    detail::MeshingMethod method) {
+    const bool nets = method == detail::MeshingMethod::SurfaceNets;
+    const char* who = nets ? "surface_nets" : "marching_cubes";
+    detail::validate_field(field, iso, who);
+    const auto& dims = field.grid.dims;
+    if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2) return Mesh{};  // no cells
+    Device::Impl& cl = device.impl();
+    const uint32_t n = uint32_t(field.values.size());
+    if (uint64_t(n) * sizeof(float) > cl.info.max_alloc)
+        throw GridError(std::string(who) + ": the field needs " +
+                        std::to_string(uint64_t(n) * sizeof(float)) +
+                        " bytes, more than one buffer on " + cl.info.name + " can hold");
+
+    // Phase 1: the bricks to visit, one work item per sample of each.
+    std::vector<cl_int> bricks;
+    for (const auto& origin : detail::active_bricks(field, iso, kBrickSize))
+        bricks.insert(bricks.end(), origin.begin(), origin.end());
+    const uint64_t items = uint64_t(bricks.size() / 3) * kBrickSize * kBrickSize * kBrickSize;
+    if (items > std::numeric_limits<uint32_t>::max())
+        throw GridError(std::string(who) + ": " + std::to_string(bricks.size() / 3) +
+                        " bricks hold surface, more than 32-bit work item numbers can cover");
+
+    try {
+        const cl::Program& program = cl.program(detail::kKernel_meshing);
+
+        // Phase 2: inputs. Every kernel takes (values, [table,] nx, ny, nz, iso, bricks,
+        // brick_size, first, count, ...), so the arguments after the table sit at the same place
+        // for both methods.
+        const cl::Buffer brick_buffer =
+            buffer(cl, CL_MEM_READ_ONLY, bricks.size() * sizeof(cl_int));
+        if (!bricks.empty())
+            cl.queue.enqueueWriteBuffer(brick_buffer, CL_FALSE, 0, bricks.size() * sizeof(cl_int),
+                                        bricks.data());
+        const cl::Buffer values = buffer(cl, CL_MEM_READ_ONLY, n * sizeof(float));
+        cl.queue.enqueueWriteBuffer(values, CL_FALSE, 0, n * sizeof(float), field.values.data());
+        cl::Buffer table;
+        if (!nets) {
+            const std::vector<uint8_t>& table_data = detail::marching_cubes_table();
+            table = buffer(cl, CL_MEM_READ_ONLY, table_data.size());
+            cl.queue.enqueueWriteBuffer(table, CL_FALSE, 0, table_data.size(), table_data.data());
+        }
+        const int shift = nets ? 0 : 1;
+        auto set_common = [&](cl::Kernel& kernel) {
+            kernel.setArg(0, values);
+            if (!nets) kernel.setArg(1, table);
+            kernel.setArg(1 + shift, cl_int(dims[0]));
+            kernel.setArg(2 + shift, cl_int(dims[1]));
+            kernel.setArg(3 + shift, cl_int(dims[2]));
+            kernel.setArg(4 + shift, cl_float(iso));
+            kernel.setArg(5 + shift, brick_buffer);
+            kernel.setArg(6 + shift, cl_int(kBrickSize));
+        };
+
+        // Phase 3: counts; samples outside the active bricks own nothing.
+        cl::Buffer vertex_offset = buffer(cl, CL_MEM_READ_WRITE, n * sizeof(cl_uint));
+        cl::Buffer triangle_offset = buffer(cl, CL_MEM_READ_WRITE, n * sizeof(cl_uint));
+        cl.queue.enqueueFillBuffer(vertex_offset, cl_uint(0), 0, n * sizeof(cl_uint));
+        cl.queue.enqueueFillBuffer(triangle_offset, cl_uint(0), 0, n * sizeof(cl_uint));
+        cl::Kernel count(program, nets ? "sn_count" : "mc_count");
+        set_common(count);
+        count.setArg(9 + shift, vertex_offset);
+        count.setArg(10 + shift, triangle_offset);
+        run_over_items(cl, count, 7 + shift, uint32_t(items));
+
+        // Phase 4: prefix sums on the host.
+        std::vector<uint32_t> vertex_counts(n), triangle_counts(n);
+        cl.queue.enqueueReadBuffer(vertex_offset, CL_FALSE, 0, n * sizeof(cl_uint),
+                                   vertex_counts.data());
+        cl.queue.enqueueReadBuffer(triangle_offset, CL_TRUE, 0, n * sizeof(cl_uint),
+                                   triangle_counts.data());
+        const uint32_t vertex_count = detail::exclusive_scan(vertex_counts, "vertices");
+        const uint32_t triangle_count = detail::exclusive_scan(triangle_counts, "triangles");
+        cl.queue.enqueueWriteBuffer(vertex_offset, CL_FALSE, 0, n * sizeof(cl_uint),
+                                    vertex_counts.data());
+        cl.queue.enqueueWriteBuffer(triangle_offset, CL_FALSE, 0, n * sizeof(cl_uint),
+                                    triangle_counts.data());
+
+        // Phase 5: emit.
+        const cl::Buffer vertex_sample =
+            buffer(cl, CL_MEM_WRITE_ONLY, vertex_count * sizeof(cl_uint));
+        const cl::Buffer vertex_local =
+            buffer(cl, CL_MEM_WRITE_ONLY, 3 * size_t(vertex_count) * sizeof(cl_float));
+        const cl::Buffer triangles =
+            buffer(cl, CL_MEM_WRITE_ONLY, 3 * size_t(triangle_count) * sizeof(cl_uint));
+        cl::Kernel emit(program, nets ? "sn_emit" : "mc_emit");
+        set_common(emit);
+        emit.setArg(9 + shift, vertex_offset);
+        emit.setArg(10 + shift, triangle_offset);
+        emit.setArg(11 + shift, vertex_sample);
+        emit.setArg(12 + shift, vertex_local);
+        emit.setArg(13 + shift, triangles);
+        run_over_items(cl, emit, 7 + shift, uint32_t(items));
+
+        // Phase 6: results back, converted like the reference's.
+        std::vector<uint32_t> host_sample(vertex_count), host_triangles(3 * size_t(triangle_count));
+        std::vector<float> host_local(3 * size_t(vertex_count));
+        if (vertex_count) {
+            cl.queue.enqueueReadBuffer(vertex_sample, CL_FALSE, 0, vertex_count * sizeof(cl_uint),
+                                       host_sample.data());
+            cl.queue.enqueueReadBuffer(vertex_local, CL_FALSE, 0,
+                                       host_local.size() * sizeof(cl_float), host_local.data());
+        }
+        if (triangle_count)
+            cl.queue.enqueueReadBuffer(triangles, CL_FALSE, 0,
+                                       host_triangles.size() * sizeof(cl_uint),
+                                       host_triangles.data());
+        cl.queue.finish();
+        return detail::records_to_mesh(field, host_sample, host_local, host_triangles);
+    } catch (const cl::Error& e) {
+        detail::throw_device_error(e, std::string(who) + " on " + cl.info.name);
+    }
+}
+
+}  // namespace
+
+Mesh surface_nets(Device& device, const ScalarField& field, float iso) {
+    return mesh_on_device(device, field, iso, detail::MeshingMethod::SurfaceNets);
+}
+
+Mesh marching_cubes(Device& device, const ScalarField& field, float iso) {
+    return mesh_on_device(device, field, iso, detail::MeshingMethod::MarchingCubes);
+}
+
+}  // namespace oclvox

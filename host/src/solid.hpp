@@ -1,0 +1,40 @@
+// Solid voxelization: voxels whose centre is inside the mesh, by crossing parity or by the
+// generalized winding number, on an OpenCL device and as a host reference.
+#pragma once
+
+#include <string>
+
+#include "kernel_sources.hpp"
+#include "oclvox/oclvox.hpp"
+
+namespace oclvox::detail {
+
+// Edges of the mesh after welding bit-identical positions, by how they fail to be closed.
+// Triangles with a repeated (welded) vertex are ignored.
+struct MeshEdgeReport {
+    uint64_t edges = 0;
+    uint64_t boundary = 0;      // used by one triangle
+    uint64_t non_manifold = 0;  // used by more than two
+    uint64_t misoriented = 0;   // used by two triangles running it the same way
+    bool closed() const { return boundary == 0 && non_manifold == 0 && misoriented == 0; }
+};
+MeshEdgeReport mesh_edge_report(const Mesh& mesh);
+
+// Both return the solid voxels only (no surface), in options.brick_size bricks, and set
+// stats.inside_test and stats.inside_test_reason. Auto picks parity for a closed mesh (every
+// edge shared by two oppositely oriented triangles) that fits the exact parity arithmetic, and
+// the winding number otherwise. Solid works from the mesh itself, not the surface's prepared
+// triangles: it needs every triangle, unclipped and including those outside the grid.
+SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,
+                          const VoxelizeOptions& options, VoxelizeStats& stats);
+SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                             VoxelizeStats& stats);
+
+// Filled = solid united with the conservative surface: ORs `surface` into `solid` and updates the
+// voxel count.
+inline void add_surface(SparseVoxels& solid, const SparseVoxels& surface, VoxelizeStats& stats) {
+    for (const auto& [index, blocks] : surface.bricks()) solid.merge_brick(index, blocks.data());
+    stats.voxels_set = solid.count();
+}
+
+}  // namespace oclvox::detail

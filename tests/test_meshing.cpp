@@ -1,0 +1,566 @@
+// Surface Nets and Marching Cubes: topology against Euler's formula and hand-worked cases,
+// geometry against analytic surfaces, brick-size invariance, device == host reference, and the
+// mesh writers read back by small independent readers.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <numeric>
+#include <random>
+#include <sstream>
+
+#include "meshing.hpp"
+#include "oclvox/field.hpp"
+
+namespace oclvox {
+namespace {
+
+using Vec3 = std::array<double, 3>;
+
+Device& device() {
+    static Device d =
+        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    return d;
+}
+
+// ---- fields
+// --------------------------------------------------------------------------------------
+
+// Samples f at the voxel centres of an n^3-voxel grid of unit voxels at the origin.
+ScalarField sample_field(int64_t nx, int64_t ny, int64_t nz,
+                         const std::function<double(const Vec3&)>& f) {
+    ScalarField field;
+    field.grid.dims = {nx, ny, nz};
+    for (int64_t k = 0; k < nz; ++k)
+        for (int64_t j = 0; j < ny; ++j)
+            for (int64_t i = 0; i < nx; ++i)
+                field.values.push_back(float(f({i + 0.5, j + 0.5, k + 0.5})));
+    return field;
+}
+
+double sphere_distance(const Vec3& p, const Vec3& c, double r) {
+    return std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) +
+                     (p[2] - c[2]) * (p[2] - c[2])) -
+           r;
+}
+
+// Torus around the z axis through c: tube radius r at distance R from the axis.
+double torus_distance(const Vec3& p, const Vec3& c, double R, double r) {
+    const double x = p[0] - c[0], y = p[1] - c[1], z = p[2] - c[2];
+    const double ring = std::sqrt(x * x + y * y) - R;
+    return std::sqrt(ring * ring + z * z) - r;
+}
+
+const Vec3 kSphereCentre{20.3, 19.6, 20.1};
+constexpr double kSphereRadius = 14.2;
+ScalarField sphere_field() {
+    return sample_field(
+        40, 40, 40, [](const Vec3& p) { return sphere_distance(p, kSphereCentre, kSphereRadius); });
+}
+
+const Vec3 kTorusCentre{20.2, 19.7, 8.1};
+constexpr double kTorusR = 12.0, kTorusTube = 4.5;
+ScalarField torus_field() {
+    return sample_field(40, 40, 16, [](const Vec3& p) {
+        return torus_distance(p, kTorusCentre, kTorusR, kTorusTube);
+    });
+}
+
+// Uniform noise in [-1, 1] (many ambiguous faces) inside an outside border, so surfaces close.
+ScalarField noise_field(int n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> value(-1.0f, 1.0f);
+    ScalarField field = sample_field(n, n, n, [](const Vec3&) { return 1.0; });
+    for (int k = 1; k < n - 1; ++k)
+        for (int j = 1; j < n - 1; ++j)
+            for (int i = 1; i < n - 1; ++i) field.values[size_t(i + n * (j + n * k))] = value(rng);
+    return field;
+}
+
+// ---- topology (independent of the meshing code) -----------------------------------------------
+
+struct Topology {
+    bool closed_and_oriented = true;  // every directed edge once, its reverse once
+    bool vertex_manifold = true;      // the triangles around every vertex form one fan
+    int64_t vertices = 0, edges = 0, faces = 0, components = 0, unused_vertices = 0;
+    int64_t euler() const { return vertices - edges + faces; }
+};
+
+Topology topology(const Mesh& mesh) {
+    Topology t;
+    t.faces = int64_t(mesh.triangles.size());
+    std::map<std::pair<uint32_t, uint32_t>, int> directed;
+    std::vector<std::map<uint32_t, uint32_t>> link(mesh.positions.size());  // vertex -> (b -> c)
+    std::vector<uint32_t> parent(mesh.positions.size());
+    std::iota(parent.begin(), parent.end(), 0u);
+    std::function<uint32_t(uint32_t)> root = [&](uint32_t v) {
+        return parent[v] == v ? v : parent[v] = root(parent[v]);
+    };
+    std::vector<bool> used(mesh.positions.size(), false);
+    for (const auto& tri : mesh.triangles) {
+        for (int i = 0; i < 3; ++i) {
+            const uint32_t a = tri[i], b = tri[(i + 1) % 3], c = tri[(i + 2) % 3];
+            if (a == b) t.closed_and_oriented = false;
+            ++directed[{a, b}];
+            used[a] = true;
+            if (!link[a].emplace(b, c).second) t.vertex_manifold = false;
+            parent[root(a)] = root(b);
+        }
+    }
+    for (const auto& [edge, count] : directed) {
+        auto reverse = directed.find({edge.second, edge.first});
+        if (count != 1 || reverse == directed.end() || reverse->second != 1)
+            t.closed_and_oriented = false;
+    }
+    t.edges = int64_t(directed.size()) / 2;
+    for (size_t v = 0; v < link.size(); ++v) {
+        if (!used[v]) {
+            ++t.unused_vertices;
+            continue;
+        }
+        ++t.vertices;
+        if (root(uint32_t(v)) == v) ++t.components;
+        // Walk the fan: following b -> c must return to the start after visiting every triangle.
+        size_t steps = 0;
+        uint32_t at = link[v].begin()->first;
+        do {
+            auto next = link[v].find(at);
+            if (next == link[v].end()) break;
+            at = next->second;
+            ++steps;
+        } while (at != link[v].begin()->first && steps <= link[v].size());
+        if (steps != link[v].size() || at != link[v].begin()->first) t.vertex_manifold = false;
+    }
+    return t;
+}
+
+void expect_closed_surface(const Mesh& mesh, int64_t euler, int64_t components) {
+    const Topology t = topology(mesh);
+    EXPECT_TRUE(t.closed_and_oriented);
+    EXPECT_TRUE(t.vertex_manifold);
+    EXPECT_EQ(t.unused_vertices, 0);
+    EXPECT_EQ(t.euler(), euler);
+    EXPECT_EQ(t.components, components);
+}
+
+double signed_volume(const Mesh& mesh) {
+    double volume = 0;
+    for (const auto& tri : mesh.triangles) {
+        const Vec3& a = mesh.positions[tri[0]];
+        const Vec3& b = mesh.positions[tri[1]];
+        const Vec3& c = mesh.positions[tri[2]];
+        volume += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                   a[2] * (b[0] * c[1] - b[1] * c[0])) /
+                  6.0;
+    }
+    return volume;
+}
+
+// Sign-changing grid edges counted straight from the samples.
+int64_t sign_changing_edges(const ScalarField& f, float iso) {
+    const auto& n = f.grid.dims;
+    int64_t count = 0;
+    for (int64_t k = 0; k < n[2]; ++k)
+        for (int64_t j = 0; j < n[1]; ++j)
+            for (int64_t i = 0; i < n[0]; ++i) {
+                const bool in = f.at(i, j, k) < iso;
+                if (i + 1 < n[0] && (f.at(i + 1, j, k) < iso) != in) ++count;
+                if (j + 1 < n[1] && (f.at(i, j + 1, k) < iso) != in) ++count;
+                if (k + 1 < n[2] && (f.at(i, j, k + 1) < iso) != in) ++count;
+            }
+    return count;
+}
+
+void expect_identical(const Mesh& a, const Mesh& b) {
+    ASSERT_EQ(a.positions.size(), b.positions.size());
+    ASSERT_EQ(a.triangles.size(), b.triangles.size());
+    EXPECT_TRUE(a.positions == b.positions) << "vertex positions differ";
+    EXPECT_TRUE(a.triangles == b.triangles) << "triangles differ";
+}
+
+// ---- analytic surfaces -----------------------------------------------------------------------
+
+TEST(Meshing, SphereIsOneClosedOrientedGenusZeroSurfaceForBothMethods) {
+    const ScalarField field = sphere_field();
+    for (const Mesh& mesh : {marching_cubes(field), surface_nets(field)}) {
+        expect_closed_surface(mesh, 2, 1);
+        // Outward normals give a positive volume close to the ball's.
+        const double ball = 4.0 / 3.0 * M_PI * std::pow(kSphereRadius, 3);
+        EXPECT_NEAR(signed_volume(mesh), ball, 0.01 * ball);
+    }
+}
+
+TEST(Meshing, TorusIsOneClosedSurfaceOfGenusOne) {
+    const ScalarField field = torus_field();
+    for (const Mesh& mesh : {marching_cubes(field), surface_nets(field)}) {
+        expect_closed_surface(mesh, 0, 1);
+        const double volume = 2 * M_PI * M_PI * kTorusR * kTorusTube * kTorusTube;
+        EXPECT_NEAR(signed_volume(mesh), volume, 0.02 * volume);
+    }
+}
+
+TEST(Meshing, VerticesLieWithinASmallFractionOfAVoxelOfTheAnalyticSurface) {
+    const ScalarField field = sphere_field();
+    auto worst = [](const Mesh& mesh) {
+        double error = 0;
+        for (const Vec3& p : mesh.positions)
+            error = std::max(error, std::abs(sphere_distance(p, kSphereCentre, kSphereRadius)));
+        return error;
+    };
+    // Marching Cubes interpolates the exact distance along edges: only the curvature within one
+    // edge and float rounding remain. Surface Nets averages crossings across a cell, which
+    // pulls the vertex inside by up to about diagonal^2 / (8 R).
+    EXPECT_LT(worst(marching_cubes(field)), 0.01);
+    EXPECT_LT(worst(surface_nets(field)), 3.0 / (8 * kSphereRadius));
+}
+
+// Euler's formula fixes the sizes: a closed triangle mesh has E = 3F/2, so V = F/2 + chi. Surface
+// Nets has one quad (2 triangles) per sign-changing edge, Marching Cubes one vertex per
+// sign-changing edge; so on a sphere V_sn = E_cross + 2 and F_mc = 2 E_cross - 4. Both methods
+// thus have about the same vertex AND triangle counts; Surface Nets is not vertex-cheaper.
+TEST(Meshing, VertexAndTriangleCountsFollowEulersFormulaForBothMethods) {
+    const ScalarField field = sphere_field();
+    const int64_t crossing = sign_changing_edges(field, 0.0f);
+    const Mesh mc = marching_cubes(field), sn = surface_nets(field);
+    EXPECT_EQ(int64_t(sn.triangles.size()), 2 * crossing);
+    EXPECT_EQ(int64_t(sn.positions.size()), crossing + 2);
+    EXPECT_EQ(int64_t(mc.positions.size()), crossing);  // smooth field: no centre vertices
+    EXPECT_EQ(int64_t(mc.triangles.size()), 2 * crossing - 4);
+}
+
+// ---- hand-worked cases --------------------------------------------------------------------------
+
+// A single set voxel, unsmoothed: samples are -0.5 there and +0.5 around, so every crossing is
+// half-way between sample centres, i.e. on a face of the voxel.
+TEST(Meshing, SingleVoxelGivesAnOctahedronThroughItsFaceCentresAndASurfaceNetsCube) {
+    Grid grid;
+    grid.origin = {10, 20, 30};
+    grid.voxel_size = 2;
+    grid.dims = {3, 3, 3};
+    SparseVoxels voxels(grid, 4);
+    voxels.set(1, 1, 1);
+    const ScalarField field = occupancy_to_field(voxels, 0);
+    EXPECT_EQ(field.grid.dims, (std::array<int64_t, 3>{5, 5, 5}));
+    EXPECT_EQ(field.at(2, 2, 2), -0.5f);
+    EXPECT_EQ(field.at(1, 2, 2), 0.5f);
+
+    const Mesh mc = marching_cubes(field);
+    ASSERT_EQ(mc.positions.size(), 6u);
+    EXPECT_EQ(mc.triangles.size(), 8u);
+    // Voxel (1,1,1) spans [12, 14] x [22, 24] x [32, 34]; its centre is (13, 23, 33).
+    std::vector<Vec3> expected{{12, 23, 33}, {14, 23, 33}, {13, 22, 33},
+                               {13, 24, 33}, {13, 23, 32}, {13, 23, 34}};
+    for (const Vec3& p : mc.positions)
+        EXPECT_NE(std::find(expected.begin(), expected.end(), p), expected.end())
+            << p[0] << " " << p[1] << " " << p[2];
+    expect_closed_surface(mc, 2, 1);
+    EXPECT_NEAR(signed_volume(mc), 4.0 / 3.0, 1e-12);  // octahedron of "radius" 1: 4/3
+
+    // Surface Nets: 8 cells around the sample, each vertex the mean of the 3 face centres it
+    // sees, half a voxel out along one axis each: centre +-1/6 voxel = +-1/3 world units per
+    // axis; 6 edges x 2 triangles.
+    const Mesh sn = surface_nets(field);
+    ASSERT_EQ(sn.positions.size(), 8u);
+    EXPECT_EQ(sn.triangles.size(), 12u);
+    for (const Vec3& p : sn.positions)
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(std::abs(p[k] - (13.0 + 10.0 * k)), 1.0 / 3.0, 1e-6);
+    expect_closed_surface(sn, 2, 1);
+}
+
+// One face with two inside samples on a diagonal, A = C = -1, and two outside ones, B = D = b.
+// The bilinear saddle is (AC - BD) / (A + C - B - D) = (1 - b^2) / (-2 - 2b): inside (the two
+// samples connect into one blob) for b < 1, outside (two separate blobs) for b > 1.
+TEST(Meshing, AsymptoticDeciderJoinsOrSeparatesAnAmbiguousFaceLikeTheBilinearSaddle) {
+    for (const float b : {0.5f, 2.0f}) {
+        ScalarField field = sample_field(4, 4, 4, [](const Vec3&) { return 1.0; });
+        auto at = [&](int i, int j, int k) -> float& {
+            return field.values[size_t(i + 4 * (j + 4 * k))];
+        };
+        at(1, 1, 1) = -1;
+        at(2, 2, 1) = -1;
+        at(2, 1, 1) = b;
+        at(1, 2, 1) = b;
+        const Mesh mesh = marching_cubes(field);
+        if (b < 1)
+            expect_closed_surface(mesh, 2, 1);
+        else
+            expect_closed_surface(mesh, 4, 2);
+    }
+}
+
+// Every corner pattern of one cell, alone in an outside field: each 6-connected group of inside
+// corners is a ball (ties in the decider separate), so the surface is one sphere per group.
+TEST(Meshing, EveryMarchingCubesCornerCaseIsClosedWithOneSpherePerInsideGroup) {
+    for (int mask = 1; mask < 256; ++mask) {
+        ScalarField field = sample_field(4, 4, 4, [](const Vec3&) { return 1.0; });
+        for (int c = 0; c < 8; ++c)
+            if (mask >> c & 1)
+                field
+                    .values[size_t((1 + (c & 1)) + 4 * ((1 + (c >> 1 & 1)) + 4 * (1 + (c >> 2))))] =
+                    -1;
+        // Groups of corners joined by cube edges.
+        int groups = 0, seen = 0;
+        for (int c = 0; c < 8; ++c) {
+            if (!(mask >> c & 1) || (seen >> c & 1)) continue;
+            ++groups;
+            std::vector<int> stack{c};
+            seen |= 1 << c;
+            while (!stack.empty()) {
+                const int at = stack.back();
+                stack.pop_back();
+                for (int axis = 0; axis < 3; ++axis) {
+                    const int next = at ^ (1 << axis);
+                    if ((mask >> next & 1) && !(seen >> next & 1)) {
+                        seen |= 1 << next;
+                        stack.push_back(next);
+                    }
+                }
+            }
+        }
+        SCOPED_TRACE("mask " + std::to_string(mask));
+        expect_closed_surface(marching_cubes(field), 2 * groups, groups);
+    }
+}
+
+// Noise has ambiguous faces everywhere (and needs centre vertices); Marching Cubes must still be
+// closed, consistently oriented and manifold.
+TEST(Meshing, MarchingCubesStaysClosedAndManifoldOnNoiseFullOfAmbiguousFaces) {
+    for (uint32_t seed = 1; seed <= 4; ++seed) {
+        const Mesh mesh = marching_cubes(noise_field(14, seed));
+        const Topology t = topology(mesh);
+        EXPECT_TRUE(t.closed_and_oriented) << "seed " << seed;
+        EXPECT_TRUE(t.vertex_manifold) << "seed " << seed;
+        EXPECT_EQ(t.unused_vertices, 0);
+        EXPECT_EQ(t.euler() % 2, 0);  // closed orientable surfaces only
+        EXPECT_GT(signed_volume(mesh), 0);
+    }
+}
+
+// A checkerboard: every face of every interior cell is ambiguous.
+TEST(Meshing, CheckerboardFieldGivesAClosedMarchingCubesMesh) {
+    ScalarField field = sample_field(10, 10, 10, [](const Vec3& p) {
+        const int parity = int(p[0]) + int(p[1]) + int(p[2]);
+        const bool border = p[0] < 1 || p[1] < 1 || p[2] < 1 || p[0] > 9 || p[1] > 9 || p[2] > 9;
+        // Slightly uneven magnitudes so the decider goes both ways.
+        return border ? 1.0 : (parity % 2 ? 1.0 + 0.1 * std::sin(p[0] * 7 + p[1] * 3) : -1.0);
+    });
+    const Topology t = topology(marching_cubes(field));
+    EXPECT_TRUE(t.closed_and_oriented);
+    EXPECT_TRUE(t.vertex_manifold);
+    EXPECT_GT(t.faces, 0);
+}
+
+// ---- tiling and device -----------------------------------------------------------------------
+
+TEST(Meshing, OutputIsIdenticalForEveryBrickSize) {
+    for (const ScalarField& field : {torus_field(), noise_field(13, 7)})
+        for (auto method :
+             {detail::MeshingMethod::SurfaceNets, detail::MeshingMethod::MarchingCubes}) {
+            const Mesh whole = detail::mesh_field_reference(field, 0.0f, method, 1 << 20);
+            EXPECT_GT(whole.triangles.size(), 0u);
+            for (int brick : {1, 2, 3, 5, 8, 17})
+                expect_identical(detail::mesh_field_reference(field, 0.0f, method, brick), whole);
+        }
+}
+
+TEST(Meshing, DeviceEqualsHostReferenceBitForBit) {
+    for (const ScalarField& field : {sphere_field(), torus_field(), noise_field(13, 3)})
+        for (const float iso : {0.0f, 0.25f}) {
+            expect_identical(surface_nets(device(), field, iso), surface_nets(field, iso));
+            expect_identical(marching_cubes(device(), field, iso), marching_cubes(field, iso));
+        }
+}
+
+// ---- occupancy fields ---------------------------------------------------------------------------
+
+TEST(Meshing, SmoothedOccupancyOfABoxIsClosedAndRoundsItsCorners) {
+    Grid grid;
+    grid.dims = {12, 12, 12};
+    SparseVoxels voxels(grid, 8);
+    for (int k = 0; k < 12; ++k)  // touches the grid border: the grown field must still close it
+        for (int j = 2; j < 9; ++j)
+            for (int i = 3; i < 10; ++i) voxels.set(i, j, k);
+    const ScalarField field = occupancy_to_field(voxels, 2);
+    EXPECT_EQ(field.grid.dims[0], 12 + 2 * 3);
+    EXPECT_EQ(field.grid.origin[0], -3.0);
+    for (const Mesh& mesh : {marching_cubes(field), surface_nets(field)}) {
+        expect_closed_surface(mesh, 2, 1);
+        // Smoothing only moves the surface of a convex box inwards (7 x 7 x 12 voxels).
+        const double volume = signed_volume(mesh);
+        EXPECT_LT(volume, 7.0 * 7.0 * 12.0);
+        EXPECT_GT(volume, 0.7 * 7.0 * 7.0 * 12.0);
+    }
+    EXPECT_THROW(occupancy_to_field(voxels, -1), GridError);
+}
+
+// One pass of the 3x3x3 box filter over a 3x3x3 block of set voxels, worked by hand: a sample
+// keeps -0.5 per set and +0.5 per unset voxel among its 27 neighbours, divided by 27.
+TEST(Meshing, OneSmoothingPassAveragesTheTwentySevenNeighbours) {
+    Grid grid;
+    grid.dims = {5, 5, 5};
+    SparseVoxels voxels(grid, 4);
+    for (int k = 1; k < 4; ++k)
+        for (int j = 1; j < 4; ++j)
+            for (int i = 1; i < 4; ++i) voxels.set(i, j, k);
+    const ScalarField field = occupancy_to_field(voxels, 1);  // grown by 2: voxel v is sample v+2
+    EXPECT_NEAR(field.at(4, 4, 4), -0.5, 1e-6);               // 27 set
+    EXPECT_NEAR(field.at(3, 4, 4), (18 * -0.5 + 9 * 0.5) / 27, 1e-6);  // block face centre
+    EXPECT_NEAR(field.at(3, 3, 3), (8 * -0.5 + 19 * 0.5) / 27, 1e-6);  // block corner
+    EXPECT_NEAR(field.at(2, 4, 4), (9 * -0.5 + 18 * 0.5) / 27, 1e-6);  // just outside a face
+    EXPECT_EQ(field.at(0, 0, 0), 0.5f);
+}
+
+TEST(Meshing, FieldsWithoutASignChangeOrWithoutCellsGiveEmptyMeshes) {
+    const ScalarField outside = sample_field(6, 5, 4, [](const Vec3&) { return 1.0; });
+    const ScalarField flat = sample_field(6, 5, 1, [](const Vec3& p) { return p[0] - 3; });
+    for (const ScalarField* field : {&outside, &flat}) {
+        for (const Mesh& mesh :
+             {surface_nets(*field), marching_cubes(*field), surface_nets(device(), *field),
+              marching_cubes(device(), *field)}) {
+            EXPECT_TRUE(mesh.positions.empty());
+            EXPECT_TRUE(mesh.triangles.empty());
+        }
+    }
+}
+
+TEST(Meshing, BadFieldsAreRejectedWithNamedErrors) {
+    ScalarField field = sphere_field();
+    field.values.pop_back();
+    EXPECT_THROW(marching_cubes(field), GridError);
+    field = sphere_field();
+    field.values[17] = NAN;
+    EXPECT_THROW(surface_nets(field), InputError);
+    EXPECT_THROW(surface_nets(sphere_field(), INFINITY), InputError);
+    EXPECT_THROW(sphere_field().at(40, 0, 0), std::out_of_range);
+}
+
+// ---- writers ---------------------------------------------------------------------------------
+
+std::string temp_path(const std::string& name) {
+    return ::testing::TempDir() + "oclvox_meshing_" + name;
+}
+
+std::string read_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+template <typename T>
+T little_endian(const std::string& bytes, size_t at) {
+    uint64_t bits = 0;
+    for (size_t i = 0; i < sizeof(T); ++i) bits |= uint64_t(uint8_t(bytes.at(at + i))) << (8 * i);
+    T value;
+    std::memcpy(&value, &bits, sizeof value);  // the test machine is little-endian (x86/ARM)
+    return value;
+}
+
+Mesh read_obj(const std::string& path) {
+    std::ifstream in(path);
+    Mesh mesh;
+    std::string line;
+    while (std::getline(in, line)) {
+        std::istringstream s(line);
+        std::string tag;
+        s >> tag;
+        if (tag == "v") {
+            Vec3 p;
+            s >> p[0] >> p[1] >> p[2];
+            mesh.positions.push_back(p);
+        } else if (tag == "f") {
+            std::array<uint32_t, 3> t;
+            s >> t[0] >> t[1] >> t[2];
+            for (auto& i : t) --i;
+            mesh.triangles.push_back(t);
+        }
+    }
+    return mesh;
+}
+
+Mesh read_ply(const std::string& path) {
+    const std::string bytes = read_bytes(path);
+    const size_t body = bytes.find("end_header\n") + 11;
+    size_t vertices = 0, faces = 0;
+    std::istringstream header(bytes.substr(0, body));
+    std::string word;
+    while (header >> word)
+        if (word == "element") {
+            header >> word;
+            (word == "vertex" ? vertices : faces) = [&] {
+                size_t n;
+                header >> n;
+                return n;
+            }();
+        }
+    EXPECT_NE(bytes.find("format binary_little_endian 1.0"), std::string::npos);
+    Mesh mesh;
+    size_t at = body;
+    for (size_t v = 0; v < vertices; ++v, at += 24)
+        mesh.positions.push_back({little_endian<double>(bytes, at),
+                                  little_endian<double>(bytes, at + 8),
+                                  little_endian<double>(bytes, at + 16)});
+    for (size_t f = 0; f < faces; ++f, at += 13) {
+        EXPECT_EQ(bytes.at(at), 3);
+        mesh.triangles.push_back({little_endian<uint32_t>(bytes, at + 1),
+                                  little_endian<uint32_t>(bytes, at + 5),
+                                  little_endian<uint32_t>(bytes, at + 9)});
+    }
+    EXPECT_EQ(at, bytes.size());
+    return mesh;
+}
+
+TEST(Meshing, WrittenMeshesReadBackExactly) {
+    const Mesh mesh = marching_cubes(torus_field());
+    const std::string obj = temp_path("torus.OBJ"), ply = temp_path("torus.ply"),
+                      stl = temp_path("torus.stl");
+    write_mesh(obj, mesh);
+    write_mesh(ply, mesh);
+    write_mesh(stl, mesh);
+    expect_identical(read_obj(obj), mesh);
+    expect_identical(read_ply(ply), mesh);
+
+    // STL: float corners of each facet, a unit normal agreeing with the winding.
+    const std::string bytes = read_bytes(stl);
+    ASSERT_EQ(bytes.size(), 84 + 50 * mesh.triangles.size());
+    EXPECT_EQ(little_endian<uint32_t>(bytes, 80), mesh.triangles.size());
+    for (size_t t = 0; t < mesh.triangles.size(); t += 97) {
+        const size_t at = 84 + 50 * t;
+        for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < 3; ++k)
+                EXPECT_EQ(little_endian<float>(bytes, at + 12 + 12 * c + 4 * k),
+                          float(mesh.positions[mesh.triangles[t][c]][k]));
+        const Vec3& a = mesh.positions[mesh.triangles[t][0]];
+        const Vec3& b = mesh.positions[mesh.triangles[t][1]];
+        const Vec3& c = mesh.positions[mesh.triangles[t][2]];
+        const Vec3 n{(b[1] - a[1]) * (c[2] - a[2]) - (b[2] - a[2]) * (c[1] - a[1]),
+                     (b[2] - a[2]) * (c[0] - a[0]) - (b[0] - a[0]) * (c[2] - a[2]),
+                     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])};
+        double dot = 0, length = 0;
+        for (int k = 0; k < 3; ++k) {
+            dot += n[k] * little_endian<float>(bytes, at + 4 * k);
+            length += n[k] * n[k];
+        }
+        EXPECT_NEAR(dot, std::sqrt(length), 1e-4 * std::sqrt(length));
+    }
+    for (const auto& path : {obj, ply, stl}) std::remove(path.c_str());
+}
+
+TEST(Meshing, WriteMeshRejectsUnknownExtensionsAndBadIndicesWithoutWriting) {
+    Mesh mesh;
+    mesh.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    mesh.triangles = {{0, 1, 2}};
+    const std::string off = temp_path("mesh.off");
+    EXPECT_THROW(write_mesh(off, mesh), OutputError);
+    mesh.triangles = {{0, 1, 3}};
+    const std::string obj = temp_path("bad.obj");
+    EXPECT_THROW(write_mesh(obj, mesh), OutputError);
+    EXPECT_FALSE(std::ifstream(off).good());
+    EXPECT_FALSE(std::ifstream(obj).good());
+}
+
+}  // namespace
+}  // namespace oclvox

@@ -1,0 +1,504 @@
+// Solid voxelization: parity and winding number against hand counts, analytic volumes and
+// double-precision geometry, device against host reference, and the robustness properties that
+// motivate each inside test.
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+
+#include "solid.hpp"
+#include "test_support.hpp"
+
+namespace oclvox::test {
+namespace {
+
+Device& device() {
+    static Device d =
+        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    return d;
+}
+
+VoxelizeOptions solid_options(InsideTest inside, int brick_size = 16) {
+    VoxelizeOptions o;
+    o.mode = VoxelizeMode::Solid;
+    o.inside = inside;
+    o.brick_size = brick_size;
+    return o;
+}
+
+SparseVoxels on_device(const Mesh& m, const Grid& g, const VoxelizeOptions& o,
+                       VoxelizeStats* stats = nullptr) {
+    VoxelizeStats s;
+    SparseVoxels v = detail::solid_device(device().impl(), m, g, o, s);
+    if (stats) *stats = s;
+    return v;
+}
+
+SparseVoxels on_host(const Mesh& m, const Grid& g, const VoxelizeOptions& o,
+                     VoxelizeStats* stats = nullptr) {
+    VoxelizeStats s;
+    SparseVoxels v = detail::solid_reference(m, g, o, s);
+    if (stats) *stats = s;
+    return v;
+}
+
+// The grid that fits the mesh with `resolution` voxels on its longest axis and one empty voxel
+// on every side.
+Grid fitted(const Mesh& m, int64_t resolution) {
+    GridFit fit;
+    fit.resolution = resolution;
+    fit.pad = 1;
+    return fit_grid(m, fit);
+}
+
+Mesh flipped(Mesh m) {
+    for (auto& t : m.triangles) std::swap(t[1], t[2]);
+    return m;
+}
+
+// Signed volume (divergence theorem), exact up to double rounding.
+double signed_volume(const Mesh& m) {
+    double v = 0;
+    for (const auto& t : m.triangles) {
+        const Vec3d& a = m.positions[t[0]];
+        const Vec3d& b = m.positions[t[1]];
+        const Vec3d& c = m.positions[t[2]];
+        v += (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
+              a[2] * (b[0] * c[1] - b[1] * c[0])) /
+             6;
+    }
+    return v;
+}
+
+// Icosahedron subdivided `levels` times, vertices pushed onto the sphere.
+Mesh icosphere(const Vec3d& centre, double radius, int levels) {
+    const double t = (1 + std::sqrt(5.0)) / 2;
+    std::vector<Vec3d> p = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                            {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                            {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+    std::vector<std::array<uint32_t, 3>> f = {
+        {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+        {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+        {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+    for (int l = 0; l < levels; ++l) {
+        std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
+        auto middle = [&](uint32_t a, uint32_t b) {
+            auto [it, added] = mid.emplace(std::minmax(a, b), uint32_t(p.size()));
+            if (added)
+                p.push_back(
+                    {(p[a][0] + p[b][0]) / 2, (p[a][1] + p[b][1]) / 2, (p[a][2] + p[b][2]) / 2});
+            return it->second;
+        };
+        std::vector<std::array<uint32_t, 3>> next;
+        for (const auto& t3 : f) {
+            const uint32_t ab = middle(t3[0], t3[1]), bc = middle(t3[1], t3[2]),
+                           ca = middle(t3[2], t3[0]);
+            next.insert(next.end(),
+                        {{t3[0], ab, ca}, {t3[1], bc, ab}, {t3[2], ca, bc}, {ab, bc, ca}});
+        }
+        f = next;
+    }
+    Mesh m;
+    for (const Vec3d& v : p) {
+        const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        m.positions.push_back({centre[0] + radius * v[0] / n, centre[1] + radius * v[1] / n,
+                               centre[2] + radius * v[2] / n});
+    }
+    m.triangles = f;
+    return m;
+}
+
+// Distance from p to triangle abc in double (closest point by Voronoi regions, Ericson 2005).
+double point_triangle_distance(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    auto sub = [](const Vec3d& u, const Vec3d& v) {
+        return Vec3d{u[0] - v[0], u[1] - v[1], u[2] - v[2]};
+    };
+    auto dot = [](const Vec3d& u, const Vec3d& v) {
+        return u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    };
+    auto at = [&](double s, double t) {
+        const Vec3d q{a[0] + s * (b[0] - a[0]) + t * (c[0] - a[0]),
+                      a[1] + s * (b[1] - a[1]) + t * (c[1] - a[1]),
+                      a[2] + s * (b[2] - a[2]) + t * (c[2] - a[2])};
+        const Vec3d d = sub(p, q);
+        return std::sqrt(dot(d, d));
+    };
+    const Vec3d ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0) return at(0, 0);
+    const Vec3d bp = sub(p, b);
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3) return at(1, 0);
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return at(d1 / (d1 - d3), 0);
+    const Vec3d cp = sub(p, c);
+    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6) return at(0, 1);
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return at(0, d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return at(1 - w, w);
+    }
+    const double denom = 1 / (va + vb + vc);
+    return at(vb * denom, vc * denom);
+}
+
+// Distance in voxels from the centre of voxel (i, j, k) to the nearest triangle.
+double centre_distance(const Mesh& m, const Grid& g, int64_t i, int64_t j, int64_t k) {
+    const Vec3d p{double(i) + 0.5, double(j) + 0.5, double(k) + 0.5};
+    double best = INFINITY;
+    for (const auto& t : m.triangles)
+        best = std::min(best, point_triangle_distance(p, to_grid(g, m.positions[t[0]]),
+                                                      to_grid(g, m.positions[t[1]]),
+                                                      to_grid(g, m.positions[t[2]])));
+    return best;
+}
+
+// Parity snaps vertices to 1/256 voxel, which moves the surface by up to sqrt(3)/512 voxels.
+constexpr double kSnap = 0.005;
+
+// Voxels in exactly one of a and b; each must have its centre within `eps` voxels of the surface.
+uint64_t expect_differ_only_on_surface(const SparseVoxels& a, const SparseVoxels& b, const Mesh& m,
+                                       double eps) {
+    uint64_t differing = 0;
+    auto check = [&](const SparseVoxels& x, const SparseVoxels& y) {
+        x.for_each([&](int64_t i, int64_t j, int64_t k) {
+            if (y.get(i, j, k)) return;
+            ++differing;
+            const double d = centre_distance(m, a.grid(), i, j, k);
+            EXPECT_LT(d, eps) << "voxel " << i << "," << j << "," << k << " differs, centre " << d
+                              << " voxels from the surface";
+        });
+    };
+    check(a, b);
+    check(b, a);
+    return differing;
+}
+
+Mesh load(const std::string& name) {
+    return load_mesh(mesh_path(name));
+}
+
+// ---- hand counts ----
+
+// Cube [1,5]^3 in an 8^3 grid: centres 1.5 .. 4.5 on each axis are inside, 4^3 = 64 voxels.
+TEST(Solid, CubeHoldsExactlyTheVoxelsWhoseCentresAreInside) {
+    const Mesh m = box_mesh({1, 1, 1}, {5, 5, 5});
+    const Grid g = unit_grid(8, 8, 8);
+    for (InsideTest inside : {InsideTest::Parity, InsideTest::Winding})
+        for (const SparseVoxels& v :
+             {on_device(m, g, solid_options(inside)), on_host(m, g, solid_options(inside))}) {
+            EXPECT_EQ(v.count(), 64u) << to_string(inside);
+            for (int k = 0; k < 8; ++k)
+                for (int j = 0; j < 8; ++j)
+                    for (int i = 0; i < 8; ++i) {
+                        const bool in = i >= 1 && i <= 4 && j >= 1 && j <= 4 && k >= 1 && k <= 4;
+                        ASSERT_EQ(v.get(i, j, k), in) << to_string(inside) << " " << i << j << k;
+                    }
+        }
+}
+
+// Cube [0.5,4.5]^3: every face lies on a plane of voxel centres and the diagonals of the
+// triangulated faces run through centres. The tie rule keeps the low x and y faces (the column
+// is moved by +e in x and +e^2 in y) and the top face (a crossing at a centre is not below it):
+// x, y in 0..3 and z in 1..4, each centre plane counted once: 64 voxels.
+TEST(Solid, ParityCountsFacesOnCentrePlanesOnce) {
+    const Mesh m = box_mesh({0.5, 0.5, 0.5}, {4.5, 4.5, 4.5});
+    const Grid g = unit_grid(8, 8, 8);
+    for (const SparseVoxels& v : {on_device(m, g, solid_options(InsideTest::Parity)),
+                                  on_host(m, g, solid_options(InsideTest::Parity))}) {
+        EXPECT_EQ(v.count(), 64u);
+        for (int k = 0; k < 8; ++k)
+            for (int j = 0; j < 8; ++j)
+                for (int i = 0; i < 8; ++i)
+                    ASSERT_EQ(v.get(i, j, k), i <= 3 && j <= 3 && k >= 1 && k <= 4) << i << j << k;
+    }
+}
+
+// Octahedron |x|+|y|+|z| <= 3 around the centre of voxel (4,4,4), so every vertex and many edge
+// points lie on voxel centres, and columns pass through vertices and edges. With d the offset from
+// (4,4,4): centres with |d| sum < 3 are inside (25). Of the 38 on the surface, the top ones
+// (dz = 3 - |dx| - |dy| > 0) are inside: 13 columns with |dx| + |dy| <= 2. Silhouette centres
+// (dz = 0) see both crossings at their own height: outside. Total 38.
+TEST(Solid, ParityIsExactThroughVerticesAndEdges) {
+    Mesh m;
+    const double c = 4.5;
+    m.positions = {{c + 3, c, c}, {c - 3, c, c}, {c, c + 3, c},
+                   {c, c - 3, c}, {c, c, c + 3}, {c, c, c - 3}};
+    for (uint32_t x : {0u, 1u})
+        for (uint32_t y : {2u, 3u})
+            for (uint32_t z : {4u, 5u}) {
+                // Outward orientation: flip when an odd number of the axes are negative.
+                if ((x == 1) ^ (y == 3) ^ (z == 5))
+                    m.triangles.push_back({x, z, y});
+                else
+                    m.triangles.push_back({x, y, z});
+            }
+    EXPECT_TRUE(detail::mesh_edge_report(m).closed());
+    const Grid g = unit_grid(9, 9, 9);
+    for (const SparseVoxels& v : {on_device(m, g, solid_options(InsideTest::Parity)),
+                                  on_host(m, g, solid_options(InsideTest::Parity))}) {
+        EXPECT_EQ(v.count(), 38u);
+        for (int k = 0; k < 9; ++k)
+            for (int j = 0; j < 9; ++j)
+                for (int i = 0; i < 9; ++i) {
+                    const int dx = i - 4, dy = j - 4, dz = k - 4;
+                    const int s = std::abs(dx) + std::abs(dy) + std::abs(dz);
+                    ASSERT_EQ(v.get(i, j, k), s < 3 || (s == 3 && dz > 0)) << dx << dy << dz;
+                }
+    }
+}
+
+// Parity counts every crossing of the column, including those below and above the grid.
+TEST(Solid, ParityCountsCrossingsOutsideTheGrid) {
+    const Grid g = unit_grid(8, 8, 8);
+    const Mesh below = box_mesh({1, 1, -3}, {5, 5, 5});  // z centres 0.5 .. 4.5: 4 * 4 * 5
+    const Mesh above = box_mesh({1, 1, 2}, {5, 5, 20});  // z centres 2.5 .. 7.5: 4 * 4 * 6
+    EXPECT_EQ(on_device(below, g, solid_options(InsideTest::Parity)).count(), 80u);
+    EXPECT_EQ(on_host(below, g, solid_options(InsideTest::Parity)).count(), 80u);
+    EXPECT_EQ(on_device(above, g, solid_options(InsideTest::Parity)).count(), 96u);
+    EXPECT_EQ(on_host(above, g, solid_options(InsideTest::Parity)).count(), 96u);
+}
+
+// ---- analytic volume ----
+
+// Voxel count times voxel volume converges to the polyhedron's volume as the grid refines.
+TEST(Solid, SphereVolumeConvergesWithResolution) {
+    const Mesh m = icosphere({0, 0, 0}, 1.0, 4);
+    const double exact = signed_volume(m);
+    double previous_error = INFINITY;
+    for (int64_t n : {16, 32, 64}) {
+        GridFit fit;
+        fit.resolution = n;
+        const Grid g = fit_grid(m, fit);
+        const SparseVoxels v = on_device(m, g, solid_options(InsideTest::Parity));
+        const double volume = double(v.count()) * g.voxel_size * g.voxel_size * g.voxel_size;
+        const double error = std::fabs(volume - exact) / exact;
+        RecordProperty("relative_error_" + std::to_string(n), std::to_string(error));
+        EXPECT_LT(error, previous_error) << n;
+        previous_error = error;
+    }
+    EXPECT_LT(previous_error, 0.01);
+}
+
+// ---- device against reference ----
+
+TEST(Solid, ParityDeviceEqualsReferenceBitForBit) {
+    for (const char* name : {"bunny00.off", "spot.obj", "TR12J_OCC.stl", "mug.obj"}) {
+        const Mesh m = load(name);
+        const Grid g = fitted(m, 64);
+        const auto o = solid_options(InsideTest::Parity);
+        const SparseVoxels d = on_device(m, g, o), h = on_host(m, g, o);
+        EXPECT_TRUE(d.same_voxels(h)) << name;
+        EXPECT_GT(d.count(), 0u) << name;
+    }
+}
+
+TEST(Solid, ResultDoesNotDependOnBrickSize) {
+    const Mesh m = load("bunny00.off");
+    const Grid g = fitted(m, 64);
+    const SparseVoxels v64 = on_device(m, g, solid_options(InsideTest::Parity, 64));
+    for (int b : {4, 16})
+        EXPECT_TRUE(on_device(m, g, solid_options(InsideTest::Parity, b)).same_voxels(v64)) << b;
+    // A budget of a few brick columns forces many batches.
+    VoxelizeOptions small = solid_options(InsideTest::Parity, 16);
+    small.device_budget_bytes = 16 << 10;
+    VoxelizeStats stats;
+    EXPECT_TRUE(on_device(m, g, small, &stats).same_voxels(v64));
+    EXPECT_GT(stats.batches, 1u);
+
+    const Mesh spot = load("spot.obj");
+    const Grid gs = fitted(spot, 48);
+    const SparseVoxels w16 = on_device(spot, gs, solid_options(InsideTest::Winding, 16));
+    EXPECT_TRUE(on_device(spot, gs, solid_options(InsideTest::Winding, 4)).same_voxels(w16));
+}
+
+// Float on the device, double on the host: the winding results may differ only at centres
+// within rounding of the surface.
+TEST(Solid, WindingDeviceMatchesDoubleReference) {
+    const Mesh m = load("spot.obj");
+    const Grid g = fitted(m, 24);
+    const auto o = solid_options(InsideTest::Winding);
+    const uint64_t differing =
+        expect_differ_only_on_surface(on_device(m, g, o), on_host(m, g, o), m, 1e-3);
+    RecordProperty("differing_voxels", std::to_string(differing));
+}
+
+// Exact generalized winding number at the centre of voxel (i, j, k), in double.
+double exact_winding(const Mesh& m, const Grid& g, int64_t i, int64_t j, int64_t k) {
+    const Vec3d p{double(i) + 0.5, double(j) + 0.5, double(k) + 0.5};
+    double sum = 0;
+    for (const auto& t : m.triangles) {
+        Vec3d v[3];
+        double len[3];
+        for (int q = 0; q < 3; ++q) {
+            const Vec3d w = to_grid(g, m.positions[t[q]]);
+            for (int c = 0; c < 3; ++c) v[q][c] = w[c] - p[c];
+            len[q] = std::sqrt(v[q][0] * v[q][0] + v[q][1] * v[q][1] + v[q][2] * v[q][2]);
+        }
+        auto dot = [](const Vec3d& a, const Vec3d& b) {
+            return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        };
+        const Vec3d bxc{v[1][1] * v[2][2] - v[1][2] * v[2][1],
+                        v[1][2] * v[2][0] - v[1][0] * v[2][2],
+                        v[1][0] * v[2][1] - v[1][1] * v[2][0]};
+        sum +=
+            2 * std::atan2(dot(v[0], bxc), len[0] * len[1] * len[2] + dot(v[0], v[1]) * len[2] +
+                                               dot(v[1], v[2]) * len[0] + dot(v[2], v[0]) * len[1]);
+    }
+    return sum / (4 * M_PI);
+}
+
+// The device sums far subtrees as dipoles. On an open mesh, where w varies smoothly through the
+// inside, that approximation may only flip voxels whose exact |w| lies within 0.02 of 1/2.
+TEST(Solid, HierarchicalWindingStaysWithinItsErrorBound) {
+    Mesh m = load("spot.obj");
+    m.triangles.resize(m.triangles.size() * 9 / 10);  // a wide opening
+    const Grid g = fitted(m, 24);
+    const SparseVoxels v = on_device(m, g, solid_options(InsideTest::Winding));
+    uint64_t inside = 0, near_half = 0;
+    for (int64_t k = 0; k < g.dims[2]; ++k)
+        for (int64_t j = 0; j < g.dims[1]; ++j)
+            for (int64_t i = 0; i < g.dims[0]; ++i) {
+                const double w = std::fabs(exact_winding(m, g, i, j, k));
+                inside += w > 0.5;
+                if (std::fabs(w - 0.5) < 0.02) {
+                    ++near_half;
+                    continue;
+                }
+                ASSERT_EQ(v.get(i, j, k), w > 0.5) << i << "," << j << "," << k << " exact w " << w;
+            }
+    EXPECT_GT(inside, 0u);
+    RecordProperty("voxels_within_0.02_of_half", std::to_string(near_half));
+}
+
+// ---- the two inside tests agree where both apply ----
+
+TEST(Solid, ParityEqualsWindingOnWatertightMeshes) {
+    for (const auto& [name, resolution] :
+         {std::pair<const char*, int>{"spot.obj", 64}, {"bunny00.off", 64}}) {
+        const Mesh m = load(name);
+        const Grid g = fitted(m, resolution);
+        const SparseVoxels parity = on_device(m, g, solid_options(InsideTest::Parity));
+        const SparseVoxels winding = on_device(m, g, solid_options(InsideTest::Winding));
+        EXPECT_GT(parity.count(), 0u);
+        const uint64_t differing = expect_differ_only_on_surface(parity, winding, m, kSnap);
+        RecordProperty(std::string("differing_") + name, std::to_string(differing));
+    }
+}
+
+// ---- choosing the inside test ----
+
+TEST(Solid, AutoPicksParityOnlyForClosedMeshes) {
+    const Grid g = unit_grid(8, 8, 8);
+    VoxelizeStats stats;
+    on_host(box_mesh({1, 1, 1}, {5, 5, 5}), g, solid_options(InsideTest::Auto), &stats);
+    EXPECT_EQ(stats.inside_test, "parity");
+    EXPECT_EQ(stats.inside_test_reason, "mesh is closed");
+
+    Mesh open = box_mesh({1, 1, 1}, {5, 5, 5});
+    open.triangles.pop_back();  // a hole bounded by 3 edges
+    on_host(open, g, solid_options(InsideTest::Auto), &stats);
+    EXPECT_EQ(stats.inside_test, "winding");
+    EXPECT_EQ(stats.inside_test_reason, "mesh has 3 boundary edges");
+
+    on_host(box_mesh({1, 1, 1}, {5, 5, 5}), g, solid_options(InsideTest::Winding), &stats);
+    EXPECT_EQ(stats.inside_test_reason, "forced by options");
+
+    // The shared meshes' README counts 223 boundary edges in the Stanford scan.
+    EXPECT_EQ(detail::mesh_edge_report(load("stanford-bunny.obj")).boundary, 223u);
+    // STL stores every triangle's vertices separately: closed only after welding.
+    EXPECT_TRUE(detail::mesh_edge_report(load("TR12J_OCC.stl")).closed());
+}
+
+// Parity needs a closed mesh: with about 1% of its triangles removed (8 round holes) it leaks
+// along the columns through the holes, while the winding number barely moves.
+TEST(Solid, WindingSurvivesHolesThatMakeParityLeak) {
+    const Mesh closed = load("bunny00.off");
+    Mesh holed = closed;
+    holed.triangles.clear();
+    // Holes: every triangle whose centroid lies within 0.02 of one of 8 seed triangles' centroids.
+    auto centroid = [&](size_t t) {
+        Vec3d c{0, 0, 0};
+        for (uint32_t v : closed.triangles[t])
+            for (int k = 0; k < 3; ++k) c[k] += closed.positions[v][k] / 3;
+        return c;
+    };
+    std::vector<Vec3d> seeds;
+    for (size_t s = 0; s < 8; ++s) seeds.push_back(centroid(s * closed.triangles.size() / 8));
+    for (size_t t = 0; t < closed.triangles.size(); ++t) {
+        const Vec3d c = centroid(t);
+        bool in_hole = false;
+        for (const Vec3d& s : seeds)
+            in_hole = in_hole || std::hypot(c[0] - s[0], c[1] - s[1], c[2] - s[2]) < 0.02;
+        if (!in_hole) holed.triangles.push_back(closed.triangles[t]);
+    }
+    const double removed = 1 - double(holed.triangles.size()) / double(closed.triangles.size());
+    RecordProperty("removed_fraction", std::to_string(removed));
+    EXPECT_GT(removed, 0.005);
+    EXPECT_LT(removed, 0.02);
+    const Grid g = fitted(closed, 64);
+    const double watertight =
+        double(on_device(closed, g, solid_options(InsideTest::Parity)).count());
+    VoxelizeStats stats;
+    const double winding =
+        double(on_device(holed, g, solid_options(InsideTest::Auto), &stats).count());
+    EXPECT_EQ(stats.inside_test, "winding");
+    const double parity = double(on_device(holed, g, solid_options(InsideTest::Parity)).count());
+    const double winding_change = std::fabs(winding - watertight) / watertight;
+    const double parity_change = std::fabs(parity - watertight) / watertight;
+    RecordProperty("watertight", std::to_string(watertight));
+    RecordProperty("holed_winding", std::to_string(winding));
+    RecordProperty("holed_parity", std::to_string(parity));
+    std::printf(
+        "leak test, bunny00.off at 64, %.2f%% of triangles removed: watertight %.0f, holed winding "
+        "%.0f (%.2f%%), holed parity %.0f (%.2f%%)\n",
+        100 * removed, watertight, winding, 100 * winding_change, parity, 100 * parity_change);
+    EXPECT_LT(winding_change, 0.01);
+    EXPECT_GT(parity_change, 5 * winding_change);
+}
+
+// ---- orientation and multiplicity ----
+
+// horse.ply winds every triangle inwards (w = -1 inside): both tests fill it like its flipped copy.
+TEST(Solid, InwardFacingMeshFillsLikeItsFlippedCopy) {
+    const Mesh horse = load("horse.ply");
+    const Mesh outward = flipped(horse);
+    const Grid g = fitted(horse, 48);
+    VoxelizeStats stats;
+    const SparseVoxels parity = on_device(horse, g, solid_options(InsideTest::Auto), &stats);
+    EXPECT_EQ(stats.inside_test, "parity");
+    EXPECT_GT(parity.count(), 0u);
+    EXPECT_TRUE(parity.same_voxels(on_device(outward, g, solid_options(InsideTest::Auto))));
+
+    const Grid small = fitted(horse, 32);
+    const SparseVoxels winding = on_device(horse, small, solid_options(InsideTest::Winding));
+    EXPECT_GT(winding.count(), 0u);
+    // Flipping reorders the float sums, so only centres within rounding of the surface may differ.
+    expect_differ_only_on_surface(
+        winding, on_device(outward, small, solid_options(InsideTest::Winding)), horse, 1e-3);
+}
+
+// Two copies of one shell: every edge has four triangles, so Auto takes the winding number
+// (w = 2 inside), which fills like the single shell; parity would cancel every crossing.
+TEST(Solid, DuplicatedShellFillsLikeOneShell) {
+    const Mesh once = load("spot.obj");
+    Mesh twice = once;
+    const auto n = uint32_t(once.positions.size());
+    twice.positions.insert(twice.positions.end(), once.positions.begin(), once.positions.end());
+    for (const auto& t : once.triangles) twice.triangles.push_back({t[0] + n, t[1] + n, t[2] + n});
+    const Grid g = fitted(once, 48);
+    VoxelizeStats stats;
+    const SparseVoxels doubled = on_device(twice, g, solid_options(InsideTest::Auto), &stats);
+    EXPECT_EQ(stats.inside_test, "winding");
+    EXPECT_EQ(stats.inside_test_reason.find("non-manifold") != std::string::npos, true)
+        << stats.inside_test_reason;
+    const SparseVoxels single = on_device(once, g, solid_options(InsideTest::Parity));
+    expect_differ_only_on_surface(doubled, single, once, kSnap);
+    EXPECT_EQ(on_device(twice, g, solid_options(InsideTest::Parity)).count(), 0u);
+}
+
+}  // namespace
+}  // namespace oclvox::test
