@@ -7,19 +7,7 @@
 // the crossing. parity_prefix: one work item per voxel column turns flips into parity. parity_pack:
 // one work item per 4x4x4 block copies the bits into the bricks' block layout.
 #include "solid_math.h"
-
-// Largest p with first_item[p] <= item (first_item is non-decreasing, first_item[0] == 0).
-static uint find_pair(__global const uint* first_item, uint pair_count, uint item) {
-    uint lo = 0, hi = pair_count - 1;
-    while (lo < hi) {
-        uint mid = lo + (hi - lo + 1) / 2;
-        if (first_item[mid] <= item)
-            lo = mid;
-        else
-            hi = mid - 1;
-    }
-    return lo;
-}
+#include "work_items.h"
 
 __kernel void parity_flip(__global const OvParityTriangle* triangles,
                           __global const uint* pair_triangle, __global const uint* pair_slot,

@@ -7,6 +7,7 @@
 // by binary search in the pairs' first-item offsets, so a huge triangle spreads over many items
 // instead of serialising on one.
 #include "voxel_math.h"
+#include "work_items.h"
 
 __kernel void setup_sat(__global const OvTriangle* triangles, uint count, int half_open,
                         __global OvSatTriangle* out) {
@@ -25,19 +26,6 @@ __kernel void setup_thin(__global const OvTriangle* triangles, uint count, int h
                          __global OvThinTriangle* out) {
     uint i = get_global_id(0);
     if (i < count && !half_open) out[i] = ov_setup_thin(triangles[i]);
-}
-
-// Largest p with first_item[p] <= item (first_item is non-decreasing, first_item[0] == 0).
-static uint find_pair(__global const uint* first_item, uint pair_count, uint item) {
-    uint lo = 0, hi = pair_count - 1;
-    while (lo < hi) {
-        uint mid = lo + (hi - lo + 1) / 2;
-        if (first_item[mid] <= item)
-            lo = mid;
-        else
-            hi = mid - 1;
-    }
-    return lo;
 }
 
 typedef struct {

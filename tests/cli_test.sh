@@ -237,6 +237,98 @@ run voxelize "$WORK/no-such-mesh.obj" -o "$o"
 grep -q '^oclvox: error: ' <<<"$ERR" && [ "$RC" -eq 1 ] && pass "run errors: 'oclvox: error:', exit 1" ||
     fail "run error format" "rc=$RC err=$ERR"
 
+# ---- distance fields: sdf, csg, mesh ------------------------------------------------------------
+# "min max count" of a float32/float64 .npy file (little-endian), or "invalid".
+npy_float_range() {
+    python3 - "$1" <<'EOF_PY'
+import ast, struct, sys
+try:
+    data = open(sys.argv[1], "rb").read()
+    assert data[:6] == b"\x93NUMPY"
+    if data[6] == 1:
+        header_len, start = struct.unpack("<H", data[8:10])[0], 10
+    else:
+        header_len, start = struct.unpack("<I", data[8:12])[0], 12
+    header = ast.literal_eval(data[start:start + header_len].decode("latin1"))
+    code = {"<f4": "f", "<f8": "d"}[header["descr"]]
+    body = data[start + header_len:]
+    values = struct.unpack("<%d%s" % (len(body) // struct.calcsize(code), code), body)
+    print(min(values), max(values), len(values))
+except Exception:
+    print("invalid")
+EOF_PY
+}
+
+# Number of faces ("f" lines) of an OBJ file.
+obj_faces() {
+    grep -c '^f ' "$1" 2>/dev/null || echo 0
+}
+
+run sdf "$MESH" -r 24 -o "$WORK/sdf.npy"
+read -r sdf_min sdf_max sdf_count <<<"$(npy_float_range "$WORK/sdf.npy")"
+if [ "$RC" -eq 0 ] && [ -s "$WORK/sdf.npy.json" ] &&
+    python3 -c "import sys; sys.exit(not ($sdf_min < 0 < $sdf_max))" 2>/dev/null; then
+    pass "sdf to .npy with sidecar: $sdf_count samples in [$sdf_min, $sdf_max]"
+else
+    fail "sdf to .npy" "rc=$RC range=$sdf_min $sdf_max err=$ERR"
+fi
+grep -qE '\([0-9]+ triangles\)' <<<"$OUT" && grep -q '^grid ' <<<"$OUT" &&
+    grep -q '^device ' <<<"$OUT" && pass "sdf summary (input, grid, device)" ||
+    fail "sdf summary" "$OUT"
+
+run sdf "$MESH" -r 24 -o "$WORK/sdf.vdb" --quiet
+[ "$RC" -eq 0 ] && [ -s "$WORK/sdf.vdb" ] && [ -z "$OUT" ] && pass "sdf to .vdb" ||
+    fail "sdf to .vdb" "rc=$RC err=$ERR"
+
+run sdf "$MESH" -r 32 --reference -o "$WORK/sdf_mesh.npy" --mesh "$WORK/sdf_mesh.obj"
+faces=$(obj_faces "$WORK/sdf_mesh.obj")
+if [ "$RC" -eq 0 ] && [ "$faces" -gt 100 ] && grep -qE 'mesh +[0-9]+ triangles' <<<"$OUT"; then
+    pass "sdf --mesh gives an OBJ with $faces faces"
+else
+    fail "sdf --mesh" "rc=$RC faces=$faces err=$ERR"
+fi
+
+# A copy of the sample moved along x by 40% of its width, so the two overlap in part.
+python3 - "$MESH" "$WORK/spot_moved.obj" <<'EOF_PY'
+import sys
+lines = open(sys.argv[1]).read().splitlines()
+xs = [float(l.split()[1]) for l in lines if l.startswith("v ")]
+shift = 0.4 * (max(xs) - min(xs))
+with open(sys.argv[2], "w") as out:
+    for l in lines:
+        if l.startswith("v "):
+            p = l.split()
+            p[1] = repr(float(p[1]) + shift)
+            l = " ".join(p)
+        out.write(l + "\n")
+EOF_PY
+declare -A csg_faces
+for op in union intersection difference; do
+    run csg "$MESH" "$op" "$WORK/spot_moved.obj" -r 28 -q -o "$WORK/csg_$op.obj"
+    csg_faces[$op]=$(obj_faces "$WORK/csg_$op.obj")
+    if [ "$RC" -eq 0 ] && [ "${csg_faces[$op]}" -gt 0 ]; then
+        pass "csg $op gives an OBJ with ${csg_faces[$op]} faces"
+    else
+        fail "csg $op" "rc=$RC faces=${csg_faces[$op]} err=$ERR"
+    fi
+done
+[ "${csg_faces[union]}" != "${csg_faces[intersection]}" ] &&
+    pass "csg union and intersection differ (${csg_faces[union]} vs ${csg_faces[intersection]} faces)" ||
+    fail "csg union equals intersection" "${csg_faces[union]} faces"
+
+run mesh "$WORK/sdf.npy" -o "$WORK/remeshed.obj" --mesher marching-cubes
+faces=$(obj_faces "$WORK/remeshed.obj")
+[ "$RC" -eq 0 ] && [ "$faces" -gt 100 ] && pass "mesh of the sdf .npy: $faces faces" ||
+    fail "mesh of the sdf .npy" "rc=$RC faces=$faces err=$ERR"
+
+o="$WORK/err_field.obj"
+expect_failure "csg with an unknown op" "$o" 'xor|op' csg "$MESH" xor "$WORK/spot_moved.obj" -o "$o"
+expect_failure "sdf --band 0" "$WORK/err.npy" 'band' sdf "$MESH" -r 24 --band 0 -o "$WORK/err.npy"
+expect_failure "sdf --band -2" "$WORK/err.npy" 'band' sdf "$MESH" -r 24 --band=-2 -o "$WORK/err.npy"
+expect_failure "mesh of a missing file" "$o" 'no-such-field' mesh "$WORK/no-such-field.npy" -o "$o"
+expect_failure "mesh of a field with grid options" "$o" 'grid options' \
+    mesh "$WORK/sdf.npy" -r 24 -o "$o"
+
 # ---- Ctrl-C -------------------------------------------------------------------------------------
 # A run that voxelizes for about 3 s on PoCL, in many small batches, gets one SIGINT after 1 s,
 # sent to its whole process group as a terminal's Ctrl-C is (job control gives the run its own

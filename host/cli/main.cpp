@@ -1,6 +1,7 @@
 // oclvox: the command-line tool. `oclvox devices` lists the OpenCL devices; `oclvox voxelize`
-// turns a mesh file into a voxel file. This file parses and checks the command line, times the
-// phases and reports; all the work is the library's.
+// turns a mesh file into a voxel file; `oclvox sdf` writes a signed distance field, `oclvox csg`
+// combines two meshes (or fields) and `oclvox mesh` meshes a field's iso-surface. This file parses
+// and checks the command line, times the phases and reports; all the work is the library's.
 //
 // Exit codes: 0 success, 1 error (the message names the problem), 2 command-line usage error,
 // 130 cancelled by Ctrl-C.
@@ -25,8 +26,11 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
+#include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
+#include "oclvox/sdf.hpp"
 #include "progress_bar.hpp"
 
 // CMake passes the project version; the fallback only labels builds made outside CMake.
@@ -432,6 +436,94 @@ int run_voxelize(const VoxelizeArgs& args) {
     return 0;
 }
 
+// Grid options shared by voxelize, sdf, csg and mesh. Returns them so that a command can tell
+// whether any was given (they do not apply to field inputs).
+std::vector<CLI::Option*> add_grid_options(CLI::App& command, oclvox::GridFit& fit) {
+    auto* resolution =
+        command.add_option("-r,--resolution", fit.resolution, "voxels along the longest axis")
+            ->type_name("N")
+            ->check(CLI::Range(int64_t(1), oclvox::kMaxGridAxis))
+            ->capture_default_str()
+            ->group("Grid");
+    auto* cubic = command
+                      .add_flag("--cubic", fit.cubic,
+                                "resolution^3 grid with the mesh centred (the binvox convention)")
+                      ->group("Grid");
+    auto* voxel_size = command
+                           .add_option("--voxel-size", fit.voxel_size,
+                                       "edge length of a voxel, instead of --resolution")
+                           ->type_name("H")
+                           ->check(kPositiveFinite)
+                           ->excludes(resolution)
+                           ->group("Grid");
+    auto* origin = command
+                       .add_option_function<std::string>(
+                           "--origin",
+                           [&fit](const std::string& text) {
+                               fit.origin = parse_triple<double>(
+                                   "--origin", text, "three finite numbers X,Y,Z",
+                                   [](double v) { return std::isfinite(v); });
+                               fit.has_origin = true;
+                           },
+                           "corner of voxel (0,0,0), instead of the fitted one")
+                       ->type_name("X,Y,Z")
+                       ->group("Grid");
+    auto* dims = command
+                     .add_option_function<std::string>(
+                         "--dims",
+                         [&fit](const std::string& text) {
+                             fit.dims = parse_triple<int64_t>(
+                                 "--dims", text,
+                                 "three whole numbers NX,NY,NZ in [1, " +
+                                     std::to_string(oclvox::kMaxGridAxis) + "]",
+                                 [](int64_t n) { return n >= 1 && n <= oclvox::kMaxGridAxis; });
+                             fit.has_dims = true;
+                         },
+                         "voxels along each axis, instead of the fitted ones")
+                     ->type_name("NX,NY,NZ")
+                     ->group("Grid");
+    cubic->excludes(voxel_size)->excludes(dims);
+    auto* pad = command.add_option("--pad", fit.pad, "empty voxels added on every side")
+                    ->type_name("N")
+                    ->check(CLI::Range(int64_t(0), oclvox::kMaxGridAxis))
+                    ->capture_default_str()
+                    ->group("Grid");
+    return {resolution, cubic, voxel_size, origin, dims, pad};
+}
+
+// --device / --reference (mutually exclusive), shared by every command that runs OpenCL work.
+void add_device_options(CLI::App& command, std::string& selector, bool& reference,
+                        const std::string& group) {
+    if (const char* env = std::getenv("OCLVOX_DEVICE")) selector = env;
+    auto* device = command
+                       .add_option("--device", selector,
+                                   "OpenCL device: \"P:D\" indices (see `oclvox devices`) or part "
+                                   "of the device or platform name. Default: $OCLVOX_DEVICE, else "
+                                   "the first GPU, else the first device. A device that does not "
+                                   "exist is an error, never a fallback")
+                       ->type_name("SEL")
+                       ->group(group);
+    command
+        .add_flag("--reference", reference,
+                  "run the CPU reference implementation instead of an OpenCL device (needs no "
+                  "OpenCL)")
+        ->excludes(device)
+        ->group(group);
+}
+
+// --quiet, --stats and (where the command has one) --stats-json.
+void add_reporting_options(CLI::App& command, bool& quiet, bool& stats, std::string* stats_json) {
+    command.add_flag("-q,--quiet", quiet, "print neither progress nor the summary")
+        ->group("Reporting");
+    command.add_flag("--stats", stats, "print a timing breakdown and counts")->group("Reporting");
+    if (stats_json)
+        command
+            .add_option("--stats-json", *stats_json,
+                        "write the timing breakdown, counts and run details to this JSON file")
+            ->type_name("FILE")
+            ->group("Reporting");
+}
+
 void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
     command.add_option("input", args.input, "mesh file: .obj, .stl, .ply or .off")
         ->type_name("INPUT")
@@ -443,56 +535,7 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
         ->type_name("OUTPUT")
         ->required();
 
-    // Grid
-    auto* resolution =
-        command.add_option("-r,--resolution", args.fit.resolution, "voxels along the longest axis")
-            ->type_name("N")
-            ->check(CLI::Range(int64_t(1), oclvox::kMaxGridAxis))
-            ->capture_default_str()
-            ->group("Grid");
-    auto* cubic = command
-                      .add_flag("--cubic", args.fit.cubic,
-                                "resolution^3 grid with the mesh centred (the binvox convention)")
-                      ->group("Grid");
-    auto* voxel_size = command
-                           .add_option("--voxel-size", args.fit.voxel_size,
-                                       "edge length of a voxel, instead of --resolution")
-                           ->type_name("H")
-                           ->check(kPositiveFinite)
-                           ->excludes(resolution)
-                           ->group("Grid");
-    command
-        .add_option_function<std::string>(
-            "--origin",
-            [&args](const std::string& text) {
-                args.fit.origin =
-                    parse_triple<double>("--origin", text, "three finite numbers X,Y,Z",
-                                         [](double v) { return std::isfinite(v); });
-                args.fit.has_origin = true;
-            },
-            "corner of voxel (0,0,0), instead of the fitted one")
-        ->type_name("X,Y,Z")
-        ->group("Grid");
-    auto* dims = command
-                     .add_option_function<std::string>(
-                         "--dims",
-                         [&args](const std::string& text) {
-                             args.fit.dims = parse_triple<int64_t>(
-                                 "--dims", text,
-                                 "three whole numbers NX,NY,NZ in [1, " +
-                                     std::to_string(oclvox::kMaxGridAxis) + "]",
-                                 [](int64_t n) { return n >= 1 && n <= oclvox::kMaxGridAxis; });
-                             args.fit.has_dims = true;
-                         },
-                         "voxels along each axis, instead of the fitted ones")
-                     ->type_name("NX,NY,NZ")
-                     ->group("Grid");
-    cubic->excludes(voxel_size)->excludes(dims);
-    command.add_option("--pad", args.fit.pad, "empty voxels added on every side")
-        ->type_name("N")
-        ->check(CLI::Range(int64_t(0), oclvox::kMaxGridAxis))
-        ->capture_default_str()
-        ->group("Grid");
+    add_grid_options(command, args.fit);
 
     // Voxelization
     command
@@ -528,21 +571,7 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
         ->check(CLI::IsMember({"closed", "half-open"}))
         ->capture_default_str()
         ->group("Voxelization");
-    if (const char* selector = std::getenv("OCLVOX_DEVICE")) args.device = selector;
-    auto* device = command
-                       .add_option("--device", args.device,
-                                   "OpenCL device: \"P:D\" indices (see `oclvox devices`) or part "
-                                   "of the device or platform name. Default: $OCLVOX_DEVICE, else "
-                                   "the first GPU, else the first device. A device that does not "
-                                   "exist is an error, never a fallback")
-                       ->type_name("SEL")
-                       ->group("Voxelization");
-    command
-        .add_flag("--reference", args.reference,
-                  "run the CPU reference implementation instead of an OpenCL device (needs no "
-                  "OpenCL)")
-        ->excludes(device)
-        ->group("Voxelization");
+    add_device_options(command, args.device, args.reference, "Voxelization");
     command.add_option("--brick-size", args.brick_size, "voxels per brick edge")
         ->type_name("B")
         ->check(kBrickSize)
@@ -564,15 +593,468 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
         ->group("Voxelization");
 
     // Reporting
-    command.add_flag("-q,--quiet", args.quiet, "print neither progress nor the summary")
-        ->group("Reporting");
-    command.add_flag("--stats", args.stats, "print a timing breakdown and counts")
-        ->group("Reporting");
+    add_reporting_options(command, args.quiet, args.stats, &args.stats_json);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Distance fields: sdf, csg, mesh
+// ---------------------------------------------------------------------------------------------
+// A usage error found after parsing (an option that does not apply to the inputs given): exit 2.
+struct UsageError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+struct FieldArgs {
+    std::string input, op, input_b, output, mesh_output;
+    oclvox::GridFit fit;
+    std::vector<CLI::Option*> grid_options;  // to reject them for .npy field inputs
+    double band = 3.0;
+    bool full = false;
+    std::string inside = "auto";
+    std::string mesher = "surface-nets";
+    double iso = 0.0;
+    std::string device;
+    bool reference = false;
+    bool quiet = false;
+    bool stats = false;
+};
+
+struct FieldTimings {
+    double load = 0, fit = 0, device = 0, compute = 0, mesh = 0, write = 0, total = 0;
+};
+
+bool is_field_path(const std::string& path) {
+    return lowercase_extension(path) == ".npy";
+}
+
+// The output's folder exists and its extension is one of `allowed` (e.g. ".npy .vdb").
+void check_output_kind(const std::string& path, const std::vector<std::string>& allowed) {
+    check_output_path(path, false);
+    const std::string ext = lowercase_extension(path);
+    std::string list;
+    for (const std::string& a : allowed) {
+        if (ext == a) return;
+        list += (list.empty() ? "" : ", ") + a;
+    }
+    throw oclvox::OutputError(
+        "cannot write '" + path + "': " +
+        (ext.empty() ? "the file name has no extension" : "unknown extension '" + ext + "'") +
+        " (supported: " + list + ")");
+}
+
+const std::vector<std::string> kMeshExtensions{".obj", ".ply", ".stl"};
+const std::vector<std::string> kFieldExtensions{".npy", ".vdb"};
+
+bool is_mesh_output(const std::string& path) {
+    const std::string ext = lowercase_extension(path);
+    return std::find(kMeshExtensions.begin(), kMeshExtensions.end(), ext) != kMeshExtensions.end();
+}
+
+bool any_given(const std::vector<CLI::Option*>& options) {
+    return std::any_of(options.begin(), options.end(),
+                       [](const CLI::Option* o) { return o->count() > 0; });
+}
+
+std::optional<oclvox::Device> open_device(const FieldArgs& args, FieldTimings& timings) {
+    std::optional<oclvox::Device> device;
+    if (!args.reference)
+        device.emplace(timed(timings.device, [&] { return oclvox::Device::open(args.device); }));
+    stop_if_interrupted();
+    return device;
+}
+
+oclvox::SdfOptions sdf_options(const FieldArgs& args) {
+    oclvox::SdfOptions options;
+    options.band_voxels = args.band;
+    options.full_grid = args.full;
+    options.inside = oclvox::inside_test_from_string(args.inside);
+    return options;
+}
+
+oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
+                                    const oclvox::Grid& grid, const FieldArgs& args,
+                                    oclvox::VoxelizeStats* stats) {
+    return device ? oclvox::signed_distance(*device, mesh, grid, sdf_options(args), stats)
+                  : oclvox::signed_distance_reference(mesh, grid, sdf_options(args), stats);
+}
+
+oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
+                             const oclvox::ScalarField& field, const std::string& mesher,
+                             float iso) {
+    if (mesher == "marching-cubes")
+        return device ? oclvox::marching_cubes(*device, field, iso)
+                      : oclvox::marching_cubes(field, iso);
+    return device ? oclvox::surface_nets(*device, field, iso) : oclvox::surface_nets(field, iso);
+}
+
+// What a field command's summary and --stats report.
+struct FieldReport {
+    std::vector<std::string> inputs;  // "path (N triangles)" or "path (field)"
+    const oclvox::Grid& grid;
+    const oclvox::DeviceInfo* device;
+    const oclvox::VoxelizeStats* stats;  // null when no distance/voxelize run happened
+    const oclvox::Mesh* mesh;            // null when no mesh was made
+    std::vector<std::string> outputs;
+    const FieldTimings& timings;
+};
+
+void print_field_summary(const FieldReport& r) {
+    for (const std::string& input : r.inputs) std::printf("input    %s\n", input.c_str());
+    const oclvox::Grid& g = r.grid;
+    std::printf("grid     %s voxels of size %g, origin (%g, %g, %g)\n", dims_text(g).c_str(),
+                g.voxel_size, g.origin[0], g.origin[1], g.origin[2]);
+    if (r.stats && !r.stats->inside_test.empty())
+        std::printf("inside   %s (%s)\n", r.stats->inside_test.c_str(),
+                    r.stats->inside_test_reason.c_str());
+    if (r.device)
+        std::printf("device   %s (%s)\n", r.device->name.c_str(), r.device->platform.c_str());
+    else
+        std::printf("device   CPU reference\n");
+    if (r.mesh)
+        std::printf("mesh     %zu triangles, %zu vertices\n", r.mesh->triangles.size(),
+                    r.mesh->positions.size());
+    for (const std::string& output : r.outputs) std::printf("output   %s\n", output.c_str());
+    std::printf("time     %.3f s\n", r.timings.total);
+}
+
+void print_field_stats(const FieldReport& r) {
+    const FieldTimings& t = r.timings;
+    std::printf("timing (seconds)\n");
+    std::printf("  load          %9.4f\n", t.load);
+    std::printf("  fit           %9.4f\n", t.fit);
+    std::printf("  device open   %9.4f  (OpenCL context, queue and programs)\n", t.device);
+    std::printf("  field         %9.4f\n", t.compute);
+    std::printf("  mesh          %9.4f\n", t.mesh);
+    std::printf("  write         %9.4f\n", t.write);
+    std::printf("  total         %9.4f\n", t.total);
+    std::printf("counts\n");
+    if (r.stats) {
+        std::printf("  triangles     %llu (%llu used)\n", (unsigned long long)r.stats->triangles_in,
+                    (unsigned long long)r.stats->triangles_used);
+        std::printf("  work items    %llu\n", (unsigned long long)r.stats->work_items);
+        std::printf("  inside voxels %llu\n", (unsigned long long)r.stats->voxels_set);
+    }
+    std::printf("  grid voxels   %llu\n", (unsigned long long)r.grid.voxel_count());
+    if (r.mesh)
+        std::printf("  mesh out      %zu triangles, %zu vertices\n", r.mesh->triangles.size(),
+                    r.mesh->positions.size());
+}
+
+void report_field_run(const FieldArgs& args, const FieldReport& report) {
+    if (!args.quiet) print_field_summary(report);
+    if (args.stats) print_field_stats(report);
+}
+
+std::string mesh_input_text(const std::string& path, const oclvox::Mesh& mesh) {
+    return path + " (" + std::to_string(mesh.triangles.size()) + " triangles)";
+}
+
+int run_sdf(const FieldArgs& args) {
+    const Clock::time_point start = Clock::now();
+    FieldTimings timings;
+    start_interrupt_watcher();
+
+    check_output_kind(args.output, kFieldExtensions);
+    if (!args.mesh_output.empty()) check_output_kind(args.mesh_output, kMeshExtensions);
+
+    const oclvox::Mesh mesh = timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
+    const oclvox::Grid grid = timed(timings.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
+    stop_if_interrupted();
+    std::optional<oclvox::Device> device = open_device(args, timings);
+
+    oclvox::VoxelizeStats stats;
+    const oclvox::ScalarField field =
+        timed(timings.compute, [&] { return signed_distance(device, mesh, grid, args, &stats); });
+    stop_if_interrupted();
+    std::optional<oclvox::Mesh> surface;
+    if (!args.mesh_output.empty()) {
+        surface =
+            timed(timings.mesh, [&] { return extract_surface(device, field, args.mesher, 0.0f); });
+        stop_if_interrupted();
+    }
+
+    const Clock::time_point write_start = Clock::now();
+    oclvox::write_field(args.output, field, args.full ? 0.0 : args.band);
+    if (surface) oclvox::write_mesh(args.mesh_output, *surface);
+    timings.write = seconds_since(write_start);
+    timings.total = seconds_since(start);
+
+    std::vector<std::string> outputs{args.output};
+    if (surface) outputs.push_back(args.mesh_output);
+    report_field_run(args, {{mesh_input_text(args.input, mesh)},
+                            grid,
+                            device ? &device->info() : nullptr,
+                            &stats,
+                            surface ? &*surface : nullptr,
+                            outputs,
+                            timings});
+    return 0;
+}
+
+int run_csg(const FieldArgs& args) {
+    const Clock::time_point start = Clock::now();
+    FieldTimings timings;
+    start_interrupt_watcher();
+
+    const oclvox::CsgOp op = oclvox::csg_op_from_string(args.op);
+    const bool mesh_out = is_mesh_output(args.output);
+    check_output_kind(args.output, {".obj", ".ply", ".stl", ".npy", ".vdb"});
+
+    const bool fields_in = is_field_path(args.input) && is_field_path(args.input_b);
+    if (!fields_in && (is_field_path(args.input) || is_field_path(args.input_b)))
+        throw UsageError("csg takes two meshes or two .npy fields, not one of each");
+    if (fields_in && any_given(args.grid_options))
+        throw UsageError("grid options do not apply to .npy field inputs (their grids are used)");
+
+    std::optional<oclvox::ScalarField> a, b;
+    std::optional<oclvox::Mesh> mesh_a, mesh_b;
+    std::optional<oclvox::Grid> grid;
+    std::vector<std::string> inputs;
+    oclvox::VoxelizeStats stats_a, stats_b;
+    std::optional<oclvox::Device> device;
+    if (fields_in) {
+        timed(timings.load, [&] {
+            a = oclvox::read_field(args.input);
+            b = oclvox::read_field(args.input_b);
+            return 0;
+        });
+        grid = a->grid;
+        inputs = {args.input + " (field)", args.input_b + " (field)"};
+        stop_if_interrupted();
+        if (mesh_out) device = open_device(args, timings);
+    } else {
+        timed(timings.load, [&] {
+            mesh_a = oclvox::load_mesh(args.input);
+            mesh_b = oclvox::load_mesh(args.input_b);
+            return 0;
+        });
+        grid = timed(timings.fit, [&] { return oclvox::fit_grid(*mesh_a, *mesh_b, args.fit); });
+        inputs = {mesh_input_text(args.input, *mesh_a), mesh_input_text(args.input_b, *mesh_b)};
+        stop_if_interrupted();
+        device = open_device(args, timings);
+        timed(timings.compute, [&] {
+            a = signed_distance(device, *mesh_a, *grid, args, &stats_a);
+            stop_if_interrupted();
+            b = signed_distance(device, *mesh_b, *grid, args, &stats_b);
+            return 0;
+        });
+        stop_if_interrupted();
+    }
+    const oclvox::ScalarField combined = oclvox::csg(*a, *b, op);
+    a.reset();
+    b.reset();
+
+    std::optional<oclvox::Mesh> surface;
+    if (mesh_out) {
+        surface = timed(timings.mesh,
+                        [&] { return extract_surface(device, combined, args.mesher, 0.0f); });
+        stop_if_interrupted();
+    }
+    const Clock::time_point write_start = Clock::now();
+    if (surface)
+        oclvox::write_mesh(args.output, *surface);
+    else
+        oclvox::write_field(args.output, combined, fields_in || args.full ? 0.0 : args.band);
+    timings.write = seconds_since(write_start);
+    timings.total = seconds_since(start);
+
+    oclvox::VoxelizeStats stats = stats_a;  // both runs' counts together
+    stats.triangles_in += stats_b.triangles_in;
+    stats.triangles_used += stats_b.triangles_used;
+    stats.work_items += stats_b.work_items;
+    report_field_run(args, {inputs,
+                            *grid,
+                            device ? &device->info() : nullptr,
+                            fields_in ? nullptr : &stats,
+                            surface ? &*surface : nullptr,
+                            {args.output},
+                            timings});
+    return 0;
+}
+
+int run_mesh(const FieldArgs& args) {
+    const Clock::time_point start = Clock::now();
+    FieldTimings timings;
+    start_interrupt_watcher();
+
+    check_output_kind(args.output, kMeshExtensions);
+    const bool field_in = is_field_path(args.input);
+    if (field_in && any_given(args.grid_options))
+        throw UsageError("grid options do not apply to a .npy field input (its grid is used)");
+
+    std::optional<oclvox::ScalarField> field;
+    std::string input_text;
+    oclvox::VoxelizeStats stats;
+    std::optional<oclvox::Device> device;
+    if (field_in) {
+        field = timed(timings.load, [&] { return oclvox::read_field(args.input); });
+        input_text = args.input + " (field)";
+        stop_if_interrupted();
+        device = open_device(args, timings);
+    } else {
+        const oclvox::Mesh mesh =
+            timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
+        const oclvox::Grid grid =
+            timed(timings.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
+        input_text = mesh_input_text(args.input, mesh);
+        stop_if_interrupted();
+        device = open_device(args, timings);
+        oclvox::VoxelizeOptions options;
+        options.mode = oclvox::VoxelizeMode::Solid;
+        options.inside = oclvox::inside_test_from_string(args.inside);
+        field = timed(timings.compute, [&] {
+            oclvox_cli::ProgressBar bar("voxelizing", "bricks",
+                                        !args.quiet && isatty(STDERR_FILENO));
+            options.progress = [&](uint64_t done, uint64_t total) {
+                bar.update(done, total);
+                return !g_interrupted;
+            };
+            const oclvox::SparseVoxels voxels =
+                device ? device->voxelize(mesh, grid, options, &stats)
+                       : oclvox::voxelize_reference(mesh, grid, options, &stats);
+            return oclvox::occupancy_to_field(voxels);
+        });
+        stop_if_interrupted();
+    }
+
+    const oclvox::Mesh surface = timed(timings.mesh, [&] {
+        return extract_surface(device, *field, args.mesher, float(args.iso));
+    });
+    stop_if_interrupted();
+    const Clock::time_point write_start = Clock::now();
+    oclvox::write_mesh(args.output, surface);
+    timings.write = seconds_since(write_start);
+    timings.total = seconds_since(start);
+
+    report_field_run(args, {{input_text},
+                            field->grid,
+                            device ? &device->info() : nullptr,
+                            field_in ? nullptr : &stats,
+                            &surface,
+                            {args.output},
+                            timings});
+    return 0;
+}
+
+const CLI::Validator kFinite(
+    [](std::string& text) -> std::string {
+        double value = 0;
+        if (!parse_number(text, value) || !std::isfinite(value))
+            return "must be a finite number, got '" + text + "'";
+        return {};
+    },
+    "FINITE");
+
+void add_mesher_option(CLI::App& command, FieldArgs& args) {
     command
-        .add_option("--stats-json", args.stats_json,
-                    "write the timing breakdown, counts and run details to this JSON file")
+        .add_option("--mesher", args.mesher,
+                    "iso-surface method: surface-nets (Naive Surface Nets) or marching-cubes")
+        ->type_name("METHOD")
+        ->check(CLI::IsMember({"surface-nets", "marching-cubes"}))
+        ->capture_default_str()
+        ->group("Meshing");
+}
+
+void add_distance_options(CLI::App& command, FieldArgs& args) {
+    command
+        .add_option("--band", args.band,
+                    "half-width of the band of exact distances, in voxels; outside it a "
+                    "narrow-band field holds +-band * voxel size")
+        ->type_name("VOXELS")
+        ->check(kPositiveFinite)
+        ->capture_default_str()
+        ->group("Distance");
+    command
+        .add_option("--inside", args.inside,
+                    "inside test that gives the sign: auto (parity for closed meshes, winding "
+                    "number otherwise), parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Distance");
+}
+
+void add_sdf_options(CLI::App& command, FieldArgs& args) {
+    command.add_option("input", args.input, "mesh file: .obj, .stl, .ply or .off")
+        ->type_name("INPUT")
+        ->required();
+    command
+        .add_option("-o,--output", args.output,
+                    "field file: .npy (float32, with a .json sidecar) or .vdb (OpenVDB level set)")
+        ->type_name("OUTPUT")
+        ->required();
+    args.grid_options = add_grid_options(command, args.fit);
+    add_distance_options(command, args);
+    command
+        .add_flag("--full", args.full,
+                  "distances in every voxel (jump flooding), not only in the narrow band")
+        ->group("Distance");
+    add_device_options(command, args.device, args.reference, "Distance");
+    command
+        .add_option("--mesh", args.mesh_output,
+                    "also write the field's zero level set as a mesh: .obj, .ply or .stl")
         ->type_name("FILE")
-        ->group("Reporting");
+        ->group("Meshing");
+    add_mesher_option(command, args);
+    add_reporting_options(command, args.quiet, args.stats, nullptr);
+}
+
+void add_csg_options(CLI::App& command, FieldArgs& args) {
+    command.add_option("a", args.input, "first mesh file, or a .npy signed distance field")
+        ->type_name("A")
+        ->required();
+    command.add_option("op", args.op, "union, intersection or difference (A minus B)")
+        ->type_name("OP")
+        ->check(CLI::IsMember({"union", "intersection", "difference"}))
+        ->required();
+    command.add_option("b", args.input_b, "second mesh file, or a .npy field on A's grid")
+        ->type_name("B")
+        ->required();
+    command
+        .add_option("-o,--output", args.output,
+                    "a mesh (.obj, .ply, .stl: the result's zero level set) or a field (.npy, "
+                    ".vdb)")
+        ->type_name("OUTPUT")
+        ->required();
+    args.grid_options = add_grid_options(command, args.fit);
+    add_distance_options(command, args);
+    command
+        .add_flag("--full", args.full,
+                  "distances in every voxel (jump flooding), not only in the narrow band")
+        ->group("Distance");
+    add_device_options(command, args.device, args.reference, "Distance");
+    add_mesher_option(command, args);
+    add_reporting_options(command, args.quiet, args.stats, nullptr);
+}
+
+void add_mesh_options(CLI::App& command, FieldArgs& args) {
+    command
+        .add_option("input", args.input,
+                    "a .npy scalar field (with its .json sidecar), meshed at --iso; or a mesh "
+                    "file (.obj, .stl, .ply, .off), which is voxelized (mode solid, on the grid "
+                    "options' grid), turned into a field by occupancy_to_field (one smoothing "
+                    "pass) and meshed: a remeshed voxel surface, not the original")
+        ->type_name("INPUT")
+        ->required();
+    command.add_option("-o,--output", args.output, "mesh file: .obj, .ply or .stl")
+        ->type_name("OUTPUT")
+        ->required();
+    args.grid_options = add_grid_options(command, args.fit);
+    command
+        .add_option("--inside", args.inside,
+                    "inside test when voxelizing a mesh input: auto, parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Meshing");
+    add_mesher_option(command, args);
+    command.add_option("--iso", args.iso, "iso-value of the surface (inside is below it)")
+        ->type_name("V")
+        ->check(kFinite)
+        ->capture_default_str()
+        ->group("Meshing");
+    add_device_options(command, args.device, args.reference, "Meshing");
+    add_reporting_options(command, args.quiet, args.stats, nullptr);
 }
 
 }  // namespace
@@ -590,6 +1072,26 @@ int main(int argc, char** argv) {
         "Example: oclvox voxelize bunny.obj -r 512 -o bunny.binvox --stats");
     add_voxelize_options(*voxelize, args);
 
+    const char* exits = "Exit codes: 0 success, 1 error, 2 usage error, 130 cancelled (Ctrl-C).\n";
+    FieldArgs sdf_args, csg_args, mesh_args;
+    CLI::App* sdf = app.add_subcommand(
+        "sdf", "signed distance field of a mesh (negative inside), as .npy or .vdb");
+    sdf->footer(std::string(exits) +
+                "Example: oclvox sdf bunny.obj -r 128 -o bunny.vdb --mesh bunny_sdf.obj");
+    add_sdf_options(*sdf, sdf_args);
+    CLI::App* csg = app.add_subcommand(
+        "csg", "union, intersection or difference of two meshes (or two .npy fields)");
+    csg->footer(std::string(exits) +
+                "Both signed distance fields are computed on one grid fitted to both meshes.\n"
+                "Example: oclvox csg a.obj difference b.obj -r 128 -o a_minus_b.obj");
+    add_csg_options(*csg, csg_args);
+    CLI::App* mesh = app.add_subcommand(
+        "mesh", "mesh the iso-surface of a .npy field, or remesh a mesh through a voxel field");
+    mesh->footer(std::string(exits) +
+                 "A mesh INPUT is voxelized (mode solid) and meshed via occupancy_to_field.\n"
+                 "Example: oclvox mesh bunny.npy --iso 0 -o bunny.ply --mesher marching-cubes");
+    add_mesh_options(*mesh, mesh_args);
+
     // Phase 1: the command line. Help and --version end here with exit code 0.
     try {
         app.parse(argc, argv);
@@ -601,7 +1103,14 @@ int main(int argc, char** argv) {
 
     // Phase 2: the command. Library errors already name the file, option or device at fault.
     try {
-        return devices->parsed() ? run_devices() : run_voxelize(args);
+        if (devices->parsed()) return run_devices();
+        if (sdf->parsed()) return run_sdf(sdf_args);
+        if (csg->parsed()) return run_csg(csg_args);
+        if (mesh->parsed()) return run_mesh(mesh_args);
+        return run_voxelize(args);
+    } catch (const UsageError& e) {
+        std::cerr << "oclvox: error: " << e.what() << "\nRun with --help for more information.\n";
+        return kExitUsage;
     } catch (const oclvox::Cancelled&) {
         std::cerr << "oclvox: cancelled\n";
         return kExitCancelled;

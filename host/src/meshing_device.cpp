@@ -23,21 +23,10 @@ constexpr uint32_t kItemsPerLaunch = uint32_t(1) << 22;
 // per brick visited.
 constexpr int kBrickSize = 16;
 
-// A fixed work-group size queried from the kernel and device: PoCL compiles a kernel once per
-// work-group size, so leaving the choice to the driver would recompile for every slice size.
-size_t group_size(const cl::Kernel& kernel, const cl::Device& device) {
-    const size_t max = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device);
-    const size_t multiple = std::max<size_t>(
-        1, kernel.getWorkGroupInfo<CL_KERNEL_PREFERRED_WORK_GROUP_SIZE_MULTIPLE>(device));
-    size_t size = multiple * std::max<size_t>(1, 64 / multiple);
-    while (size > max && size > 1) size /= 2;
-    return std::max<size_t>(1, size);
-}
-
 // Runs `kernel` over items [0, n) in slices; `slice_arg` is the index of its (first, count)
 // argument pair.
 void run_over_items(Device::Impl& cl, cl::Kernel& kernel, int slice_arg, uint32_t n) {
-    const size_t group = group_size(kernel, cl.device);
+    const size_t group = detail::work_group_size(kernel, cl.device);
     for (uint32_t first = 0; first < n; first += std::min(kItemsPerLaunch, n - first)) {
         const uint32_t count = std::min(kItemsPerLaunch, n - first);
         kernel.setArg(slice_arg, cl_uint(first));

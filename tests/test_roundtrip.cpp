@@ -1,0 +1,244 @@
+// Round trip mesh -> signed distance field -> mesh: the surfaces that Surface Nets and Marching
+// Cubes extract from a device SDF stay within about one voxel of the mesh the field was made
+// from, are closed, and do not depend on the brick size of the solid pass that signs the field.
+//
+// The distance between the meshes is measured here, independently of the library: points sampled
+// densely on each mesh's triangles, their exact double-precision distance to the other mesh's
+// triangles (Ericson's closest point), looked up through a simple uniform grid of triangles.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <utility>
+#include <vector>
+
+#include "oclvox/sdf.hpp"
+#include "test_support.hpp"
+
+namespace oclvox::test {
+namespace {
+
+Device& device() {
+    static Device d =
+        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    return d;
+}
+
+Vec3d sub(const Vec3d& a, const Vec3d& b) {
+    return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+Vec3d mad(const Vec3d& o, const Vec3d& e, double t) {
+    return {o[0] + t * e[0], o[1] + t * e[1], o[2] + t * e[2]};
+}
+double dot(const Vec3d& a, const Vec3d& b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+double norm(const Vec3d& a) {
+    return std::sqrt(dot(a, a));
+}
+
+// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5), double.
+// Written from the book rather than taken from the library so that it checks it.
+Vec3d closest_point(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    const Vec3d ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0) return a;
+    const Vec3d bp = sub(p, b);
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3) return b;
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return mad(a, ab, d1 / (d1 - d3));
+    const Vec3d cp = sub(p, c);
+    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6) return c;
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return mad(a, ac, d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return mad(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    const double denom = 1 / (va + vb + vc);
+    return mad(mad(a, ab, vb * denom), ac, vc * denom);
+}
+
+// Distance queries against one mesh, exact up to `reach`: every triangle is listed in each cell
+// of a uniform grid that its box grown by `reach` touches, so any triangle within `reach` of a
+// point is listed in the point's cell. Farther than that the answer is just "at least reach",
+// which is all a bound of one voxel needs.
+class DistanceGrid {
+  public:
+    DistanceGrid(const Mesh& mesh, double cell, double reach)
+        : mesh_(mesh), cell_(cell), reach_(reach) {
+        lo_ = {INFINITY, INFINITY, INFINITY};
+        Vec3d hi{-INFINITY, -INFINITY, -INFINITY};
+        for (const auto& p : mesh.positions)
+            for (int k = 0; k < 3; ++k) {
+                lo_[k] = std::min(lo_[k], p[k] - reach);
+                hi[k] = std::max(hi[k], p[k] + reach);
+            }
+        for (int k = 0; k < 3; ++k) dims_[k] = int64_t((hi[k] - lo_[k]) / cell) + 1;
+        cells_.resize(size_t(dims_[0] * dims_[1] * dims_[2]));
+        for (uint32_t t = 0; t < mesh.triangles.size(); ++t) {
+            int64_t a[3], b[3];
+            for (int k = 0; k < 3; ++k) {
+                double mn = INFINITY, mx = -INFINITY;
+                for (uint32_t v : mesh.triangles[t]) {
+                    mn = std::min(mn, mesh.positions[v][k]);
+                    mx = std::max(mx, mesh.positions[v][k]);
+                }
+                a[k] = cell_of(mn - reach, k);
+                b[k] = cell_of(mx + reach, k);
+            }
+            for (int64_t z = a[2]; z <= b[2]; ++z)
+                for (int64_t y = a[1]; y <= b[1]; ++y)
+                    for (int64_t x = a[0]; x <= b[0]; ++x)
+                        cells_[size_t(x + dims_[0] * (y + dims_[1] * z))].push_back(t);
+        }
+    }
+
+    // min(exact distance to the mesh, reach)
+    double distance(const Vec3d& p) const {
+        int64_t c[3];
+        for (int k = 0; k < 3; ++k) {
+            c[k] = int64_t(std::floor((p[k] - lo_[k]) / cell_));
+            if (c[k] < 0 || c[k] >= dims_[k]) return reach_;
+        }
+        double best = reach_;
+        for (uint32_t t : cells_[size_t(c[0] + dims_[0] * (c[1] + dims_[1] * c[2]))]) {
+            const auto& tri = mesh_.triangles[t];
+            best = std::min(
+                best, norm(sub(p, closest_point(p, mesh_.positions[tri[0]], mesh_.positions[tri[1]],
+                                                mesh_.positions[tri[2]]))));
+        }
+        return best;
+    }
+
+  private:
+    int64_t cell_of(double x, int k) const {
+        return std::clamp<int64_t>(int64_t(std::floor((x - lo_[k]) / cell_)), 0, dims_[k] - 1);
+    }
+
+    const Mesh& mesh_;
+    double cell_, reach_;
+    Vec3d lo_{};
+    int64_t dims_[3]{};
+    std::vector<std::vector<uint32_t>> cells_;
+};
+
+// One-sided Hausdorff estimate max_{p on from} d(p, to), in units of `spacing`: every triangle of
+// `from` is sampled on a barycentric lattice fine enough that samples are at most spacing/8
+// apart, so the estimate is below the true value by at most that much. Distances are exact up to
+// 1.5 voxels and reported as 1.5 beyond, which still fails a bound of one voxel.
+double one_sided_hausdorff(const Mesh& from, const Mesh& to, double spacing) {
+    const DistanceGrid grid(to, 0.75 * spacing, 1.5 * spacing);
+    double worst = 0;
+    for (const auto& t : from.triangles) {
+        const Vec3d& a = from.positions[t[0]];
+        const Vec3d& b = from.positions[t[1]];
+        const Vec3d& c = from.positions[t[2]];
+        const double longest = std::max({norm(sub(b, a)), norm(sub(c, b)), norm(sub(a, c))});
+        const int n = std::max(1, int(std::ceil(longest / (spacing / 6))));
+        for (int i = 0; i <= n; ++i)
+            for (int j = 0; i + j <= n; ++j) {
+                const Vec3d p = mad(mad(a, sub(b, a), double(i) / n), sub(c, a), double(j) / n);
+                worst = std::max(worst, grid.distance(p));
+            }
+    }
+    return worst / spacing;
+}
+
+// Closed: no undirected edge lies on a border (used by an odd number of triangles). Manifold as
+// well: every edge is used by exactly two triangles. Surface Nets is documented to be
+// non-manifold (an edge shared by four triangles) at cell faces with four sign changes, so for
+// it only closedness is required on real meshes; the count of such edges is printed.
+void expect_closed(const Mesh& m, const char* what, bool require_manifold) {
+    ASSERT_FALSE(m.triangles.empty()) << what;
+    std::map<std::pair<uint32_t, uint32_t>, int> uses;
+    for (const auto& t : m.triangles)
+        for (int e = 0; e < 3; ++e) {
+            const uint32_t u = t[e], v = t[(e + 1) % 3];
+            ASSERT_NE(u, v) << what << ": triangle with a repeated vertex";
+            ++uses[{std::min(u, v), std::max(u, v)}];
+        }
+    size_t border = 0, non_manifold = 0;
+    for (const auto& [edge, count] : uses) {
+        border += count % 2 != 0;
+        non_manifold += count != 2;
+        if ((count % 2 != 0 || (require_manifold && count != 2)) && border + non_manifold < 6)
+            ADD_FAILURE() << what << ": edge " << edge.first << "-" << edge.second << " used "
+                          << count << " times";
+    }
+    std::printf("[ measured ] %s: %zu edges, %zu border, %zu used more than twice\n", what,
+                uses.size(), border, non_manifold);
+    EXPECT_EQ(border, 0u) << what;
+    if (require_manifold) EXPECT_EQ(non_manifold, 0u) << what;
+}
+
+void expect_same_mesh(const Mesh& a, const Mesh& b, const char* what) {
+    EXPECT_TRUE(a.positions == b.positions) << what << ": vertex positions differ";
+    EXPECT_TRUE(a.triangles == b.triangles) << what << ": triangles differ";
+}
+
+SdfOptions band3(int brick_size) {
+    SdfOptions o;
+    o.band_voxels = 3.0;
+    o.brick_size = brick_size;
+    return o;
+}
+
+// The whole round trip for one mesh on one grid: both directions of the Hausdorff distance for
+// both meshing methods within `bound` voxels, closed outputs, brick size without effect.
+void check_round_trip(const char* name, const Mesh& mesh, const Grid& grid, double bound,
+                      bool nets_manifold) {
+    const ScalarField f64 = signed_distance(device(), mesh, grid, band3(64));
+    const ScalarField f16 = signed_distance(device(), mesh, grid, band3(16));
+    ASSERT_TRUE(f64.values == f16.values) << name << ": the field depends on the brick size";
+
+    const Mesh nets = surface_nets(device(), f64), cubes = marching_cubes(device(), f64);
+    expect_same_mesh(nets, surface_nets(device(), f16), "surface nets, bricks 64 vs 16");
+    expect_same_mesh(cubes, marching_cubes(device(), f16), "marching cubes, bricks 64 vs 16");
+    expect_closed(nets, "surface nets", nets_manifold);
+    expect_closed(cubes, "marching cubes", true);
+
+    for (const auto& [method, out] :
+         {std::pair{"surface nets", &nets}, {"marching cubes", &cubes}}) {
+        const double to_original = one_sided_hausdorff(*out, mesh, grid.voxel_size);
+        const double to_output = one_sided_hausdorff(mesh, *out, grid.voxel_size);
+        std::printf(
+            "[ measured ] %s, %s: %zu triangles, Hausdorff output->original %.3f, "
+            "original->output %.3f voxels\n",
+            name, method, out->triangles.size(), to_original, to_output);
+        EXPECT_LE(to_original, bound) << name << ", " << method << ": output -> original";
+        EXPECT_LE(to_output, bound) << name << ", " << method << ": original -> output";
+    }
+}
+
+TEST(RoundTrip, SphereMeshesStayWithinOneVoxelAreClosedAndIgnoreBrickSize) {
+    // Radius 15 voxels, centre off the voxel lattice so no crossing lands on a sample.
+    const Mesh sphere = sphere_mesh({0.31, -0.17, 0.23}, 1.5, 4);
+    Grid g;
+    g.voxel_size = 0.1;
+    g.origin = {-1.93, -1.87, -1.91};
+    g.dims = {40, 40, 40};
+    check_round_trip("sphere", sphere, g, 1.0, true);
+}
+
+TEST(RoundTrip, SpotMeshesStayWithinOneVoxelAreClosedAndIgnoreBrickSize) {
+    const Mesh spot = load_mesh(mesh_path("spot.obj"));
+    GridFit fit;
+    fit.resolution = 48;
+    fit.pad = 4;  // beyond the band, so the surface never reaches the grid border
+    check_round_trip("spot", spot, fit_grid(spot, fit), 1.0, false);
+}
+
+// The measure itself must be able to fail: a copy of the sphere moved by 1.25 voxels is more
+// than one voxel away from the original in both directions (exactly 1.25 along the shift).
+TEST(RoundTrip, HausdorffEstimateSeesAShiftOfOneAndAQuarterVoxels) {
+    const Mesh a = sphere_mesh({0, 0, 0}, 1.5, 4), b = sphere_mesh({0.125, 0, 0}, 1.5, 4);
+    EXPECT_NEAR(one_sided_hausdorff(a, b, 0.1), 1.25, 0.03);
+    EXPECT_NEAR(one_sided_hausdorff(b, a, 0.1), 1.25, 0.03);
+    EXPECT_NEAR(one_sided_hausdorff(a, a, 0.1), 0.0, 1e-9);
+}
+
+}  // namespace
+}  // namespace oclvox::test
