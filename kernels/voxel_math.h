@@ -271,10 +271,17 @@ typedef struct {
     float block_lo, block_hi;
     float edge_normal[3][3][2];
     float edge_offset[3][3];
+    // Half-open voxels: bit 3k+j makes edge function (k, j) strict (> 0); bits 9 and 10 make the
+    // plane test's lower and upper bound strict.
+    int strict;
 } OvThinTriangle;
 
-OV_FN OvThinTriangle ov_setup_thin(OvTriangle t) {
+// Half-open thin voxels: the centre segment along the dominant axis is [c - 1/2, c + 1/2) and each
+// diamond loses its +x and +y corners, so neighbouring voxels no longer share the points where
+// they touch. A support value is then strict when it is attained only at an excluded corner.
+OV_FN OvThinTriangle ov_setup_thin(OvTriangle t, int half_open) {
     OvThinTriangle s;
+    s.strict = 0;
     for (int k = 0; k < 3; ++k) s.anchor[k] = t.anchor[k];
     float n[3];
     ov_normal(t, n);
@@ -282,6 +289,12 @@ OV_FN OvThinTriangle ov_setup_thin(OvTriangle t) {
     ov_block_cull(t, n, &s.block_lo, &s.block_hi);
     s.plane_offset = n[0] * (0.5f - t.u[0]) + n[1] * (0.5f - t.u[1]) + n[2] * (0.5f - t.u[2]);
     s.plane_half = 0.5f * ov_max3(fabs(n[0]), fabs(n[1]), fabs(n[2]));
+    int dominant = fabs(n[0]) >= fabs(n[1]) && fabs(n[0]) >= fabs(n[2]) ? 0
+                   : fabs(n[1]) >= fabs(n[2])                           ? 1
+                                                                        : 2;
+    // The plane crosses the segment at t = -value / n[dominant], which must lie in [-1/2, 1/2).
+    if (half_open && n[dominant] > 0.0f) s.strict |= 1 << 9;
+    if (half_open && n[dominant] < 0.0f) s.strict |= 1 << 10;
     for (int k = 0; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
@@ -293,6 +306,9 @@ OV_FN OvThinTriangle ov_setup_thin(OvTriangle t) {
             s.edge_normal[k][j][1] = ny;
             s.edge_offset[k][j] = nx * (0.5f - t.u[3 * j + a1]) + ny * (0.5f - t.u[3 * j + a2]) +
                                   0.5f * fmax(fabs(nx), fabs(ny));
+            if (half_open &&
+                ((fabs(nx) > fabs(ny) && nx > 0.0f) || (fabs(ny) > fabs(nx) && ny > 0.0f)))
+                s.strict |= 1 << (3 * k + j);
         }
     }
     return s;
@@ -302,13 +318,16 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
     float q[3] = {qx, qy, qz};
     float dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset;
     if (dn > s->plane_half || dn < -s->plane_half) return 0;
+    if ((dn == -s->plane_half && (s->strict >> 9 & 1)) ||
+        (dn == s->plane_half && (s->strict >> 10 & 1)))
+        return 0;
     for (int k = 0; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
         for (int j = 0; j < 3; ++j) {
             float e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
                       s->edge_offset[k][j];
-            if (e < 0.0f) return 0;
+            if (e < 0.0f || (e == 0.0f && (s->strict >> (3 * k + j) & 1))) return 0;
         }
     }
     return 1;

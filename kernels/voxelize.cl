@@ -21,11 +21,10 @@ __kernel void setup_pef(__global const OvTriangle* triangles, uint count, int ha
     if (i < count) out[i] = ov_setup_pef(triangles[i], half_open);
 }
 
-// Thin voxelization has no half-open variant (the host refuses the combination).
 __kernel void setup_thin(__global const OvTriangle* triangles, uint count, int half_open,
                          __global OvThinTriangle* out) {
     uint i = get_global_id(0);
-    if (i < count && !half_open) out[i] = ov_setup_thin(triangles[i]);
+    if (i < count) out[i] = ov_setup_thin(triangles[i], half_open);
 }
 
 typedef struct {

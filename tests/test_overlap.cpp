@@ -406,12 +406,29 @@ TEST(Thin, ClosedSurfacesLeaveNoSixConnectedGap) {
     EXPECT_LT(t.count(), reference(cube, unit_grid(25, 25, 25), OverlapTest::PEF).count());
 }
 
-TEST(Thin, HalfOpenIsRefused) {
+// Thin voxels follow the boundary rule too: three parallel grid-aligned planes mark two layers
+// each when closed (4 N^2 in all) and exactly one layer each when half-open (3 N^2), and the
+// half-open thin sphere is still 6-separating.
+TEST(Thin, HalfOpenPlanesMarkExactlyOneLayer) {
+    const int n = 8;
     Mesh m;
-    add_triangle(m, {1, 1, 1}, {2, 1, 1}, {1, 2, 1});
-    EXPECT_THROW(reference(m, unit_grid(4, 4, 4), OverlapTest::PEF, 8, Boundary::HalfOpen,
-                           VoxelizeMode::Thin),
-                 GridError);
+    for (double z : {1.0, 2.0, 3.0}) add_plane(m, 2, z, n);
+    const Grid g = unit_grid(n, n, n);
+    EXPECT_EQ(thin(m, g).count(), uint64_t(4 * n * n));
+    const SparseVoxels open =
+        reference(m, g, OverlapTest::PEF, 8, Boundary::HalfOpen, VoxelizeMode::Thin);
+    EXPECT_EQ(open.count(), uint64_t(3 * n * n));
+    for (int k : {1, 2, 3}) EXPECT_TRUE(open.get(3, 4, k));
+
+    const Vec3d c{12.2, 11.7, 12.45};
+    const SparseVoxels s = reference(sphere_mesh(c, 9.3, 4), unit_grid(25, 25, 25),
+                                     OverlapTest::PEF, 8, Boundary::HalfOpen, VoxelizeMode::Thin);
+    EXPECT_TRUE(subset(s, thin(sphere_mesh(c, 9.3, 4), unit_grid(25, 25, 25))));
+    EXPECT_EQ(leaked_voxels(s,
+                            [&](double x, double y, double z) {
+                                return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.3 * 0.98 - 0.01;
+                            }),
+              0u);
 }
 
 }  // namespace

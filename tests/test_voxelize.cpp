@@ -100,6 +100,8 @@ TEST(DeviceMatchesReferenceForModes, ThinAndHalfOpen) {
         VoxelizeOptions thin = options(OverlapTest::PEF, brick);
         thin.mode = VoxelizeMode::Thin;
         expect_same(device().voxelize(m, g, thin), voxelize_reference(m, g, thin));
+        thin.boundary = Boundary::HalfOpen;
+        expect_same(device().voxelize(m, g, thin), voxelize_reference(m, g, thin));
         for (OverlapTest test : kTests) {
             VoxelizeOptions open = options(test, brick);
             open.boundary = Boundary::HalfOpen;

@@ -9,14 +9,9 @@ namespace oclvox::detail {
 
 enum class SurfaceTest { SAT, PEF, Thin };
 
-// Thin voxelization has one predicate; the conservative one is SAT or PEF. Throws GridError for
-// combinations that do not exist yet.
+// Thin voxelization has one predicate; the conservative one is SAT or PEF.
 inline SurfaceTest surface_test_for(const VoxelizeOptions& options) {
-    if (options.mode == VoxelizeMode::Thin) {
-        if (options.boundary == Boundary::HalfOpen)
-            throw GridError("the half-open boundary rule is not implemented for thin voxelization");
-        return SurfaceTest::Thin;
-    }
+    if (options.mode == VoxelizeMode::Thin) return SurfaceTest::Thin;
     return options.test == OverlapTest::SAT ? SurfaceTest::SAT : SurfaceTest::PEF;
 }
 
@@ -53,7 +48,8 @@ void with_host_surface_test(SurfaceTest test, Boundary boundary, F f) {
               ov_pef_overlaps);
             return;
         case SurfaceTest::Thin:
-            f([](const OvTriangle& t) { return ov_setup_thin(t); }, ov_thin_overlaps);
+            f([half_open](const OvTriangle& t) { return ov_setup_thin(t, half_open); },
+              ov_thin_overlaps);
             return;
     }
 }
