@@ -8,7 +8,10 @@
 // Times are medians of --repeat runs after one warm-up run that builds programs and fills caches.
 //
 //   oclvox_bench_pipeline [--device SEL] [--repeat N] [--commit HASH] [--winding-max RES]
-//                         MESH... -- RES...
+//                         [--sections abcd] [--bands 1,3,6] [--no-full-grid] MESH... -- RES...
+//
+// --sections, --bands and --no-full-grid trim a run to the rows worth measuring at a large
+// resolution, where the full matrix would take too long on a CPU device.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -113,6 +116,9 @@ oclvox::Mesh overlapping_copy(const oclvox::Mesh& a, const oclvox::Mesh& b) {
 int main(int argc, char** argv) {
     std::string selector, commit = "unknown";
     int64_t winding_max = 128;
+    std::string sections = "abcd";
+    std::vector<double> bands = {1, 3, 6};
+    bool full_grid = true;
     std::vector<std::string> paths;
     std::vector<int64_t> resolutions;
     bool after_separator = false;
@@ -126,6 +132,18 @@ int main(int argc, char** argv) {
             commit = argv[++i];
         else if (a == "--winding-max" && i + 1 < argc)
             winding_max = std::atoll(argv[++i]);
+        else if (a == "--sections" && i + 1 < argc)
+            sections = argv[++i];
+        else if (a == "--bands" && i + 1 < argc) {
+            bands.clear();
+            for (const char* p = argv[++i]; *p;) {
+                char* end = nullptr;
+                bands.push_back(std::strtod(p, &end));
+                p = *end == ',' ? end + 1 : end;
+                if (end == p && *p) break;
+            }
+        } else if (a == "--no-full-grid")
+            full_grid = false;
         else if (a == "--")
             after_separator = true;
         else if (after_separator)
@@ -149,98 +167,111 @@ int main(int argc, char** argv) {
         std::vector<oclvox::Mesh> meshes;
         for (const auto& p : paths) meshes.push_back(oclvox::load_mesh(p));
 
+        auto wanted = [&](char section) { return sections.find(section) != std::string::npos; };
+
         // (a) Parity adds a column pass to the surface pass; the target is within ~2x.
-        std::printf(
-            "### (a) Solid voxelization vs surface pass\n\n"
-            "Winding (forced) runs once, without warm-up, and only up to resolution %lld: "
-            "it is O(voxels x triangles near) and slow on a CPU device.\n\n",
-            (long long)winding_max);
-        std::printf(
-            "| mesh | tris | res | grid | surface s | parity s | parity/surface | "
-            "winding s | solid voxels |\n|---|---:|---:|---|---:|---:|---:|---:|---:|\n");
-        for (size_t m = 0; m < meshes.size(); ++m)
-            for (int64_t res : resolutions) {
-                oclvox::GridFit fit;
-                fit.resolution = res;
-                const oclvox::Grid grid = oclvox::fit_grid(meshes[m], fit);
-                oclvox::VoxelizeOptions surface, parity, winding;
-                parity.mode = winding.mode = oclvox::VoxelizeMode::Solid;
-                parity.inside = oclvox::InsideTest::Parity;
-                winding.inside = oclvox::InsideTest::Winding;
-                oclvox::VoxelizeStats stats;
-                const double ts =
-                    median_seconds([&] { device.voxelize(meshes[m], grid, surface); });
-                const double tp =
-                    median_seconds([&] { device.voxelize(meshes[m], grid, parity, &stats); });
-                char tw[64] = "skipped (res > max)";
-                if (res <= winding_max)
-                    std::snprintf(tw, sizeof tw, "%.3f",
-                                  median_seconds([&] { device.voxelize(meshes[m], grid, winding); },
-                                                 1, false));
-                std::printf("| %s | %zu | %lld | %s | %.3f | %.3f | %.2f | %s | %llu |\n",
-                            base_name(paths[m]).c_str(), meshes[m].triangles.size(), (long long)res,
-                            dims_string(grid).c_str(), ts, tp, tp / ts, tw,
-                            (unsigned long long)stats.voxels_set);
-                std::fflush(stdout);
-            }
+        if (wanted('a')) {
+            std::printf(
+                "### (a) Solid voxelization vs surface pass\n\n"
+                "Winding (forced) runs once, without warm-up, and only up to resolution %lld: "
+                "it is slow on a CPU device.\n\n",
+                (long long)winding_max);
+            std::printf(
+                "| mesh | tris | res | grid | surface s | parity s | parity/surface | "
+                "winding s | solid voxels |\n|---|---:|---:|---|---:|---:|---:|---:|---:|\n");
+            for (size_t m = 0; m < meshes.size(); ++m)
+                for (int64_t res : resolutions) {
+                    oclvox::GridFit fit;
+                    fit.resolution = res;
+                    const oclvox::Grid grid = oclvox::fit_grid(meshes[m], fit);
+                    oclvox::VoxelizeOptions surface, parity, winding;
+                    parity.mode = winding.mode = oclvox::VoxelizeMode::Solid;
+                    parity.inside = oclvox::InsideTest::Parity;
+                    winding.inside = oclvox::InsideTest::Winding;
+                    oclvox::VoxelizeStats stats;
+                    const double ts =
+                        median_seconds([&] { device.voxelize(meshes[m], grid, surface); });
+                    const double tp =
+                        median_seconds([&] { device.voxelize(meshes[m], grid, parity, &stats); });
+                    char tw[64] = "skipped (res > max)";
+                    if (res <= winding_max)
+                        std::snprintf(
+                            tw, sizeof tw, "%.3f",
+                            median_seconds([&] { device.voxelize(meshes[m], grid, winding); }, 1,
+                                           false));
+                    std::printf("| %s | %zu | %lld | %s | %.3f | %.3f | %.2f | %s | %llu |\n",
+                                base_name(paths[m]).c_str(), meshes[m].triangles.size(),
+                                (long long)res, dims_string(grid).c_str(), ts, tp, tp / ts, tw,
+                                (unsigned long long)stats.voxels_set);
+                    std::fflush(stdout);
+                }
+        }
 
         // (b) Narrow band per width, plus the full grid (jump flooding) once at the smallest res.
-        std::printf(
-            "\n### (b) Signed distance field (parity sign, grid padded by 7 voxels)\n\n"
-            "| mesh | res | grid | band | kind | total s | kernels s (distance + sign) | "
-            "Mvox/s |\n|---|---:|---|---:|---|---:|---:|---:|\n");
-        for (size_t m = 0; m < meshes.size(); ++m)
-            for (int64_t res : resolutions) {
-                const oclvox::Grid grid = oclvox::fit_grid(meshes[m], padded_fit(res));
-                std::vector<std::pair<double, bool>> runs = {{1, false}, {3, false}, {6, false}};
-                if (res == resolutions.front()) runs.push_back({3, true});
-                for (const auto& [width, full] : runs) {
-                    oclvox::VoxelizeStats stats;
-                    const double t = median_seconds([&] {
-                        stats = {};
-                        oclvox::signed_distance(device, meshes[m], grid, band(width, full), &stats);
-                    });
-                    std::printf("| %s | %lld | %s | %.0f | %s | %.3f | %.3f | %.1f |\n",
-                                base_name(paths[m]).c_str(), (long long)res,
-                                dims_string(grid).c_str(), width, full ? "full grid" : "narrow", t,
-                                stats.seconds_kernels, double(grid.voxel_count()) / t / 1e6);
-                    std::fflush(stdout);
+        if (wanted('b')) {
+            std::printf(
+                "\n### (b) Signed distance field (parity sign, grid padded by 7 voxels)\n\n"
+                "| mesh | res | grid | band | kind | total s | kernels s (distance + sign) | "
+                "Mvox/s |\n|---|---:|---|---:|---|---:|---:|---:|\n");
+            for (size_t m = 0; m < meshes.size(); ++m)
+                for (int64_t res : resolutions) {
+                    const oclvox::Grid grid = oclvox::fit_grid(meshes[m], padded_fit(res));
+                    std::vector<std::pair<double, bool>> runs;
+                    for (double b : bands) runs.push_back({b, false});
+                    if (full_grid && res == resolutions.front()) runs.push_back({3, true});
+                    for (const auto& [width, full] : runs) {
+                        oclvox::VoxelizeStats stats;
+                        const double t = median_seconds([&] {
+                            stats = {};
+                            oclvox::signed_distance(device, meshes[m], grid, band(width, full),
+                                                    &stats);
+                        });
+                        std::printf("| %s | %lld | %s | %.0f | %s | %.3f | %.3f | %.2f |\n",
+                                    base_name(paths[m]).c_str(), (long long)res,
+                                    dims_string(grid).c_str(), width, full ? "full grid" : "narrow",
+                                    t, stats.seconds_kernels, double(grid.voxel_count()) / t / 1e6);
+                        std::fflush(stdout);
+                    }
                 }
-            }
+        }
 
         // (c) Meshing the band-3 field: output triangles per second of wall time.
-        std::printf(
-            "\n### (c) Meshing the band-3 SDF\n\n"
-            "| mesh | res | grid | method | where | s | triangles | Mtri/s |\n"
-            "|---|---:|---|---|---|---:|---:|---:|\n");
-        for (size_t m = 0; m < meshes.size(); ++m)
-            for (int64_t res : resolutions) {
-                const oclvox::Grid grid = oclvox::fit_grid(meshes[m], padded_fit(res));
-                const oclvox::ScalarField f =
-                    oclvox::signed_distance(device, meshes[m], grid, band(3));
-                struct Method {
-                    const char *name, *where;
-                    std::function<oclvox::Mesh()> run;
-                };
-                const Method methods[] = {
-                    {"surface nets", "device", [&] { return oclvox::surface_nets(device, f); }},
-                    {"surface nets", "host", [&] { return oclvox::surface_nets(f); }},
-                    {"marching cubes", "device", [&] { return oclvox::marching_cubes(device, f); }},
-                    {"marching cubes", "host", [&] { return oclvox::marching_cubes(f); }},
-                };
-                for (const Method& method : methods) {
-                    size_t tris = 0;
-                    const double t = median_seconds([&] { tris = method.run().triangles.size(); });
-                    std::printf("| %s | %lld | %s | %s | %s | %.3f | %zu | %.2f |\n",
-                                base_name(paths[m]).c_str(), (long long)res,
-                                dims_string(grid).c_str(), method.name, method.where, t, tris,
-                                double(tris) / t / 1e6);
-                    std::fflush(stdout);
+        if (wanted('c')) {
+            std::printf(
+                "\n### (c) Meshing the band-3 SDF\n\n"
+                "| mesh | res | grid | method | where | s | triangles | Mtri/s |\n"
+                "|---|---:|---|---|---|---:|---:|---:|\n");
+            for (size_t m = 0; m < meshes.size(); ++m)
+                for (int64_t res : resolutions) {
+                    const oclvox::Grid grid = oclvox::fit_grid(meshes[m], padded_fit(res));
+                    const oclvox::ScalarField f =
+                        oclvox::signed_distance(device, meshes[m], grid, band(3));
+                    struct Method {
+                        const char *name, *where;
+                        std::function<oclvox::Mesh()> run;
+                    };
+                    const Method methods[] = {
+                        {"surface nets", "device", [&] { return oclvox::surface_nets(device, f); }},
+                        {"surface nets", "host", [&] { return oclvox::surface_nets(f); }},
+                        {"marching cubes", "device",
+                         [&] { return oclvox::marching_cubes(device, f); }},
+                        {"marching cubes", "host", [&] { return oclvox::marching_cubes(f); }},
+                    };
+                    for (const Method& method : methods) {
+                        size_t tris = 0;
+                        const double t =
+                            median_seconds([&] { tris = method.run().triangles.size(); });
+                        std::printf("| %s | %lld | %s | %s | %s | %.3f | %zu | %.2f |\n",
+                                    base_name(paths[m]).c_str(), (long long)res,
+                                    dims_string(grid).c_str(), method.name, method.where, t, tris,
+                                    double(tris) / t / 1e6);
+                        std::fflush(stdout);
+                    }
                 }
-            }
+        }
 
         // (d) CSG of two real meshes on one grid: two SDFs, the per-sample operation, a mesh.
-        if (meshes.size() >= 2) {
+        if (wanted('d') && meshes.size() >= 2) {
             const oclvox::Mesh& a = meshes[0];
             const oclvox::Mesh b = overlapping_copy(a, meshes[1]);
             std::printf(

@@ -171,7 +171,9 @@ void expect_closed(const Mesh& m, const char* what, bool require_manifold) {
     std::printf("[ measured ] %s: %zu edges, %zu border, %zu used more than twice\n", what,
                 uses.size(), border, non_manifold);
     EXPECT_EQ(border, 0u) << what;
-    if (require_manifold) EXPECT_EQ(non_manifold, 0u) << what;
+    if (require_manifold) {
+        EXPECT_EQ(non_manifold, 0u) << what;
+    }
 }
 
 void expect_same_mesh(const Mesh& a, const Mesh& b, const char* what) {
