@@ -211,7 +211,8 @@ int main(int argc, char** argv) {
         if (wanted('b')) {
             std::printf(
                 "\n### (b) Signed distance field (parity sign, grid padded by 7 voxels)\n\n"
-                "| mesh | res | grid | band | kind | total s | kernels s (distance + sign) | "
+                "| mesh | res | grid | band | kind | total s (median) | kernels s (last run, "
+                "distance + sign) | "
                 "Mvox/s |\n|---|---:|---|---:|---|---:|---:|---:|\n");
             for (size_t m = 0; m < meshes.size(); ++m)
                 for (int64_t res : resolutions) {
