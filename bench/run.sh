@@ -24,6 +24,11 @@ out=bench/RESULTS.md.tmp
   echo
   /usr/bin/time -f "peak RSS of the whole process: %M KiB" build/bench/oclvox_bench "${device[@]}" \
     --repeat 1 --commit "$commit" "$meshes/bunny00.off" -- 4096 2>&1 | grep -v '^machine\|^device\|^commit'
+  echo
+  echo "# Solid, SDF, meshing and CSG"
+  echo
+  build/bench/oclvox_bench_pipeline "${device[@]}" --commit "$commit" \
+    "$meshes/spot.obj" "$meshes/bunny00.off" -- 64 128
 } > "$out"
 mv "$out" bench/RESULTS.md
 cat bench/RESULTS.md

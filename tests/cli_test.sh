@@ -159,13 +159,13 @@ fi
 grep -q 'CPU reference' <<<"$OUT" && pass "summary names the CPU reference" ||
     fail "summary names the CPU reference" "$OUT"
 
-run voxelize "$MESH" -r 32 --test sat -o "$WORK/sat.npy" --stats
+run voxelize "$MESH" -r 32 --test pef -o "$WORK/sat.npy" --stats
 sat_ones=$(npy_ones "$WORK/sat.npy")
 if [ "$RC" -eq 0 ] && [ "$sat_ones" -gt 0 ] 2>/dev/null && grep -q 'kernels' <<<"$OUT" &&
     grep -q 'triangles/s' <<<"$OUT"; then
-    pass "--test sat --stats ($sat_ones voxels; pef set $device_ones)"
+    pass "--test pef --stats ($sat_ones voxels; the default sat set $device_ones)"
 else
-    fail "--test sat --stats" "rc=$RC ones=$sat_ones out=$OUT err=$ERR"
+    fail "--test pef --stats" "rc=$RC ones=$sat_ones out=$OUT err=$ERR"
 fi
 
 run voxelize "$MESH" -r 16 --cubic -o "$WORK/cubic.npy" --stats-json "$WORK/cubic.json" -q

@@ -84,7 +84,7 @@ void stop_if_interrupted() {
 struct VoxelizeArgs {
     std::string input, output;
     oclvox::GridFit fit;
-    std::string test = "pef";
+    std::string test = "sat";
     std::string mode = "surface";
     std::string inside = "auto";
     std::string boundary = "closed";
@@ -540,8 +540,8 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
     // Voxelization
     command
         .add_option("--test", args.test,
-                    "triangle/box overlap test; both are always available: pef (default, plane "
-                    "and projected edge functions) or sat (separating axes)")
+                    "triangle/box overlap test; both are always available: sat (default, 13 "
+                    "separating axes) or pef (plane and projected edge functions)")
         ->type_name("TEST")
         ->check(CLI::IsMember({"pef", "sat"}))
         ->capture_default_str()

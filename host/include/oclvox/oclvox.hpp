@@ -195,7 +195,7 @@ struct VoxelizeOptions {
     VoxelizeMode mode = VoxelizeMode::Surface;
     InsideTest inside = InsideTest::Auto;
     Boundary boundary = Boundary::Closed;
-    OverlapTest test = OverlapTest::PEF;
+    OverlapTest test = OverlapTest::SAT;  // measured faster on most meshes (bench/RESULTS.md)
     int brick_size = 64;  // voxels per brick edge, a multiple of 4 in [4, 1024]
     uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
     uint64_t host_budget_bytes = 0;             // 0: half of physical memory
