@@ -196,7 +196,7 @@ struct VoxelizeOptions {
     InsideTest inside = InsideTest::Auto;
     Boundary boundary = Boundary::Closed;
     OverlapTest test = OverlapTest::SAT;  // measured faster on most meshes (bench/RESULTS.md)
-    int brick_size = 64;  // voxels per brick edge, a multiple of 4 in [4, 1024]
+    int brick_size = 64;                  // voxels per brick edge, a multiple of 4 in [4, 1024]
     uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
     uint64_t host_budget_bytes = 0;             // 0: half of physical memory
     ProgressCallback progress;
