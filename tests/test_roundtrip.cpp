@@ -19,12 +19,6 @@
 namespace oclvox::test {
 namespace {
 
-Device& device() {
-    static Device d =
-        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
-    return d;
-}
-
 Vec3d sub(const Vec3d& a, const Vec3d& b) {
     return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
 }

@@ -12,12 +12,6 @@
 namespace oclvox::test {
 namespace {
 
-Device& device() {
-    static Device d =
-        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
-    return d;
-}
-
 VoxelizeOptions solid_options(InsideTest inside, int brick_size = 16) {
     VoxelizeOptions o;
     o.mode = VoxelizeMode::Solid;

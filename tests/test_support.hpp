@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <string>
 
@@ -14,6 +15,14 @@
 namespace oclvox::test {
 
 using detail::Vec3d;
+
+// The OpenCL device the tests run on: $OCLVOX_DEVICE, else the library's default choice. Opened
+// once per test process.
+inline Device& device() {
+    static Device d =
+        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    return d;
+}
 
 inline Grid unit_grid(int64_t nx, int64_t ny, int64_t nz) {
     Grid g;

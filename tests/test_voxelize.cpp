@@ -10,12 +10,6 @@ namespace {
 
 const OverlapTest kTests[] = {OverlapTest::SAT, OverlapTest::PEF};
 
-Device& device() {
-    static Device d =
-        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
-    return d;
-}
-
 VoxelizeOptions options(OverlapTest test, int brick = 16) {
     VoxelizeOptions o;
     o.test = test;
