@@ -366,7 +366,7 @@ uint64_t leaked_voxels(const SparseVoxels& v, Inside inside) {
 // A sphere of radius 9.3 off the voxel lattice, and a tilted cube.
 TEST(Thin, ClosedSurfacesLeaveNoSixConnectedGap) {
     const Vec3d c{12.2, 11.7, 12.45};
-    const Mesh sphere = sphere_mesh(c, 9.3, 4);
+    const Mesh sphere = icosphere(c, 9.3, 3);
     const SparseVoxels s = thin(sphere, unit_grid(25, 25, 25));
     EXPECT_EQ(leaked_voxels(s,
                             [&](double x, double y, double z) {
@@ -421,9 +421,9 @@ TEST(Thin, HalfOpenPlanesMarkExactlyOneLayer) {
     for (int k : {1, 2, 3}) EXPECT_TRUE(open.get(3, 4, k));
 
     const Vec3d c{12.2, 11.7, 12.45};
-    const SparseVoxels s = reference(sphere_mesh(c, 9.3, 4), unit_grid(25, 25, 25),
-                                     OverlapTest::PEF, 8, Boundary::HalfOpen, VoxelizeMode::Thin);
-    EXPECT_TRUE(subset(s, thin(sphere_mesh(c, 9.3, 4), unit_grid(25, 25, 25))));
+    const SparseVoxels s = reference(icosphere(c, 9.3, 3), unit_grid(25, 25, 25), OverlapTest::PEF,
+                                     8, Boundary::HalfOpen, VoxelizeMode::Thin);
+    EXPECT_TRUE(subset(s, thin(icosphere(c, 9.3, 3), unit_grid(25, 25, 25))));
     EXPECT_EQ(leaked_voxels(s,
                             [&](double x, double y, double z) {
                                 return std::hypot(x - c[0], y - c[1], z - c[2]) < 9.3 * 0.98 - 0.01;

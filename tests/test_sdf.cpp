@@ -20,43 +20,6 @@
 namespace oclvox::test {
 namespace {
 
-Vec3d sub(const Vec3d& a, const Vec3d& b) {
-    return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-}
-double dot(const Vec3d& a, const Vec3d& b) {
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-double norm(const Vec3d& a) {
-    return std::sqrt(dot(a, a));
-}
-
-// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5), double.
-Vec3d closest_point(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
-    const Vec3d ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
-    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
-    if (d1 <= 0 && d2 <= 0) return a;
-    const Vec3d bp = sub(p, b);
-    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
-    if (d3 >= 0 && d4 <= d3) return b;
-    const double vc = d1 * d4 - d3 * d2;
-    auto along = [](const Vec3d& o, const Vec3d& e, double t) {
-        return Vec3d{o[0] + t * e[0], o[1] + t * e[1], o[2] + t * e[2]};
-    };
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) return along(a, ab, d1 / (d1 - d3));
-    const Vec3d cp = sub(p, c);
-    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
-    if (d6 >= 0 && d5 <= d6) return c;
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) return along(a, ac, d2 / (d2 - d6));
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-        return along(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    const double denom = 1 / (va + vb + vc);
-    const double v = vb * denom, w = vc * denom;
-    return {a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w,
-            a[2] + ab[2] * v + ac[2] * w};
-}
-
 Vec3d centre_of(const Grid& g, int64_t i, int64_t j, int64_t k) {
     return {g.origin[0] + (double(i) + 0.5) * g.voxel_size,
             g.origin[1] + (double(j) + 0.5) * g.voxel_size,
@@ -78,47 +41,6 @@ std::vector<double> brute_force_distance(const Mesh& m, const Grid& g) {
                 out[size_t(i + g.dims[0] * (j + g.dims[1] * k))] = best;
             }
     return out;
-}
-
-// Icosahedron subdivided `levels` times, vertices on the sphere (centre, radius), wound
-// counter-clockwise seen from outside.
-Mesh icosphere(const Vec3d& centre, double radius, int levels) {
-    const double t = (1 + std::sqrt(5.0)) / 2;
-    std::vector<Vec3d> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
-                            {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
-                            {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-    std::vector<std::array<uint32_t, 3>> f = {
-        {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-        {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-        {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-    for (int level = 0; level < levels; ++level) {
-        std::map<std::pair<uint32_t, uint32_t>, uint32_t> middle;
-        auto mid = [&](uint32_t a, uint32_t b) {
-            const auto key = std::minmax(a, b);
-            const auto found = middle.find(key);
-            if (found != middle.end()) return found->second;
-            v.push_back(
-                {(v[a][0] + v[b][0]) / 2, (v[a][1] + v[b][1]) / 2, (v[a][2] + v[b][2]) / 2});
-            return middle[key] = uint32_t(v.size() - 1);
-        };
-        std::vector<std::array<uint32_t, 3>> next;
-        for (const auto& tri : f) {
-            const uint32_t a = mid(tri[0], tri[1]), b = mid(tri[1], tri[2]),
-                           c = mid(tri[2], tri[0]);
-            next.push_back({tri[0], a, c});
-            next.push_back({tri[1], b, a});
-            next.push_back({tri[2], c, b});
-            next.push_back({a, b, c});
-        }
-        f = next;
-    }
-    Mesh m;
-    for (const auto& p : v) {
-        const double s = radius / norm(p);
-        m.positions.push_back({centre[0] + p[0] * s, centre[1] + p[1] * s, centre[2] + p[2] * s});
-    }
-    m.triangles = f;
-    return m;
 }
 
 // How far the icosphere's surface can be from the sphere: R minus the smallest distance from the

@@ -4,8 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <map>
 #include <random>
 #include <string>
 
@@ -53,36 +55,88 @@ inline Mesh box_mesh(const Vec3d& lo, const Vec3d& hi) {
     return m;
 }
 
-// A closed sphere: an octahedron subdivided `levels` times, vertices pushed onto the sphere.
-inline Mesh sphere_mesh(const Vec3d& centre, double radius, int levels) {
-    std::vector<std::array<Vec3d, 3>> tris;
-    const Vec3d px{1, 0, 0}, nx{-1, 0, 0}, py{0, 1, 0}, ny{0, -1, 0}, pz{0, 0, 1}, nz{0, 0, -1};
-    tris = {{px, py, pz}, {py, nx, pz}, {nx, ny, pz}, {ny, px, pz},
-            {py, px, nz}, {nx, py, nz}, {ny, nx, nz}, {px, ny, nz}};
-    auto unit_mid = [](const Vec3d& a, const Vec3d& b) {
-        Vec3d m{a[0] + b[0], a[1] + b[1], a[2] + b[2]};
-        const double l = std::sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
-        return Vec3d{m[0] / l, m[1] / l, m[2] / l};
+// Double-precision vector helpers and the closest point on a triangle (Ericson, Real-Time
+// Collision Detection, 5.1.5), written here rather than taken from the library so that they
+// check it.
+inline Vec3d sub(const Vec3d& a, const Vec3d& b) {
+    return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+inline double dot(const Vec3d& a, const Vec3d& b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+inline double norm(const Vec3d& a) {
+    return std::sqrt(dot(a, a));
+}
+
+inline Vec3d closest_point(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    const Vec3d ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0) return a;
+    const Vec3d bp = sub(p, b);
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3) return b;
+    const double vc = d1 * d4 - d3 * d2;
+    auto along = [](const Vec3d& o, const Vec3d& e, double t) {
+        return Vec3d{o[0] + t * e[0], o[1] + t * e[1], o[2] + t * e[2]};
     };
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return along(a, ab, d1 / (d1 - d3));
+    const Vec3d cp = sub(p, c);
+    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6) return c;
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return along(a, ac, d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return along(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    const double denom = 1 / (va + vb + vc);
+    const double v = vb * denom, w = vc * denom;
+    return {a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w,
+            a[2] + ab[2] * v + ac[2] * w};
+}
+
+inline double point_triangle_distance(const Vec3d& p, const Vec3d& a, const Vec3d& b,
+                                      const Vec3d& c) {
+    return norm(sub(p, closest_point(p, a, b, c)));
+}
+
+// Icosahedron subdivided `levels` times, vertices on the sphere (centre, radius), wound
+// counter-clockwise seen from outside.
+inline Mesh icosphere(const Vec3d& centre, double radius, int levels) {
+    const double t = (1 + std::sqrt(5.0)) / 2;
+    std::vector<Vec3d> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                            {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                            {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+    std::vector<std::array<uint32_t, 3>> f = {
+        {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+        {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+        {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
     for (int level = 0; level < levels; ++level) {
-        std::vector<std::array<Vec3d, 3>> finer;
-        for (const auto& t : tris) {
-            const Vec3d ab = unit_mid(t[0], t[1]), bc = unit_mid(t[1], t[2]),
-                        ca = unit_mid(t[2], t[0]);
-            finer.push_back({t[0], ab, ca});
-            finer.push_back({ab, t[1], bc});
-            finer.push_back({ca, bc, t[2]});
-            finer.push_back({ab, bc, ca});
+        std::map<std::pair<uint32_t, uint32_t>, uint32_t> middle;
+        auto mid = [&](uint32_t a, uint32_t b) {
+            const auto key = std::minmax(a, b);
+            const auto found = middle.find(key);
+            if (found != middle.end()) return found->second;
+            v.push_back(
+                {(v[a][0] + v[b][0]) / 2, (v[a][1] + v[b][1]) / 2, (v[a][2] + v[b][2]) / 2});
+            return middle[key] = uint32_t(v.size() - 1);
+        };
+        std::vector<std::array<uint32_t, 3>> next;
+        for (const auto& tri : f) {
+            const uint32_t a = mid(tri[0], tri[1]), b = mid(tri[1], tri[2]),
+                           c = mid(tri[2], tri[0]);
+            next.push_back({tri[0], a, c});
+            next.push_back({tri[1], b, a});
+            next.push_back({tri[2], c, b});
+            next.push_back({a, b, c});
         }
-        tris.swap(finer);
+        f = next;
     }
     Mesh m;
-    for (const auto& t : tris) {
-        Vec3d p[3];
-        for (int i = 0; i < 3; ++i)
-            for (int k = 0; k < 3; ++k) p[i][k] = centre[k] + radius * t[i][k];
-        add_triangle(m, p[0], p[1], p[2]);
+    for (const auto& p : v) {
+        const double s = radius / norm(p);
+        m.positions.push_back({centre[0] + p[0] * s, centre[1] + p[1] * s, centre[2] + p[2] * s});
     }
+    m.triangles = f;
     return m;
 }
 
