@@ -99,10 +99,9 @@ double one_sided_hausdorff(const Mesh& from, const Mesh& to, double spacing) {
         const Vec3d& b = from.positions[t[1]];
         const Vec3d& c = from.positions[t[2]];
         const double longest = std::max({norm(sub(b, a)), norm(sub(c, b)), norm(sub(a, c))});
-        // Capped so the loop bound stays far from INT_MAX (a triangle that long fails anyway).
-        const int n = std::max(1, int(std::min(1e6, std::ceil(longest / (spacing / 6)))));
-        for (int i = 0; i <= n; ++i)
-            for (int j = 0; i + j <= n; ++j) {
+        const int n = std::max(1, int(std::ceil(longest / (spacing / 6))));
+        for (int64_t i = 0; i <= n; ++i)
+            for (int64_t j = 0; i + j <= n; ++j) {
                 const Vec3d p = mad(mad(a, sub(b, a), double(i) / n), sub(c, a), double(j) / n);
                 worst = std::max(worst, grid.distance(p));
             }
