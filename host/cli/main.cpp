@@ -381,6 +381,16 @@ int run_devices() {
     return 0;
 }
 
+// The device, unless the CPU reference was asked for; opening it builds (or loads cached) kernels,
+// so it is timed apart from the run.
+std::optional<oclvox::Device> open_device(bool reference, const std::string& selector,
+                                          double& seconds) {
+    std::optional<oclvox::Device> device;
+    if (!reference) device.emplace(timed(seconds, [&] { return oclvox::Device::open(selector); }));
+    stop_if_interrupted();
+    return device;
+}
+
 int run_voxelize(const VoxelizeArgs& args) {
     const Clock::time_point start = Clock::now();
     Timings timings;
@@ -396,10 +406,7 @@ int run_voxelize(const VoxelizeArgs& args) {
     stop_if_interrupted();
 
     // Phase 3: the device. Opening it builds (or loads cached) kernels, timed apart from the run.
-    std::optional<oclvox::Device> device;
-    if (!args.reference)
-        device.emplace(timed(timings.device, [&] { return oclvox::Device::open(args.device); }));
-    stop_if_interrupted();
+    std::optional<oclvox::Device> device = open_device(args.reference, args.device, timings.device);
 
     // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
     oclvox::VoxelizeOptions options;
@@ -655,14 +662,6 @@ bool any_given(const std::vector<CLI::Option*>& options) {
                        [](const CLI::Option* o) { return o->count() > 0; });
 }
 
-std::optional<oclvox::Device> open_device(const FieldArgs& args, FieldTimings& timings) {
-    std::optional<oclvox::Device> device;
-    if (!args.reference)
-        device.emplace(timed(timings.device, [&] { return oclvox::Device::open(args.device); }));
-    stop_if_interrupted();
-    return device;
-}
-
 oclvox::SdfOptions sdf_options(const FieldArgs& args) {
     oclvox::SdfOptions options;
     options.band_voxels = args.band;
@@ -760,7 +759,7 @@ int run_sdf(const FieldArgs& args) {
     const oclvox::Mesh mesh = timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
     const oclvox::Grid grid = timed(timings.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
     stop_if_interrupted();
-    std::optional<oclvox::Device> device = open_device(args, timings);
+    std::optional<oclvox::Device> device = open_device(args.reference, args.device, timings.device);
 
     oclvox::VoxelizeStats stats;
     const oclvox::ScalarField field =
@@ -821,7 +820,7 @@ int run_csg(const FieldArgs& args) {
         grid = a->grid;
         inputs = {args.input + " (field)", args.input_b + " (field)"};
         stop_if_interrupted();
-        if (mesh_out) device = open_device(args, timings);
+        if (mesh_out) device = open_device(args.reference, args.device, timings.device);
     } else {
         timed(timings.load, [&] {
             mesh_a = oclvox::load_mesh(args.input);
@@ -831,7 +830,7 @@ int run_csg(const FieldArgs& args) {
         grid = timed(timings.fit, [&] { return oclvox::fit_grid(*mesh_a, *mesh_b, args.fit); });
         inputs = {mesh_input_text(args.input, *mesh_a), mesh_input_text(args.input_b, *mesh_b)};
         stop_if_interrupted();
-        device = open_device(args, timings);
+        device = open_device(args.reference, args.device, timings.device);
         timed(timings.compute, [&] {
             a = signed_distance(device, *mesh_a, *grid, args, &stats_a);
             stop_if_interrupted();
@@ -890,7 +889,7 @@ int run_mesh(const FieldArgs& args) {
         field = timed(timings.load, [&] { return oclvox::read_field(args.input); });
         input_text = args.input + " (field)";
         stop_if_interrupted();
-        device = open_device(args, timings);
+        device = open_device(args.reference, args.device, timings.device);
     } else {
         const oclvox::Mesh mesh =
             timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
@@ -898,7 +897,7 @@ int run_mesh(const FieldArgs& args) {
             timed(timings.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
         input_text = mesh_input_text(args.input, mesh);
         stop_if_interrupted();
-        device = open_device(args, timings);
+        device = open_device(args.reference, args.device, timings.device);
         oclvox::VoxelizeOptions options;
         options.mode = oclvox::VoxelizeMode::Solid;
         options.inside = oclvox::inside_test_from_string(args.inside);
