@@ -333,7 +333,7 @@ void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxe
         for (uint64_t p = bins.first_pair[c]; p < bins.first_pair[c + 1]; ++p) {
             const OvParityTriangle& tri = triangles[bins.pair_triangle[p]];
             OvColumnRange r;
-            ovs_column_range(&tri, bx, by, l.brick, l.nx, l.ny, &r);
+            if (!ovs_column_range(&tri, bx, by, l.brick, l.nx, l.ny, &r)) continue;
             for (int j = r.lo[1]; j <= r.hi[1]; ++j)
                 for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
                     const int k = ovs_parity_flip(&tri, i, j, l.nz);
