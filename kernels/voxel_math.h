@@ -196,6 +196,78 @@ OV_FN int ov_sat_overlaps(const OvSatTriangle* s, float qx, float qy, float qz) 
     return 1;
 }
 
+// Exact orientation of a projected triangle. Where a projection is nearly degenerate (a sliver, a
+// face almost perpendicular to the projection plane), the float n[k] = f0 x f1 can cancel to 0
+// or take the wrong sign; edge functions turned by that sign point outwards, and a conservative
+// test then drops voxels far along the sliver that the triangle clearly crosses. So the sign is
+// computed exactly, from error-free transformations that need only +, - and * (FP_CONTRACT is off
+// and there is no FMA, so they are exact on every conforming device, as long as no product
+// underflows: all nonzero coordinates at least 2^-50 in magnitude).
+
+// a + b = *sum + *err exactly (Knuth's TwoSum, any magnitudes).
+OV_FN void ov_two_sum(float a, float b, float* sum, float* err) {
+    float s = a + b;
+    float b_virtual = s - a;
+    float a_virtual = s - b_virtual;
+    *sum = s;
+    *err = (a - a_virtual) + (b - b_virtual);
+}
+
+// a = *hi + *lo with both halves of at most 12 significant bits (Veltkamp's split, 2^12 + 1).
+OV_FN void ov_split(float a, float* hi, float* lo) {
+    float c = 4097.0f * a;
+    float h = c - (c - a);
+    *hi = h;
+    *lo = a - h;
+}
+
+// a * b = *product + *err exactly (Dekker's TwoProduct without FMA).
+OV_FN void ov_two_product(float a, float b, float* product, float* err) {
+    float a_hi, a_lo, b_hi, b_lo;
+    ov_split(a, &a_hi, &a_lo);
+    ov_split(b, &b_hi, &b_lo);
+    float p = a * b;
+    *product = p;
+    *err = a_lo * b_lo - (((p - a_hi * b_hi) - a_lo * b_hi) - a_hi * b_lo);
+}
+
+// Exact sign (-1, 0 or 1) of twice the signed area of the triangle projected onto axes (a1, a2):
+// the sum over edges of u_j x u_{j+1}, six exact products, twelve terms, summed exactly into a
+// nonoverlapping expansion (Shewchuk's Grow-Expansion) whose largest nonzero part has the sign.
+OV_FN float ov_exact_orientation(OvTriangle t, int a1, int a2) {
+    float expansion[12];
+    int length = 0;
+    for (int j = 0; j < 3; ++j) {
+        int next = j == 2 ? 0 : j + 1;
+        float terms[4];
+        ov_two_product(t.u[3 * j + a1], t.u[3 * next + a2], &terms[0], &terms[1]);
+        ov_two_product(-t.u[3 * j + a2], t.u[3 * next + a1], &terms[2], &terms[3]);
+        for (int i = 0; i < 4; ++i) {
+            float carry = terms[i];
+            for (int e = 0; e < length; ++e) ov_two_sum(carry, expansion[e], &carry, &expansion[e]);
+            expansion[length++] = carry;
+        }
+    }
+    for (int e = 11; e >= 0; --e)
+        if (expansion[e] != 0.0f) return expansion[e] > 0.0f ? 1.0f : -1.0f;
+    return 0.0f;
+}
+
+// The same sign, usually from the plain float determinant: Shewchuk's orient2d filter, whose
+// bound (3 + 16 eps) eps |terms| (eps = 2^-24) covers every rounding of that evaluation; the
+// absolute 1e-30 covers products that underflow. Only near-degenerate projections pay for the
+// exact sum.
+OV_FN float ov_projected_orientation(OvTriangle t, int a1, int a2) {
+    float left = (t.u[a1] - t.u[6 + a1]) * (t.u[3 + a2] - t.u[6 + a2]);
+    float right = (t.u[a2] - t.u[6 + a2]) * (t.u[3 + a1] - t.u[6 + a1]);
+    float det = left - right;
+    float eps = 5.9604645e-08f;  // 2^-24
+    float bound = (3.0f + 16.0f * eps) * eps * (fabs(left) + fabs(right)) + 1e-30f;
+    if (det > bound) return 1.0f;
+    if (det < -bound) return -1.0f;
+    return ov_exact_orientation(t, a1, a2);
+}
+
 OV_FN OvPefTriangle ov_setup_pef(OvTriangle t, int half_open) {
     OvPefTriangle s;
     s.strict = 0;
@@ -217,12 +289,16 @@ OV_FN OvPefTriangle ov_setup_pef(OvTriangle t, int half_open) {
     if (half_open && (n[0] < 0.0f || n[1] < 0.0f || n[2] < 0.0f)) s.strict |= 1 << 9;
     if (half_open && (n[0] > 0.0f || n[1] > 0.0f || n[2] > 0.0f)) s.strict |= 1 << 10;
 
-    // Projection k keeps axes (a1, a2). Edge normals are turned to point inwards using the sign of
-    // n[k], which is exactly the orientation of the projected triangle (same float expression).
+    // Projection k keeps axes (a1, a2). Edge normals are turned to point inwards by the exact
+    // orientation of the projected triangle. Each edge line passes through its first vertex with
+    // the rounded edge as direction (off the true edge by rounding only: anchor-relative
+    // coordinates are >= 0, so each difference is exact or within 2^-24 of itself), so with the
+    // true orientation the test is exact up to rounding. A projection of exactly zero area (a
+    // segment) may take either orientation: opposite edges then demand both sides of the segment.
     for (int k = 0; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
-        float sign = n[k] >= 0.0f ? 1.0f : -1.0f;
+        float sign = ov_projected_orientation(t, a1, a2) >= 0.0f ? 1.0f : -1.0f;
         for (int j = 0; j < 3; ++j) {
             float ex = ov_edge(t, j, a1);
             float ey = ov_edge(t, j, a2);
@@ -298,7 +374,7 @@ OV_FN OvThinTriangle ov_setup_thin(OvTriangle t, int half_open) {
     for (int k = 0; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
-        float sign = n[k] >= 0.0f ? 1.0f : -1.0f;
+        float sign = ov_projected_orientation(t, a1, a2) >= 0.0f ? 1.0f : -1.0f;  // as in PEF
         for (int j = 0; j < 3; ++j) {
             float nx = -ov_edge(t, j, a2) * sign;
             float ny = ov_edge(t, j, a1) * sign;

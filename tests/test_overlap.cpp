@@ -178,6 +178,22 @@ TEST_P(HandWorked, HalfOpenPointBelongsToOneVoxel) {
     EXPECT_TRUE(v.get(2, 1, 1));
 }
 
+// A sliver from TR12J_OCC.stl at 512^3: a vertical face (normal z = -1.6e-5 of |n| = 364) whose
+// projection onto z is a needle 18 voxels long and 2e-5 wide. In float, that projection's area
+// cancels to exactly 0, which once oriented its edge functions backwards: PEF then dropped a run
+// of voxels the face crosses by 6% of a voxel.
+TEST_P(HandWorked, SliverWithCancellingProjectionIsNotDropped) {
+    Mesh m;
+    add_triangle(m, {177.81734807312253, 312.37235208745057, 93.8498023715415},
+                 {189.84859421319169, 325.73442517910081, 114.08695652173913},
+                 {177.81732491353756, 312.37232506793481, 114.08695652173913});
+    Grid g = unit_grid(28, 28, 28);
+    g.origin = {170, 300, 90};  // whole voxels: the float triangle is the one the 512^3 run saw
+    const SparseVoxels v = reference(m, g, GetParam());
+    for (int k = 10; k <= 23; ++k) EXPECT_TRUE(v.get(11, 15, k)) << "voxel 11,15," << k;
+    expect_exact_up_to(v, m, 1e-4);
+}
+
 INSTANTIATE_TEST_SUITE_P(BothTests, HandWorked, ::testing::ValuesIn(kTests),
                          [](const auto& info) { return std::string(to_string(info.param)); });
 
@@ -315,6 +331,68 @@ TEST(Translation, WholeVoxelShiftMovesVoxelsExactly) {
 
 namespace oclvox::test {
 namespace {
+
+// The thin predicate in double precision on the unrounded triangle, written from Schwarz & Seidel
+// 2010 independently of voxel_math.h: the voxel's box meets the triangle's box, the plane crosses
+// the centre segment along the normal's dominant axis, and in each projection every edge's inner
+// half-plane reaches the voxel's inscribed diamond. `margin` > 0 demands that much slack (in
+// voxels), < 0 allows it.
+bool thin_double(const Mesh& m, int64_t i, int64_t j, int64_t k, double margin) {
+    const Vec3d p{i + 0.5, j + 0.5, k + 0.5};
+    const Vec3d u[3] = {m.positions[0], m.positions[1], m.positions[2]};
+    for (int a = 0; a < 3; ++a) {
+        const double lo = std::min({u[0][a], u[1][a], u[2][a]});
+        const double hi = std::max({u[0][a], u[1][a], u[2][a]});
+        if (p[a] + 0.5 < lo + margin || p[a] - 0.5 > hi - margin) return false;
+    }
+    const Vec3d e0 = sub(u[1], u[0]), e1 = sub(u[2], u[0]);
+    const Vec3d n{e0[1] * e1[2] - e0[2] * e1[1], e0[2] * e1[0] - e0[0] * e1[2],
+                  e0[0] * e1[1] - e0[1] * e1[0]};
+    const double dominant = std::max({std::abs(n[0]), std::abs(n[1]), std::abs(n[2])});
+    if (std::abs(dot(n, sub(p, u[0]))) > dominant * (0.5 - margin)) return false;
+    for (int a = 0; a < 3; ++a) {
+        const int a1 = (a + 1) % 3, a2 = (a + 2) % 3;
+        const double orientation = n[a] >= 0 ? 1 : -1;
+        for (int e = 0; e < 3; ++e) {
+            const Vec3d& from = u[e];
+            const Vec3d& to = u[(e + 1) % 3];
+            const double mx = -(to[a2] - from[a2]) * orientation;
+            const double my = (to[a1] - from[a1]) * orientation;
+            const double reach = std::max(std::abs(mx), std::abs(my));
+            if (mx * (p[a1] - from[a1]) + my * (p[a2] - from[a2]) + reach * (0.5 - margin) < 0)
+                return false;
+        }
+    }
+    return true;
+}
+
+// The TR12J_OCC sliver of HandWorked.SliverWithCancellingProjectionIsNotDropped: its cancelling
+// projection once turned the thin test's edge functions backwards too, dropping part of the
+// 6-separating layer. Within 1e-4 voxel, the thin voxels are those the double predicate gives.
+TEST(Thin, SliverWithCancellingProjectionMatchesDoublePredicate) {
+    Mesh m;
+    add_triangle(m, {177.81734807312253, 312.37235208745057, 93.8498023715415},
+                 {189.84859421319169, 325.73442517910081, 114.08695652173913},
+                 {177.81732491353756, 312.37232506793481, 114.08695652173913});
+    Grid g = unit_grid(28, 28, 28);
+    g.origin = {170, 300, 90};
+    for (auto& p : m.positions) p = to_grid(g, p);  // whole voxels: exact
+    g.origin = {0, 0, 0};
+    const SparseVoxels v = thin(m, g);
+    uint64_t required = 0;
+    for (int64_t k = 0; k < 28; ++k)
+        for (int64_t j = 0; j < 28; ++j)
+            for (int64_t i = 0; i < 28; ++i) {
+                if (thin_double(m, i, j, k, 1e-4)) {
+                    ++required;
+                    EXPECT_TRUE(v.get(i, j, k)) << "voxel " << i << "," << j << "," << k;
+                }
+                if (v.get(i, j, k))
+                    EXPECT_TRUE(thin_double(m, i, j, k, -1e-4))
+                        << "voxel " << i << "," << j << "," << k;
+            }
+    EXPECT_GT(required, 100u);
+}
 
 // Thin voxels are conservative voxels, and fewer of them.
 TEST(Thin, IsASubsetOfConservative) {
