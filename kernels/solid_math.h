@@ -182,9 +182,10 @@ OVS_FN int ovs_centre_above(OvWide area, OvWide num, ovs_long za, int k) {
     return ovs_sign(ovs_add(ovs_mul(area, centre - za), ovs_negate(num))) > 0;
 }
 
-// The parity flip of triangle t in column (i, j): -1 if t does not cover the column's centre,
-// else the first voxel k in [0, nz] whose centre lies above the crossing (nz: none in the grid).
-OVS_FN int ovs_parity_flip(const OvParityTriangle* t, int i, int j, int nz) {
+// The parity flip of triangle t in column (i, j), in exact integers: -1 if t does not cover the
+// column's centre, else the first voxel k in [0, nz] whose centre lies above the crossing (nz:
+// none in the grid).
+OVS_FN int ovs_parity_flip_exact(const OvParityTriangle* t, int i, int j, int nz) {
     ovs_long px = (ovs_long)i * OVS_UNITS + OVS_UNITS / 2;
     ovs_long py = (ovs_long)j * OVS_UNITS + OVS_UNITS / 2;
     ovs_long ax = t->v[0] - px, ay = t->v[1] - py;
@@ -224,6 +225,90 @@ OVS_FN int ovs_parity_flip(const OvParityTriangle* t, int i, int j, int nz) {
     while (k > 0 && ovs_centre_above(area, num, t->v[2], k - 1)) --k;
     while (k < nz && !ovs_centre_above(area, num, t->v[2], k)) ++k;
     return k;
+}
+
+// The float filter in front of the exact test. Every float below carries a rigorous bound on its
+// distance from the exact value, so whatever it decides is what the exact test would decide
+// (float + - * are correctly rounded in OpenCL C and on the host, and an overflow to inf or NaN
+// decides nothing); only what it cannot decide, centres within about 2^-20 relative of an edge
+// or of the crossing, goes to the exact test. Coordinates are scaled by 2^-20 so that no product
+// underflows and none overflows below the OvWide bounds.
+#define OVS_FILTER_SCALE 0x1p-20f
+#define OVS_UNDECIDED (-2)
+
+// |x|, the same function on device and host.
+OVS_FN float ovs_abs(float x) {
+    return x < 0.0f ? -x : x;
+}
+
+// G(k) = sum over vertices of w_v * (centre_k - z_v): > 0 iff voxel k's centre lies above the
+// crossing (the weights w are >= 0). Returns +1 or -1 where the float evaluation decides the sign
+// beyond its error bound, else 0. werr: bounds on |w - exact weight|.
+OVS_FN int ovs_filtered_above(const OvParityTriangle* t, const float* w, const float* werr, int k) {
+    ovs_long centre = (ovs_long)k * OVS_UNITS + OVS_UNITS / 2;
+    float g = 0.0f, bound = 0.0f;
+    for (int v = 0; v < 3; ++v) {
+        float h = (float)(centre - t->v[3 * v + 2]) * OVS_FILTER_SCALE;
+        g += w[v] * h;
+        bound += (werr[v] + 0x1p-20f * w[v]) * ovs_abs(h);
+    }
+    // The products and sums above round at most a few times 2^-24 relative; twice the bound
+    // covers them and the rounding of the bound itself.
+    bound *= 2.0f;
+    if (g > bound) return 1;
+    if (g < -bound) return -1;
+    return 0;
+}
+
+// The parity flip as ovs_parity_flip_exact, or OVS_UNDECIDED where the float filter cannot tell.
+OVS_FN int ovs_parity_flip_filtered(const OvParityTriangle* t, int i, int j, int nz) {
+    ovs_long px = (ovs_long)i * OVS_UNITS + OVS_UNITS / 2;
+    ovs_long py = (ovs_long)j * OVS_UNITS + OVS_UNITS / 2;
+    float x[3], y[3];
+    for (int v = 0; v < 3; ++v) {
+        x[v] = (float)(t->v[3 * v] - px) * OVS_FILTER_SCALE;
+        y[v] = (float)(t->v[3 * v + 1] - py) * OVS_FILTER_SCALE;
+    }
+    // w[v]: the weight of vertex v, the edge function of the opposite edge. With p1 and p2 its
+    // rounded products, |w - exact| <= 2^-21 (|p1| + |p2|): the two conversions, the product and
+    // the difference each round by at most 2^-24 relative.
+    float w[3], werr[3];
+    int plus = 0, minus = 0;
+    for (int v = 0; v < 3; ++v) {
+        int a = (v + 1) % 3, b = (v + 2) % 3;
+        float p1 = x[a] * y[b], p2 = y[a] * x[b];
+        w[v] = p1 - p2;
+        werr[v] = 0x1p-21f * (ovs_abs(p1) + ovs_abs(p2));
+        plus += w[v] > werr[v] ? 1 : 0;
+        minus += w[v] < -werr[v] ? 1 : 0;
+    }
+    if (plus > 0 && minus > 0) return -1;
+    if (plus + minus < 3) return OVS_UNDECIDED;
+    if (minus == 3)
+        for (int v = 0; v < 3; ++v) w[v] = -w[v];
+
+    // Start from the float crossing height and confirm it between two centres.
+    float area = w[0] + w[1] + w[2];
+    float za = (float)t->v[2] * OVS_FILTER_SCALE;
+    float dzb = (float)(t->v[5] - t->v[2]) * OVS_FILTER_SCALE;
+    float dzc = (float)(t->v[8] - t->v[2]) * OVS_FILTER_SCALE;
+    float voxel = (float)OVS_UNITS * OVS_FILTER_SCALE;
+    float estimate = (za + (w[1] * dzb + w[2] * dzc) / area - 0.5f * voxel) / voxel;
+    int k = 0;
+    if (estimate >= (float)nz)
+        k = nz;
+    else if (estimate > 0.0f)
+        k = (int)estimate + 1;
+    if (k > 0 && ovs_filtered_above(t, w, werr, k - 1) >= 0) return OVS_UNDECIDED;
+    if (k < nz && ovs_filtered_above(t, w, werr, k) <= 0) return OVS_UNDECIDED;
+    return k;
+}
+
+// The parity flip of triangle t in column (i, j): -1 if t does not cover the column's centre,
+// else the first voxel k in [0, nz] whose centre lies above the crossing (nz: none in the grid).
+OVS_FN int ovs_parity_flip(const OvParityTriangle* t, int i, int j, int nz) {
+    int k = ovs_parity_flip_filtered(t, i, j, nz);
+    return k != OVS_UNDECIDED ? k : ovs_parity_flip_exact(t, i, j, nz);
 }
 
 // Inclusive prefix XOR of the 32 bits of `word` (bit 0 first), continuing the parity `carry`
