@@ -5,20 +5,19 @@
 // whose centre (i + 0.5, j + 0.5) its xy projection covers, the first voxel whose centre lies
 // above the crossing; a prefix XOR up the column then gives every voxel its parity.
 //
-// Both decisions are exact for the vertices as snapped, once, to a fixed-point grid of 2^-40
-// voxel (so a vertex has one value in every triangle that uses it, and it moves by at most
-// 2^-41 voxel, less than a double's own rounding beyond 2^12 voxels from the grid origin). The 2D
-// edge functions are exact 128-bit integers and the crossing height is compared with voxel
-// centres as an exact 192-bit integer expression, so a closed mesh never double counts or drops a
-// crossing at a shared edge or vertex, and a centre is on the side of the snapped surface it
+// Both decisions are exact for the vertices as rounded, once, to a fixed-point grid of 2^-40
+// voxel (so a vertex has one value in every triangle that uses it; it moves by at most 2^-41
+// voxel, and not at all at 2^12 voxels or more from the grid origin, where doubles are no finer).
+// The 2D edge functions are exact 128-bit integers and a voxel centre is compared with the
+// crossing height by an exact 192-bit integer expression, so a closed mesh never double counts
+// or drops a crossing at a shared edge or vertex, and a centre is on the side of the surface it
 // truly lies on, however close. A centre exactly on a projected edge or vertex is decided by
 // simulation of simplicity: the column is moved to (x + e, y + e^2) for an infinitesimal e > 0,
 // which no edge or vertex can contain. Vertical triangles cover no column for the same reason. A
 // centre exactly on the surface counts the crossing as not below it.
 //
-// Only integer + - * and comparisons decide anything; a float estimate merely picks where the
-// exact search for the crossing starts, so device and host agree bit for bit whatever the float
-// rounding.
+// A float filter with rigorous error bounds decides the clear cases and defers the others to the
+// integer test, so the answer never depends on float rounding: device and host agree bit for bit.
 #ifndef OCLVOX_SOLID_MATH_H
 #define OCLVOX_SOLID_MATH_H
 
