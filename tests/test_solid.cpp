@@ -5,8 +5,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <random>
 
 #include "solid.hpp"
+#include "solid_math.h"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -230,6 +232,89 @@ TEST(Solid, ParityDecidesCentresJustOffSlantedFaces) {
                     }
         }
     }
+}
+
+// The wide integers of solid_math.h against the compiler's 128-bit integers: edge functions
+// exactly, and 192-bit products modulo 2^128 with the right sign.
+TEST(Solid, ParityWideIntegersAreExact) {
+    __extension__ typedef __int128 int128;
+    std::mt19937_64 rng(7);
+    auto value = [&](int bits) {
+        const int64_t v = int64_t(rng() >> (64 - bits));
+        return rng() & 1 ? -v : v;
+    };
+    auto as_int128 = [](const detail::OvWide& w) {
+        return int128((unsigned __int128)w.w[1] << 64 | w.w[0]);
+    };
+    for (int n = 0; n < 200000; ++n) {
+        const int bits = 1 + int(rng() % 62);
+        const int64_t ax = value(bits), ay = value(bits), bx = value(bits), by = value(bits);
+        const detail::OvWide e = detail::ovs_cross(ax, ay, bx, by);
+        const int128 expected = int128(ax) * by - int128(ay) * bx;
+        ASSERT_EQ(as_int128(e), expected) << ax << " " << ay << " " << bx << " " << by;
+        ASSERT_EQ(detail::ovs_sign(e), expected > 0 ? 1 : expected < 0 ? -1 : 0);
+        const int64_t d = value(1 + int(rng() % 62));
+        const detail::OvWide p = detail::ovs_mul(e, d);
+        ASSERT_EQ(as_int128(p), int128((unsigned __int128)expected * (unsigned __int128)d));
+        const int sign = (expected > 0) - (expected < 0);
+        ASSERT_EQ(detail::ovs_sign(p), d == 0 ? 0 : d > 0 ? sign : -sign);
+        ASSERT_EQ(detail::ovs_sign(detail::ovs_add(p, detail::ovs_negate(p))), 0);
+    }
+}
+
+// The float filter decides only what the exact integer test decides: triangles around column
+// (2, 2) with vertices on, or a few units off, the column's lines and crossings within a few units
+// of a voxel centre, at offsets from 1 unit (2^-40 voxel) to many voxels.
+TEST(Solid, ParityFilterAgreesWithExactTest) {
+    using detail::ovs_long;  // for OVS_UNITS
+    std::mt19937_64 rng(11);
+    const int64_t centre = 2 * OVS_UNITS + OVS_UNITS / 2;
+    auto offset = [&]() -> int64_t {
+        const int scale = int(rng() % 46);  // up to 2^45 units: 32 voxels
+        const int64_t tiny = int64_t(rng() % 5) - 2;
+        switch (rng() % 4) {
+            case 0:
+                return tiny;
+            case 1:
+                return (int64_t(rng() >> (63 - scale)) - (int64_t(1) << scale)) + tiny;
+            case 2:
+                return int64_t(rng() % 9 - 4) * (OVS_UNITS / 2) + tiny;
+            default:
+                return int64_t(rng() >> (63 - scale)) - (int64_t(1) << scale);
+        }
+    };
+    uint64_t filtered = 0, deferred = 0, covered = 0;
+    for (int n = 0; n < 300000; ++n) {
+        detail::OvParityTriangle t;
+        for (int v = 0; v < 3; ++v) {
+            t.v[3 * v] = centre + offset();
+            t.v[3 * v + 1] = centre + offset();
+            t.v[3 * v + 2] = centre + offset();
+        }
+        // Often a plane through the centre of voxel (2, 2, 2), up to a few units.
+        if (rng() % 2) {
+            const int64_t gx = int64_t(rng() % 7) - 3, gy = int64_t(rng() % 7) - 3;
+            for (int v = 0; v < 3; ++v)
+                t.v[3 * v + 2] = centre +
+                                 (gx * (t.v[3 * v] - centre) + gy * (t.v[3 * v + 1] - centre)) / 2 +
+                                 int64_t(rng() % 5) - 2;
+        }
+        const int exact = detail::ovs_parity_flip_exact(&t, 2, 2, 6);
+        const int fast = detail::ovs_parity_flip_filtered(&t, 2, 2, 6);
+        covered += exact >= 0;
+        if (fast == OVS_UNDECIDED) {
+            ++deferred;
+            continue;
+        }
+        ++filtered;
+        ASSERT_EQ(fast, exact) << n;
+        ASSERT_EQ(detail::ovs_parity_flip(&t, 2, 2, 6), exact);
+    }
+    std::printf("filter: %llu decided, %llu deferred, %llu covered\n", (unsigned long long)filtered,
+                (unsigned long long)deferred, (unsigned long long)covered);
+    EXPECT_GT(filtered, 100000u);
+    EXPECT_GT(deferred, 10000u);
+    EXPECT_GT(covered, 30000u);
 }
 
 // Voxels of a naive double-precision parity fill: 0 outside, 1 inside, 2 undecided (x fastest).
