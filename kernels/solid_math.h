@@ -5,14 +5,19 @@
 // whose centre (i + 0.5, j + 0.5) its xy projection covers, the first voxel whose centre lies
 // above the crossing; a prefix XOR up the column then gives every voxel its parity.
 //
-// Which triangle covers a column is decided exactly, so a closed mesh never double counts or
-// drops a crossing at a shared edge or vertex: vertices are snapped once to a fixed-point grid of
-// 1/256 voxel (so a vertex has one value in every triangle that uses it), and the 2D edge
-// functions are exact 64-bit integer expressions. A centre exactly on a projected edge or vertex
-// is decided by simulation of simplicity: the column is moved to (x + e, y + e^2) for an
-// infinitesimal e > 0, which no edge or vertex can contain. Vertical triangles cover no column
-// for the same reason. Only the crossing height is computed in float; rounding there can only
-// move a crossing past a voxel centre that lies within rounding of the surface.
+// Both decisions are exact for the vertices as rounded, once, to a fixed-point grid of 2^-40
+// voxel (so a vertex has one value in every triangle that uses it; it moves by at most 2^-41
+// voxel, and not at all at 2^12 voxels or more from the grid origin, where doubles are no finer).
+// The 2D edge functions are exact 128-bit integers and a voxel centre is compared with the
+// crossing height by an exact 192-bit integer expression, so a closed mesh never double counts
+// or drops a crossing at a shared edge or vertex, and a centre is on the side of the surface it
+// truly lies on, however close. A centre exactly on a projected edge or vertex is decided by
+// simulation of simplicity: the column is moved to (x + e, y + e^2) for an infinitesimal e > 0,
+// which no edge or vertex can contain. Vertical triangles cover no column for the same reason. A
+// centre exactly on the surface counts the crossing as not below it.
+//
+// A float filter with rigorous error bounds decides the clear cases and defers the others to the
+// integer test, so the answer never depends on float rounding: device and host agree bit for bit.
 #ifndef OCLVOX_SOLID_MATH_H
 #define OCLVOX_SOLID_MATH_H
 
@@ -20,23 +25,101 @@
 #pragma OPENCL FP_CONTRACT OFF
 #define OVS_FN static inline
 typedef long ovs_long;
+typedef ulong ovs_ulong;
+#define ovs_mul_hi(a, b) mul_hi(a, b)
 #else
 #include <cstdint>
 #define OVS_FN static inline
 namespace oclvox::detail {
 typedef int64_t ovs_long;
+typedef uint64_t ovs_ulong;
+// OpenCL's mul_hi for ulong: the high 64 bits of the 128-bit product a * b.
+OVS_FN ovs_ulong ovs_mul_hi(ovs_ulong a, ovs_ulong b) {
+    const ovs_ulong a_lo = a & 0xffffffffu, a_hi = a >> 32;
+    const ovs_ulong b_lo = b & 0xffffffffu, b_hi = b >> 32;
+    const ovs_ulong lo_hi = a_lo * b_hi, hi_lo = a_hi * b_lo;
+    const ovs_ulong middle = ((a_lo * b_lo) >> 32) + (lo_hi & 0xffffffffu) + (hi_lo & 0xffffffffu);
+    return a_hi * b_hi + (lo_hi >> 32) + (hi_lo >> 32) + (middle >> 32);
+}
 #endif
 
-// Fixed-point units per voxel. Voxel centres, i * 256 + 128, are exact.
-#define OVS_UNITS 256
-// Snapped coordinates must stay within +-2^29 units (2^21 voxels): with grid axes up to 2^20
-// voxels, edge-function products then stay below 2^60 and their sums below 2^63.
-#define OVS_MAX_UNITS ((ovs_long)1 << 29)
+// Fixed-point units per voxel (2^40). Voxel centres, i * OVS_UNITS + OVS_UNITS / 2, are exact.
+#define OVS_UNITS ((ovs_long)1 << 40)
+// Snapped coordinates stay within +-2^61 units (2^21 voxels), and grid axes hold at most 2^20
+// voxels, so coordinates relative to a column centre or to another vertex stay below 2^62; 2D
+// edge functions below 2^125; twice a triangle's projected area below 2^124 (its xy box's area);
+// the crossing numerator and the centre test below 2^188: all within the 192-bit OvWide.
+#define OVS_MAX_UNITS ((ovs_long)1 << 61)
 
 // A triangle for the parity test: vertices in fixed-point grid units (x0 y0 z0 x1 ...).
 typedef struct {
     ovs_long v[9];
 } OvParityTriangle;
+
+// A signed 192-bit integer in two's complement, least significant word first.
+typedef struct {
+    ovs_ulong w[3];
+} OvWide;
+
+OVS_FN OvWide ovs_wide(ovs_long a) {
+    OvWide r;
+    r.w[0] = (ovs_ulong)a;
+    r.w[1] = r.w[2] = a < 0 ? ~(ovs_ulong)0 : 0;
+    return r;
+}
+
+OVS_FN OvWide ovs_add(OvWide a, OvWide b) {
+    OvWide r;
+    r.w[0] = a.w[0] + b.w[0];
+    ovs_ulong carry = r.w[0] < a.w[0] ? 1 : 0;
+    ovs_ulong sum = a.w[1] + b.w[1];
+    ovs_ulong carry_out = sum < a.w[1] ? 1 : 0;
+    r.w[1] = sum + carry;
+    carry_out += r.w[1] < sum ? 1 : 0;
+    r.w[2] = a.w[2] + b.w[2] + carry_out;
+    return r;
+}
+
+OVS_FN OvWide ovs_negate(OvWide a) {
+    OvWide r;
+    r.w[0] = ~a.w[0] + 1;
+    ovs_ulong carry = r.w[0] == 0 ? 1 : 0;
+    r.w[1] = ~a.w[1] + carry;
+    carry = (carry && r.w[1] == 0) ? 1 : 0;
+    r.w[2] = ~a.w[2] + carry;
+    return r;
+}
+
+OVS_FN int ovs_sign(OvWide a) {
+    if ((ovs_long)a.w[2] < 0) return -1;
+    return (a.w[0] | a.w[1] | a.w[2]) != 0 ? 1 : 0;
+}
+
+// a * b, for |a| < 2^128 (the product must fit, which the bounds above guarantee).
+OVS_FN OvWide ovs_mul(OvWide a, ovs_long b) {
+    int negative = (ovs_sign(a) < 0) != (b < 0);
+    OvWide m = ovs_sign(a) < 0 ? ovs_negate(a) : a;
+    ovs_ulong mb = b < 0 ? (ovs_ulong)0 - (ovs_ulong)b : (ovs_ulong)b;
+    OvWide r;
+    r.w[0] = m.w[0] * mb;
+    ovs_ulong high = ovs_mul_hi(m.w[0], mb);
+    r.w[1] = high + m.w[1] * mb;
+    r.w[2] = ovs_mul_hi(m.w[1], mb) + (r.w[1] < high ? 1 : 0);
+    return negative ? ovs_negate(r) : r;
+}
+
+// a / 2^64 as a float (within a few units of its last place), for a float estimate of a ratio of
+// two OvWide values. Converted as a magnitude, so that no two large words cancel.
+OVS_FN float ovs_wide_float(OvWide a) {
+    OvWide m = ovs_sign(a) < 0 ? ovs_negate(a) : a;
+    float f = (float)m.w[2] * 0x1p64f + (float)m.w[1] + (float)m.w[0] * 0x1p-64f;
+    return ovs_sign(a) < 0 ? -f : f;
+}
+
+// ax * by - ay * bx, exactly.
+OVS_FN OvWide ovs_cross(ovs_long ax, ovs_long ay, ovs_long bx, ovs_long by) {
+    return ovs_add(ovs_mul(ovs_wide(ax), by), ovs_negate(ovs_mul(ovs_wide(ay), bx)));
+}
 
 // Voxel columns (i, j) of a triangle's xy bounding box whose centres it may cover, clipped to one
 // brick column (bx, by) of brick_size voxels and to the grid; returns how many (0 if none).
@@ -61,7 +144,8 @@ OVS_FN ovs_long ovs_column_range(const OvParityTriangle* t, int bx, int by, int 
             lo = t->v[3 * i + k] < lo ? t->v[3 * i + k] : lo;
             hi = t->v[3 * i + k] > hi ? t->v[3 * i + k] : hi;
         }
-        // Centres c = i * 256 + 128 with lo <= c <= hi; the exact test decides the boundary ones.
+        // Centres c = i * OVS_UNITS + OVS_UNITS / 2 with lo <= c <= hi; the exact test decides
+        // the boundary ones.
         ovs_long first = ovs_floor_div(lo - OVS_UNITS / 2 + OVS_UNITS - 1, OVS_UNITS);
         ovs_long last = ovs_floor_div(hi - OVS_UNITS / 2, OVS_UNITS);
         ovs_long brick_lo = (ovs_long)brick[k] * brick_size;
@@ -78,11 +162,12 @@ OVS_FN ovs_long ovs_column_range(const OvParityTriangle* t, int bx, int by, int 
 }
 
 // Side of the column centre p relative to the projected edge a -> b, with a and b given relative
-// to p: +1 left, -1 right, 0 only if a and b project to the same point. Exact, and antisymmetric
-// (swapping a and b negates it), so two triangles sharing an edge always see opposite sides.
-OVS_FN int ovs_edge_side(ovs_long ax, ovs_long ay, ovs_long bx, ovs_long by) {
-    ovs_long e = ax * by - ay * bx;
-    if (e != 0) return e > 0 ? 1 : -1;
+// to p and e = ax * by - ay * bx: +1 left, -1 right, 0 only if a and b project to the same point.
+// Exact, and antisymmetric (swapping a and b negates it), so two triangles sharing an edge always
+// see opposite sides.
+OVS_FN int ovs_edge_side(OvWide e, ovs_long ax, ovs_long ay, ovs_long bx, ovs_long by) {
+    int s = ovs_sign(e);
+    if (s != 0) return s;
     // Centre on the edge's line: the sign at (x + e, y + e^2) is that of e * (ay - by) +
     // e^2 * (bx - ax).
     if (ay != by) return ay > by ? 1 : -1;
@@ -90,53 +175,139 @@ OVS_FN int ovs_edge_side(ovs_long ax, ovs_long ay, ovs_long bx, ovs_long by) {
     return 0;
 }
 
-// The parity flip of triangle t in column (i, j): -1 if t does not cover the column's centre,
-// else the first voxel k in [0, nz] whose centre lies above the crossing (nz: none in the grid).
-OVS_FN int ovs_parity_flip(const OvParityTriangle* t, int i, int j, int nz) {
+// Whether the centre of voxel k lies strictly above the crossing za + num / area (area > 0).
+OVS_FN int ovs_centre_above(OvWide area, OvWide num, ovs_long za, int k) {
+    ovs_long centre = (ovs_long)k * OVS_UNITS + OVS_UNITS / 2;
+    return ovs_sign(ovs_add(ovs_mul(area, centre - za), ovs_negate(num))) > 0;
+}
+
+// The parity flip of triangle t in column (i, j), in exact integers: -1 if t does not cover the
+// column's centre, else the first voxel k in [0, nz] whose centre lies above the crossing (nz:
+// none in the grid).
+OVS_FN int ovs_parity_flip_exact(const OvParityTriangle* t, int i, int j, int nz) {
     ovs_long px = (ovs_long)i * OVS_UNITS + OVS_UNITS / 2;
     ovs_long py = (ovs_long)j * OVS_UNITS + OVS_UNITS / 2;
     ovs_long ax = t->v[0] - px, ay = t->v[1] - py;
     ovs_long bx = t->v[3] - px, by = t->v[4] - py;
     ovs_long cx = t->v[6] - px, cy = t->v[7] - py;
 
+    // Barycentric weights: twice the areas of the sub-triangles opposite each vertex.
+    OvWide w_c = ovs_cross(ax, ay, bx, by);
+    OvWide w_a = ovs_cross(bx, by, cx, cy);
+    OvWide w_b = ovs_cross(cx, cy, ax, ay);
+
     // Covered iff the perturbed centre is strictly on the same side of all three edges, whichever
     // way the triangle winds: parity must not depend on orientation.
-    int s_ab = ovs_edge_side(ax, ay, bx, by);
-    int s_bc = ovs_edge_side(bx, by, cx, cy);
-    int s_ca = ovs_edge_side(cx, cy, ax, ay);
+    int s_ab = ovs_edge_side(w_c, ax, ay, bx, by);
+    int s_bc = ovs_edge_side(w_a, bx, by, cx, cy);
+    int s_ca = ovs_edge_side(w_b, cx, cy, ax, ay);
     if (s_ab == 0 || s_ab != s_bc || s_bc != s_ca) return -1;
-
-    // Barycentric weights (twice the sub-triangle areas, exact), made non-negative.
-    ovs_long w_c = ax * by - ay * bx;
-    ovs_long w_a = bx * cy - by * cx;
-    ovs_long w_b = cx * ay - cy * ax;
     if (s_ab < 0) {
-        w_a = -w_a;
-        w_b = -w_b;
-        w_c = -w_c;
+        w_a = ovs_negate(w_a);
+        w_b = ovs_negate(w_b);
+        w_c = ovs_negate(w_c);
     }
-    ovs_long area = w_a + w_b + w_c;  // > 0: not all weights can vanish on a covering triangle
+    // Now every weight is >= 0, and their sum is > 0: not all can vanish on a covering triangle.
+    OvWide area = ovs_add(ovs_add(w_a, w_b), w_c);
 
-    // Crossing height relative to vertex a: z - za = num / area. Voxel k's centre is above it iff
-    // g(k) = (centre_k - za) * area - num > 0. g is evaluated in float, and float rounding is
-    // monotone, so g is non-decreasing in k and the first k with g(k) > 0 is well defined; a
-    // float estimate of it is only a starting point for the search, which makes the result
-    // independent of how the estimate was rounded.
-    float f_area = (float)area;
-    float num = (float)w_b * (float)(t->v[5] - t->v[2]) + (float)w_c * (float)(t->v[8] - t->v[2]);
-    float estimate = ((float)t->v[2] + num / f_area - (float)(OVS_UNITS / 2)) / (float)OVS_UNITS;
+    // Crossing height relative to vertex a: num / area. The first voxel whose centre lies above
+    // it is found by an exact search, which starts at a float estimate (close, as the weights
+    // are exact and non-negative) and so does not depend on how the estimate was rounded.
+    OvWide num = ovs_add(ovs_mul(w_b, t->v[5] - t->v[2]), ovs_mul(w_c, t->v[8] - t->v[2]));
+    float ratio = ovs_wide_float(num) / ovs_wide_float(area);
+    float estimate = ((float)t->v[2] + ratio - (float)(OVS_UNITS / 2)) / (float)OVS_UNITS;
     int k = 0;
     if (estimate >= (float)nz)
         k = nz;
     else if (estimate > 0.0f)
         k = (int)estimate + 1;
-    while (k > 0 &&
-           (float)((ovs_long)(k - 1) * OVS_UNITS + OVS_UNITS / 2 - t->v[2]) * f_area - num > 0.0f)
-        --k;
-    while (k < nz &&
-           !((float)((ovs_long)k * OVS_UNITS + OVS_UNITS / 2 - t->v[2]) * f_area - num > 0.0f))
-        ++k;
+    while (k > 0 && ovs_centre_above(area, num, t->v[2], k - 1)) --k;
+    while (k < nz && !ovs_centre_above(area, num, t->v[2], k)) ++k;
     return k;
+}
+
+// The float filter in front of the exact test. Every float below carries a rigorous bound on its
+// distance from the exact value, so whatever it decides is what the exact test would decide
+// (float + - * are correctly rounded in OpenCL C and on the host, and an overflow to inf or NaN
+// decides nothing); only what it cannot decide, centres within about 2^-20 relative of an edge
+// or of the crossing, goes to the exact test. Coordinates are scaled by 2^-20 so that no product
+// underflows and none overflows below the OvWide bounds.
+#define OVS_FILTER_SCALE 0x1p-20f
+#define OVS_UNDECIDED (-2)
+
+// |x|, the same function on device and host.
+OVS_FN float ovs_abs(float x) {
+    return x < 0.0f ? -x : x;
+}
+
+// G(k) = sum over vertices of w_v * (centre_k - z_v): > 0 iff voxel k's centre lies above the
+// crossing (the weights w are >= 0). Returns +1 or -1 where the float evaluation decides the sign
+// beyond its error bound, else 0. werr: bounds on |w - exact weight|.
+OVS_FN int ovs_filtered_above(const OvParityTriangle* t, const float* w, const float* werr, int k) {
+    ovs_long centre = (ovs_long)k * OVS_UNITS + OVS_UNITS / 2;
+    float g = 0.0f, bound = 0.0f;
+    for (int v = 0; v < 3; ++v) {
+        float h = (float)(centre - t->v[3 * v + 2]) * OVS_FILTER_SCALE;
+        g += w[v] * h;
+        bound += (werr[v] + 0x1p-20f * w[v]) * ovs_abs(h);
+    }
+    // The products and sums above round at most a few times 2^-24 relative; twice the bound
+    // covers them and the rounding of the bound itself.
+    bound *= 2.0f;
+    if (g > bound) return 1;
+    if (g < -bound) return -1;
+    return 0;
+}
+
+// The parity flip as ovs_parity_flip_exact, or OVS_UNDECIDED where the float filter cannot tell.
+OVS_FN int ovs_parity_flip_filtered(const OvParityTriangle* t, int i, int j, int nz) {
+    ovs_long px = (ovs_long)i * OVS_UNITS + OVS_UNITS / 2;
+    ovs_long py = (ovs_long)j * OVS_UNITS + OVS_UNITS / 2;
+    float x[3], y[3];
+    for (int v = 0; v < 3; ++v) {
+        x[v] = (float)(t->v[3 * v] - px) * OVS_FILTER_SCALE;
+        y[v] = (float)(t->v[3 * v + 1] - py) * OVS_FILTER_SCALE;
+    }
+    // w[v]: the weight of vertex v, the edge function of the opposite edge. With p1 and p2 its
+    // rounded products, |w - exact| <= 2^-21 (|p1| + |p2|): the two conversions, the product and
+    // the difference each round by at most 2^-24 relative.
+    float w[3], werr[3];
+    int plus = 0, minus = 0;
+    for (int v = 0; v < 3; ++v) {
+        int a = (v + 1) % 3, b = (v + 2) % 3;
+        float p1 = x[a] * y[b], p2 = y[a] * x[b];
+        w[v] = p1 - p2;
+        werr[v] = 0x1p-21f * (ovs_abs(p1) + ovs_abs(p2));
+        plus += w[v] > werr[v] ? 1 : 0;
+        minus += w[v] < -werr[v] ? 1 : 0;
+    }
+    if (plus > 0 && minus > 0) return -1;
+    if (plus + minus < 3) return OVS_UNDECIDED;
+    if (minus == 3)
+        for (int v = 0; v < 3; ++v) w[v] = -w[v];
+
+    // Start from the float crossing height and confirm it between two centres.
+    float area = w[0] + w[1] + w[2];
+    float za = (float)t->v[2] * OVS_FILTER_SCALE;
+    float dzb = (float)(t->v[5] - t->v[2]) * OVS_FILTER_SCALE;
+    float dzc = (float)(t->v[8] - t->v[2]) * OVS_FILTER_SCALE;
+    float voxel = (float)OVS_UNITS * OVS_FILTER_SCALE;
+    float estimate = (za + (w[1] * dzb + w[2] * dzc) / area - 0.5f * voxel) / voxel;
+    int k = 0;
+    if (estimate >= (float)nz)
+        k = nz;
+    else if (estimate > 0.0f)
+        k = (int)estimate + 1;
+    if (k > 0 && ovs_filtered_above(t, w, werr, k - 1) >= 0) return OVS_UNDECIDED;
+    if (k < nz && ovs_filtered_above(t, w, werr, k) <= 0) return OVS_UNDECIDED;
+    return k;
+}
+
+// The parity flip of triangle t in column (i, j): -1 if t does not cover the column's centre,
+// else the first voxel k in [0, nz] whose centre lies above the crossing (nz: none in the grid).
+OVS_FN int ovs_parity_flip(const OvParityTriangle* t, int i, int j, int nz) {
+    int k = ovs_parity_flip_filtered(t, i, j, nz);
+    return k != OVS_UNDECIDED ? k : ovs_parity_flip_exact(t, i, j, nz);
 }
 
 // Inclusive prefix XOR of the 32 bits of `word` (bit 0 first), continuing the parity `carry`

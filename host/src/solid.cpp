@@ -43,7 +43,7 @@ std::string mib(uint64_t bytes) {
 // ---- choosing the inside test ----
 
 // Vertices snapped to fixed-point grid units, or false if a vertex lies too far outside the grid
-// for the exact 64-bit edge functions.
+// for the exact integer arithmetic of solid_math.h.
 bool parity_triangles(const Mesh& mesh, const Grid& grid, std::vector<OvParityTriangle>& out) {
     const double limit = double(OVS_MAX_UNITS) / OVS_UNITS;
     const double inv = 1.0 / grid.voxel_size;
