@@ -692,7 +692,7 @@ TEST_F(MeshFiles, MalformedPlyAndOffBodiesFailInsteadOfShifting) {
     EXPECT_TRUE(contains(input_error_of(write("junk.off",
                                               "OFF\n3 1 0\n0 0 0\n1 0x 0\n0 1 0\n"
                                               "3 0 1 2\n")),
-                         "line 4: the y coordinate of vertex 1 '0x' is not a number"));
+                         "line 4: the y coordinate '0x' is not a number"));
     EXPECT_TRUE(contains(input_error_of(write("missing.off",
                                               "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n"
                                               "3 0 1 2\n")),

@@ -134,33 +134,34 @@ void TextCursor::fail(const std::string& problem) const {
     mesh_reading::fail(path_, "line " + std::to_string(line_) + ": " + problem);
 }
 
-double TextCursor::to_double(std::string_view word, const std::string& what) const {
-    if (word.empty()) fail("the " + what + " is missing");
+double TextCursor::to_double(std::string_view word, std::string_view what) const {
+    if (word.empty()) fail("the " + std::string(what) + " is missing");
     const char* const last = word.data() + word.size();
     double value = 0;
     // Correctly rounded: the nearest double to the decimal text. "nan" and "inf" are numbers
     // here; validate_mesh decides whether they matter.
     const auto parsed = std::from_chars(skip_plus(word.data(), last), last, value);
     if (parsed.ec == std::errc::result_out_of_range)
-        fail("the " + what + " " + quoted(word) + " is out of the range of double");
+        fail("the " + std::string(what) + " " + quoted(word) + " is out of the range of double");
     if (parsed.ec != std::errc() || parsed.ptr != last)
-        fail("the " + what + " " + quoted(word) + " is not a number");
+        fail("the " + std::string(what) + " " + quoted(word) + " is not a number");
     return value;
 }
 
-int64_t TextCursor::to_integer(std::string_view word, const std::string& what) const {
-    if (word.empty()) fail("the " + what + " is missing");
+int64_t TextCursor::to_integer(std::string_view word, std::string_view what) const {
+    if (word.empty()) fail("the " + std::string(what) + " is missing");
     const char* const last = word.data() + word.size();
     int64_t value = 0;
     const auto parsed = std::from_chars(skip_plus(word.data(), last), last, value);
     if (parsed.ec != std::errc() || parsed.ptr != last)
-        fail("the " + what + " " + quoted(word) + " is not a whole number that fits in 64 bits");
+        fail("the " + std::string(what) + " " + quoted(word) +
+             " is not a whole number that fits in 64 bits");
     return value;
 }
 
-uint64_t TextCursor::to_count(std::string_view word, const std::string& what) const {
+uint64_t TextCursor::to_count(std::string_view word, std::string_view what) const {
     const int64_t value = to_integer(word, what);
-    if (value < 0) fail("the " + what + " " + quoted(word) + " is negative");
+    if (value < 0) fail("the " + std::string(what) + " " + quoted(word) + " is negative");
     return uint64_t(value);
 }
 

@@ -31,6 +31,9 @@ struct Polygons {
     }
 };
 
+// Names of the coordinates, for messages.
+inline constexpr const char* kAxisCoordinate[3] = {"x coordinate", "y coordinate", "z coordinate"};
+
 // Faces with more corners are refused: ear clipping costs O(corners^2) and more, so one huge
 // face in a hostile file would otherwise take hours.
 constexpr uint32_t kMaxPolygonCorners = 4096;
@@ -90,9 +93,9 @@ class TextCursor {
 
     // Strict conversions of a whole word; `what` names the value in the message. A missing
     // word, trailing characters or a value out of range fail with the file and line.
-    double to_double(std::string_view word, const std::string& what) const;
-    int64_t to_integer(std::string_view word, const std::string& what) const;
-    uint64_t to_count(std::string_view word, const std::string& what) const;
+    double to_double(std::string_view word, std::string_view what) const;
+    int64_t to_integer(std::string_view word, std::string_view what) const;
+    uint64_t to_count(std::string_view word, std::string_view what) const;
 
     [[noreturn]] void fail(const std::string& problem) const;
 

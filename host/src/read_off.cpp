@@ -80,9 +80,7 @@ Polygons read_off(const std::string& path) {
                       std::to_string(vertex_count) + " vertices that the header declares");
         Position p;
         for (int axis = 0; axis < 3; ++axis)
-            p[axis] = text.to_double(
-                text.word_on_line(),
-                std::string(1, char('x' + axis)) + " coordinate of vertex " + std::to_string(v));
+            p[axis] = text.to_double(text.word_on_line(), kAxisCoordinate[axis]);
         out.positions.push_back(p);
         text.skip_line();
     }

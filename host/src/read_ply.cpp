@@ -57,6 +57,7 @@ enum class Role { Skip, X, Y, Z, Corners };
 
 struct Property {
     std::string name;
+    std::string described;           // "'name' value", for messages
     Scalar value = Scalar::Float32;  // the scalar's type, or the type of a list's entries
     bool is_list = false;
     Scalar length = Scalar::UInt8;  // lists: the type of the entry count
@@ -97,6 +98,7 @@ Property read_property(TextCursor& text) {
     property.value = scalar_type(text, property.is_list ? text.word_on_line() : type);
     property.name = std::string(text.word_on_line());
     if (property.name.empty()) text.fail("a property has no name");
+    property.described = "'" + property.name + "' value";
     return property;
 }
 
@@ -304,7 +306,7 @@ void read_binary_body(const std::string& path, const Header& header, const std::
 void read_ascii_body(const std::string& path, const Header& header, const std::string& bytes,
                      Polygons& out) {
     TextCursor text(path, std::string_view(bytes).substr(header.body_offset), 0, header.body_line);
-    const auto value = [&](std::string_view word, Scalar type, const std::string& what) {
+    const auto value = [&](std::string_view word, Scalar type, std::string_view what) {
         return is_floating(type) ? text.to_double(word, what) : double(text.to_integer(word, what));
     };
     for (const Element& element : header.elements) {
@@ -325,7 +327,7 @@ void read_ascii_body(const std::string& path, const Header& header, const std::s
                     const std::string_view word = next_word();
                     if (property.role != Role::Skip)
                         position[int(property.role) - int(Role::X)] =
-                            value(word, property.value, "'" + property.name + "' value");
+                            value(word, property.value, property.described);
                     continue;
                 }
                 const uint64_t length = text.to_count(next_word(), "list length");
