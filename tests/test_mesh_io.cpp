@@ -1046,6 +1046,23 @@ TEST_F(MeshFiles, OffPolygonsOfAnySizeAreTriangulatedExactly) {
                 1e-12);
 }
 
+TEST_F(MeshFiles, OffKeywordVariantsAreRead) {
+    const std::string body = "0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n3 0 1 2\n";
+    for (const std::string& header :
+         {std::string("NOFF\n3 1 0\n"), std::string("STCNOFF 3 1\n"),
+          std::string("nOFF\n3\n3 1 0\n"), std::string("# no keyword\n3 1 0\n")}) {
+        const Mesh mesh = oclvox::load_mesh(write("variant.off", header + body));
+        EXPECT_EQ(mesh.triangles.size(), 1u) << header;
+        EXPECT_EQ(mesh.positions.size(), 3u) << header;
+    }
+    EXPECT_TRUE(contains(input_error_of(write("4d.off", "nOFF 4\n3 1 0\n" + body)),
+                         "dimension 4 are not supported"));
+    EXPECT_TRUE(contains(input_error_of(write("binary.off", "OFF BINARY\n" + body)),
+                         "binary OFF is not supported"));
+    EXPECT_TRUE(contains(input_error_of(write("xoff.off", "XOFF\n3 1 0\n" + body)),
+                         "unknown OFF keyword 'XOFF'"));
+}
+
 TEST_F(MeshFiles, AsciiStlLoopsOfMoreThanThreeVerticesAreTriangulated) {
     const Mesh mesh = oclvox::load_mesh(write("quad.stl",
                                               "SOLID upper case\nFACET NORMAL 0 0 1\nOUTER LOOP\n"
