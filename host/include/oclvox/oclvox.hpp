@@ -63,8 +63,10 @@ struct Mesh {
     std::vector<std::array<uint32_t, 3>> triangles;
 };
 
-// Loads OBJ (tinyobjloader), STL (ASCII and binary), PLY and OFF (assimp). The format follows
-// from the file extension (case-insensitive). Throws InputError naming the file and the problem.
+// Loads OBJ, STL (ASCII and binary), PLY (ascii and binary) and OFF exactly in double, and glTF
+// 2.0 (.gltf, .glb) and 3MF through assimp (every node transform applied, all meshes merged).
+// The format follows from the file extension (case-insensitive). Polygons are triangulated and
+// equal positions welded. Throws InputError naming the file and the problem.
 Mesh load_mesh(const std::string& path);
 
 // Throws InputError if the mesh has no triangles, an index out of range, or a non-finite

@@ -1,0 +1,305 @@
+// The pieces every mesh reader shares (see mesh_reading.hpp).
+#include "mesh_reading.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+namespace oclvox::mesh_reading {
+
+void fail(const std::string& path, const std::string& problem) {
+    throw InputError("mesh file '" + path + "': " + problem);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files and sizes
+// ---------------------------------------------------------------------------------------------
+
+// Fails with a clear message for the problems every format shares (missing, a folder,
+// unreadable, empty) before a parser sees the file and words them its own way.
+void require_readable_nonempty(const std::string& path) {
+    std::error_code error;
+    const auto status = std::filesystem::status(path, error);
+    if (!std::filesystem::exists(status)) fail(path, "the file does not exist");
+    if (std::filesystem::is_directory(status)) fail(path, "this is a folder, not a mesh file");
+    std::ifstream file(path, std::ios::binary);
+    if (!file) fail(path, "the file cannot be opened for reading");
+    if (file.peek() == std::ifstream::traits_type::eof()) fail(path, "the file is empty");
+}
+
+std::string read_whole_file(const std::string& path) {
+    require_readable_nonempty(path);
+    std::ifstream file(path, std::ios::binary);
+    std::ostringstream bytes;
+    bytes << file.rdbuf();
+    if (!file) fail(path, "reading the file failed");
+    return bytes.str();
+}
+
+void require_room(const std::string& path, uint64_t count, uint64_t min_bytes_each,
+                  uint64_t bytes_left, const std::string& what) {
+    if (min_bytes_each == 0 || count <= bytes_left / min_bytes_each) return;
+    fail(path, "the header declares " + std::to_string(count) + " " + what + ", more than the " +
+                   std::to_string(bytes_left) + " bytes that follow can hold");
+}
+
+std::string quoted(std::string_view word) {
+    constexpr size_t kShown = 40;
+    std::string text = "'";
+    for (size_t k = 0; k < std::min(word.size(), kShown); ++k) {
+        const unsigned char c = static_cast<unsigned char>(word[k]);
+        if (c >= 0x20 && c < 0x7f) {
+            text += char(c);
+        } else {
+            static const char* const kHex = "0123456789abcdef";
+            text += "\\x";
+            text += kHex[c >> 4];
+            text += kHex[c & 15];
+        }
+    }
+    if (word.size() > kShown) text += "...";
+    return text + "'";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Text
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+bool is_blank(char c) {
+    return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
+
+// Where a strict parser takes no leading '+', which writers may emit.
+const char* skip_plus(const char* first, const char* last) {
+    return (*first == '+' && last - first > 1) ? first + 1 : first;
+}
+
+}  // namespace
+
+void TextCursor::skip_blanks() {
+    while (at_ < text_.size() && is_blank(text_[at_])) ++at_;
+    if (comment_ != 0 && at_ < text_.size() && text_[at_] == comment_)
+        while (at_ < text_.size() && text_[at_] != '\n') ++at_;
+}
+
+std::string_view TextCursor::word_on_line() {
+    skip_blanks();
+    const size_t first = at_;
+    while (at_ < text_.size() && text_[at_] != '\n' && !is_blank(text_[at_]) &&
+           text_[at_] != comment_)
+        ++at_;
+    return text_.substr(first, at_ - first);
+}
+
+std::string_view TextCursor::word() {
+    for (;;) {
+        const std::string_view found = word_on_line();
+        if (!found.empty() || at_ == text_.size()) return found;
+        skip_line();
+    }
+}
+
+bool TextCursor::line_done() {
+    skip_blanks();
+    return at_ == text_.size() || text_[at_] == '\n';
+}
+
+void TextCursor::skip_line() {
+    while (at_ < text_.size() && text_[at_] != '\n') ++at_;
+    if (at_ < text_.size()) {
+        ++at_;
+        ++line_;
+    }
+}
+
+bool TextCursor::next_nonblank_line() {
+    while (line_done()) {
+        if (at_ == text_.size()) return false;
+        skip_line();
+    }
+    return true;
+}
+
+bool TextCursor::at_end() {
+    return !next_nonblank_line();
+}
+
+void TextCursor::fail(const std::string& problem) const {
+    mesh_reading::fail(path_, "line " + std::to_string(line_) + ": " + problem);
+}
+
+double TextCursor::to_double(std::string_view word, std::string_view what) const {
+    if (word.empty()) fail("the " + std::string(what) + " is missing");
+    const char* const last = word.data() + word.size();
+    double value = 0;
+    // Correctly rounded: the nearest double to the decimal text. "nan" and "inf" are numbers
+    // here; validate_mesh decides whether they matter.
+    const auto parsed = std::from_chars(skip_plus(word.data(), last), last, value);
+    if (parsed.ec == std::errc::result_out_of_range)
+        fail("the " + std::string(what) + " " + quoted(word) + " is out of the range of double");
+    if (parsed.ec != std::errc() || parsed.ptr != last)
+        fail("the " + std::string(what) + " " + quoted(word) + " is not a number");
+    return value;
+}
+
+int64_t TextCursor::to_integer(std::string_view word, std::string_view what) const {
+    if (word.empty()) fail("the " + std::string(what) + " is missing");
+    const char* const last = word.data() + word.size();
+    int64_t value = 0;
+    const auto parsed = std::from_chars(skip_plus(word.data(), last), last, value);
+    if (parsed.ec != std::errc() || parsed.ptr != last)
+        fail("the " + std::string(what) + " " + quoted(word) +
+             " is not a whole number that fits in 64 bits");
+    return value;
+}
+
+uint64_t TextCursor::to_count(std::string_view word, std::string_view what) const {
+    const int64_t value = to_integer(word, what);
+    if (value < 0) fail("the " + std::string(what) + " " + quoted(word) + " is negative");
+    return uint64_t(value);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Polygons
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+// Splits polygons into triangles that cover exactly the polygon, by ear clipping in the
+// coordinate plane that the polygon faces most. A fan would be simpler, but in a concave polygon
+// its triangles leave the polygon and overlap, which a voxelizer turns into voxels that are not
+// part of the surface. Convex polygons get the fan from their first corner, the usual convention.
+class PolygonTriangulator {
+  public:
+    // Appends corners.size() - 2 triangles with the polygon's winding.
+    void triangulate(const std::vector<Position>& positions, const std::vector<uint32_t>& corners,
+                     Mesh& out) {
+        const size_t n = corners.size();
+        if (n == 3) {
+            out.triangles.push_back({corners[0], corners[1], corners[2]});
+            return;
+        }
+        project(positions, corners);
+
+        // Clip ears until a triangle is left. Starting at the second corner and staying at the
+        // clipped position after each clip turns a convex polygon into the fan from corner 0. A
+        // full round without an ear means a degenerate or self-crossing polygon, which has no
+        // clean triangulation: then the current corner is clipped anyway, so every polygon still
+        // gives n - 2 triangles.
+        ring_.resize(n);
+        for (size_t k = 0; k < n; ++k) ring_[k] = k;
+        size_t at = 1, misses = 0;
+        while (ring_.size() > 3) {
+            const size_t m = ring_.size();
+            at %= m;
+            const size_t prev = ring_[(at + m - 1) % m], cur = ring_[at],
+                         next = ring_[(at + 1) % m];
+            if (misses < m && !is_ear(prev, cur, next)) {
+                ++at;
+                ++misses;
+                continue;
+            }
+            out.triangles.push_back({corners[prev], corners[cur], corners[next]});
+            ring_.erase(ring_.begin() + std::ptrdiff_t(at));
+            misses = 0;
+        }
+        out.triangles.push_back({corners[ring_[0]], corners[ring_[1]], corners[ring_[2]]});
+    }
+
+  private:
+    // 2D coordinates of the corners in the plane that the Newell normal points most along, with
+    // a sign that makes the polygon wind counter-clockwise there.
+    void project(const std::vector<Position>& positions, const std::vector<uint32_t>& corners) {
+        const size_t n = corners.size();
+        Position normal{0, 0, 0};
+        for (size_t k = 0; k < n; ++k) {
+            const Position& a = positions[corners[k]];
+            const Position& b = positions[corners[(k + 1) % n]];
+            normal[0] += (a[1] - b[1]) * (a[2] + b[2]);
+            normal[1] += (a[2] - b[2]) * (a[0] + b[0]);
+            normal[2] += (a[0] - b[0]) * (a[1] + b[1]);
+        }
+        int drop = 0;
+        for (int axis = 1; axis < 3; ++axis)
+            if (std::fabs(normal[axis]) > std::fabs(normal[drop])) drop = axis;
+        // With (u, v) the cyclic successors of the dropped axis, normal[drop] is twice the
+        // polygon's signed area in the (u, v) plane.
+        const int u = (drop + 1) % 3, v = (drop + 2) % 3;
+        winding_ = normal[drop] < 0 ? -1.0 : 1.0;
+        flat_.resize(n);
+        for (size_t k = 0; k < n; ++k)
+            flat_[k] = {positions[corners[k]][u], positions[corners[k]][v]};
+    }
+
+    // Twice the area of (a, b, c), positive when it turns the way the polygon winds.
+    double turn(size_t a, size_t b, size_t c) const {
+        const auto &pa = flat_[a], &pb = flat_[b], &pc = flat_[c];
+        return winding_ * ((pb[0] - pa[0]) * (pc[1] - pa[1]) - (pb[1] - pa[1]) * (pc[0] - pa[0]));
+    }
+
+    // A strictly convex corner whose triangle holds no other remaining corner. Corners that
+    // coincide with one of the triangle's (a polygon touching itself) do not block it.
+    bool is_ear(size_t prev, size_t cur, size_t next) const {
+        if (!(turn(prev, cur, next) > 0)) return false;
+        for (size_t other : ring_) {
+            if (other == prev || other == cur || other == next) continue;
+            const auto& p = flat_[other];
+            if (p == flat_[prev] || p == flat_[cur] || p == flat_[next]) continue;
+            if (turn(prev, cur, other) >= 0 && turn(cur, next, other) >= 0 &&
+                turn(next, prev, other) >= 0)
+                return false;
+        }
+        return true;
+    }
+
+    std::vector<std::array<double, 2>> flat_;
+    std::vector<size_t> ring_;
+    double winding_ = 1;
+};
+
+}  // namespace
+
+Mesh triangulated(const std::string& path, Polygons polygons) {
+    const uint64_t vertex_count = polygons.positions.size();
+    if (vertex_count > std::numeric_limits<uint32_t>::max())
+        fail(path, "more than 2^32 vertices, which 32-bit triangle indices cannot address");
+
+    Mesh mesh;
+    mesh.positions = std::move(polygons.positions);
+    PolygonTriangulator triangulator;
+    std::vector<uint32_t> corners;
+    size_t first = 0;
+    for (size_t face = 0; face < polygons.corner_counts.size(); ++face) {
+        const uint32_t count = polygons.corner_counts[face];
+        const std::string face_name = "face " + std::to_string(face + 1);
+        if (count > kMaxPolygonCorners)
+            fail(path, face_name + " has " + std::to_string(count) +
+                           " corners; oclvox triangulates faces of up to " +
+                           std::to_string(kMaxPolygonCorners));
+        corners.clear();
+        for (size_t k = first; k < first + count; ++k) {
+            const int64_t index = polygons.corners[k];
+            const std::string shown = std::to_string(index + polygons.first_index);
+            if (index < 0)
+                fail(path, face_name + " refers to vertex " + shown +
+                               ", which is out of range: a vertex index cannot be negative");
+            if (uint64_t(index) >= vertex_count)
+                fail(path, face_name + " refers to vertex " + shown +
+                               ", which is out of range: the file has " +
+                               std::to_string(vertex_count) + " vertices, numbered from " +
+                               std::to_string(polygons.first_index));
+            corners.push_back(uint32_t(index));
+        }
+        if (count >= 3) triangulator.triangulate(mesh.positions, corners, mesh);
+        first += count;
+    }
+    return mesh;
+}
+
+}  // namespace oclvox::mesh_reading

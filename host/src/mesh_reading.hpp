@@ -1,0 +1,124 @@
+// Pieces the mesh readers (read_*.cpp) share: what a reader produces, the file's bytes, a text
+// cursor with strict number parsing, the guard that checks declared sizes against the file before
+// anything is allocated for them, and the one polygon triangulation that every format goes through.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "oclvox/oclvox.hpp"
+
+namespace oclvox::mesh_reading {
+
+using Position = std::array<double, 3>;
+
+// A file's geometry in its own numbering: positions, and polygons as runs of vertex indices.
+// Indices are kept as read (possibly negative or past the end) so that triangulated() reports
+// them in the file's terms.
+struct Polygons {
+    std::vector<Position> positions;
+    std::vector<int64_t> corners;         // vertex indices, polygon after polygon
+    std::vector<uint32_t> corner_counts;  // corners of each polygon, in file order
+    int first_index = 0;                  // how the format numbers its first vertex (OBJ: 1)
+
+    void add_triangle(int64_t a, int64_t b, int64_t c) {
+        corners.insert(corners.end(), {a, b, c});
+        corner_counts.push_back(3);
+    }
+};
+
+// Names of the coordinates, for messages.
+inline constexpr const char* kAxisCoordinate[3] = {"x coordinate", "y coordinate", "z coordinate"};
+
+// Faces with more corners are refused: ear clipping costs O(corners^2) and more, so one huge
+// face in a hostile file would otherwise take hours.
+constexpr uint32_t kMaxPolygonCorners = 4096;
+
+// The readers, one per file. Each throws InputError naming the file.
+Polygons read_obj(const std::string& path);
+Polygons read_stl(const std::string& path);
+Polygons read_ply(const std::string& path);
+Polygons read_off(const std::string& path);
+Polygons read_scene_assimp(const std::string& path);  // glTF 2.0, GLB, 3MF
+
+// Checks every index and splits every polygon into triangles that cover exactly the polygon (ear
+// clipping in the plane the polygon faces most; a convex polygon gets the fan from its first
+// corner). Polygons of fewer than 3 corners (points, lines) are not surfaces and are dropped.
+Mesh triangulated(const std::string& path, Polygons polygons);
+
+[[noreturn]] void fail(const std::string& path, const std::string& problem);
+
+// The whole file, after clear failures for a missing, unreadable or empty one.
+std::string read_whole_file(const std::string& path);
+void require_readable_nonempty(const std::string& path);
+
+// Fails unless `count` items of at least `min_bytes_each` bytes fit in `bytes_left` bytes. Called
+// with every count a header declares, before anything is allocated for it, so a few bytes that
+// claim billions of records cost nothing.
+void require_room(const std::string& path, uint64_t count, uint64_t min_bytes_each,
+                  uint64_t bytes_left, const std::string& what);
+
+// A word as it may be quoted in a message: non-printable bytes escaped, long words cut.
+std::string quoted(std::string_view word);
+
+// Whitespace-separated words of a text file, with the line number for messages. Only space,
+// tab, CR, VT and FF separate words, so a NUL byte is part of a word and fails its parse.
+class TextCursor {
+  public:
+    // `comment` starts a comment that runs to the end of the line (0: none); `first_line` is the
+    // number of the text's first line in the file.
+    TextCursor(const std::string& path, std::string_view text, char comment = 0,
+               size_t first_line = 1)
+        : path_(path), text_(text), comment_(comment), line_(first_line) {}
+
+    // The next word on the current line; empty at the end of the line.
+    std::string_view word_on_line();
+    // The next word, moving over line ends; empty at the end of the text.
+    std::string_view word();
+    // True when the current line has no more words.
+    bool line_done();
+    // Moves past the end of the current line (whatever words are left on it).
+    void skip_line();
+    // Moves to the start of the next line that has a word; false at the end of the text.
+    bool next_nonblank_line();
+    bool at_end();
+
+    size_t line() const { return line_; }
+    size_t offset() const { return at_; }
+    size_t bytes_left() const { return text_.size() - at_; }
+
+    // Strict conversions of a whole word; `what` names the value in the message. A missing
+    // word, trailing characters or a value out of range fail with the file and line.
+    double to_double(std::string_view word, std::string_view what) const;
+    int64_t to_integer(std::string_view word, std::string_view what) const;
+    uint64_t to_count(std::string_view word, std::string_view what) const;
+
+    [[noreturn]] void fail(const std::string& problem) const;
+
+  private:
+    void skip_blanks();
+
+    const std::string& path_;
+    std::string_view text_;
+    char comment_;
+    size_t line_;
+    size_t at_ = 0;
+};
+
+// A value of type T stored in `bytes` with the given byte order (IEEE 754 for floating point).
+template <class T>
+T load_scalar(const char* bytes, bool big_endian) {
+    unsigned char ordered[sizeof(T)];
+    for (size_t b = 0; b < sizeof(T); ++b)
+        ordered[b] = static_cast<unsigned char>(bytes[big_endian ? sizeof(T) - 1 - b : b]);
+    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the byte order above is the host's");
+    T value;
+    std::memcpy(&value, ordered, sizeof(T));
+    return value;
+}
+
+}  // namespace oclvox::mesh_reading

@@ -1,0 +1,119 @@
+// STL, ASCII and binary. Every facet keeps its own three corners here; load_mesh welds equal
+// positions afterwards, which is what gives an STL mesh a shared topology.
+#include <algorithm>
+#include <cctype>
+
+#include "mesh_reading.hpp"
+
+namespace oclvox::mesh_reading {
+
+namespace {
+
+constexpr uint64_t kBinaryHeaderBytes = 84;  // 80 bytes of anything, then the facet count
+constexpr uint64_t kBinaryFacetBytes = 50;   // normal, 3 corners (12 floats), attribute word
+
+bool same_keyword(std::string_view word, std::string_view keyword) {
+    return word.size() == keyword.size() &&
+           std::equal(word.begin(), word.end(), keyword.begin(), [](char a, char b) {
+               return std::tolower(static_cast<unsigned char>(a)) == b;
+           });
+}
+
+void expect(const TextCursor& text, std::string_view word, std::string_view keyword) {
+    if (same_keyword(word, keyword)) return;
+    if (word.empty()) text.fail("expected '" + std::string(keyword) + "', but the file ends");
+    text.fail("expected '" + std::string(keyword) + "', found " + quoted(word));
+}
+
+// Binary floats are exact in double, so the corners are the file's values bit for bit.
+Polygons read_binary(const std::string& path, const std::string& bytes) {
+    if (bytes.size() < kBinaryHeaderBytes)
+        fail(path, "the file does not start with 'solid' (ASCII STL) and is shorter than the " +
+                       std::to_string(kBinaryHeaderBytes) + "-byte header of a binary STL");
+    const uint32_t facets = load_scalar<uint32_t>(&bytes[80], false);
+    require_room(path, facets, kBinaryFacetBytes, bytes.size() - kBinaryHeaderBytes,
+                 "facets (binary STL)");
+
+    Polygons out;
+    out.positions.reserve(size_t(facets) * 3);
+    out.corners.reserve(size_t(facets) * 3);
+    out.corner_counts.reserve(facets);
+    const char* facet = bytes.data() + kBinaryHeaderBytes;
+    for (uint32_t f = 0; f < facets; ++f, facet += kBinaryFacetBytes) {
+        // The stored normal (first 12 bytes) is ignored: the corners define the facet.
+        for (int corner = 0; corner < 3; ++corner) {
+            Position p;
+            for (int axis = 0; axis < 3; ++axis)
+                p[axis] = load_scalar<float>(facet + 12 + 12 * corner + 4 * axis, false);
+            out.positions.push_back(p);
+        }
+        const int64_t first = int64_t(out.positions.size()) - 3;
+        out.add_triangle(first, first + 1, first + 2);
+    }
+    return out;
+}
+
+// solid NAME / facet normal N N N / outer loop / vertex X Y Z (3 or more) / endloop / endfacet
+// ... / endsolid NAME, several solids in a row; keywords in any case. Coordinates are parsed
+// correctly rounded. The normal's words are not parsed: writers put "nan" there for slivers.
+Polygons read_ascii(const std::string& path, const std::string& text) {
+    TextCursor cursor(path, text);
+    Polygons out;
+    while (!cursor.at_end()) {
+        expect(cursor, cursor.word(), "solid");
+        cursor.skip_line();  // the solid's name
+        for (;;) {
+            const std::string_view keyword = cursor.word();
+            if (same_keyword(keyword, "endsolid")) {
+                cursor.skip_line();
+                break;
+            }
+            if (!same_keyword(keyword, "facet"))
+                cursor.fail(keyword.empty()
+                                ? "the file ends inside a solid (no 'endsolid')"
+                                : "expected 'facet' or 'endsolid', found " + quoted(keyword));
+            expect(cursor, cursor.word(), "normal");
+            for (int axis = 0; axis < 3; ++axis)
+                if (cursor.word().empty()) cursor.fail("the file ends inside a facet normal");
+            expect(cursor, cursor.word(), "outer");
+            expect(cursor, cursor.word(), "loop");
+
+            uint32_t corners = 0;
+            std::string_view word = cursor.word();
+            for (; same_keyword(word, "vertex"); word = cursor.word(), ++corners) {
+                Position p;
+                for (int axis = 0; axis < 3; ++axis)
+                    p[axis] = cursor.to_double(cursor.word_on_line(), kAxisCoordinate[axis]);
+                out.positions.push_back(p);
+            }
+            expect(cursor, word, "endloop");
+            expect(cursor, cursor.word(), "endfacet");
+            if (corners < 3)
+                cursor.fail("a facet has " + std::to_string(corners) + " vertices; it needs 3");
+            const size_t first = out.positions.size() - corners;
+            for (size_t k = first; k < out.positions.size(); ++k) out.corners.push_back(int64_t(k));
+            out.corner_counts.push_back(corners);
+        }
+    }
+    return out;
+}
+
+}  // namespace
+
+Polygons read_stl(const std::string& path) {
+    const std::string bytes = read_whole_file(path);
+    // A binary file is recognised by its size, which its facet count fixes: many binary writers
+    // start the header with "solid" too.
+    if (bytes.size() >= kBinaryHeaderBytes) {
+        const uint64_t facets = load_scalar<uint32_t>(&bytes[80], false);
+        if (bytes.size() == kBinaryHeaderBytes + kBinaryFacetBytes * facets)
+            return read_binary(path, bytes);
+    }
+    const size_t start = bytes.find_first_not_of(" \t\r\n");
+    if (start != std::string::npos &&
+        same_keyword(std::string_view(bytes).substr(start, 5), "solid"))
+        return read_ascii(path, bytes);
+    return read_binary(path, bytes);
+}
+
+}  // namespace oclvox::mesh_reading
