@@ -1,7 +1,8 @@
 // Per-sample meshing work shared, token for token, by kernels/meshing.cl and the host reference
 // (Surface Nets and Marching Cubes). Same determinism contract as voxel_math.h: plain
-// single-precision arithmetic in the order written, FP_CONTRACT OFF, so device == host bit for
-// bit.
+// single-precision + - * and comparisons in the order written, FP_CONTRACT OFF; the only
+// divisions (vertex positions) go through om_divide, which is correctly rounded on any device
+// whatever its own division does. So device == host bit for bit.
 //
 // Ownership: every vertex and triangle belongs to exactly one sample s = (x, y, z), which is what
 // lets any tiling (bricks on the host, launch slices on the device) produce the same mesh:
@@ -32,13 +33,20 @@
 #define OM_GLOBAL __global
 #define OM_UINT uint
 #define OM_UCHAR uchar
+#define OM_LONG long
 #else
+#include <cfloat>
+#include <cmath>
 #include <cstdint>
 #define OM_FN static inline
 #define OM_GLOBAL
 #define OM_UINT uint32_t
 #define OM_UCHAR uint8_t
+#define OM_LONG int64_t
 namespace oclvox::detail {
+using std::fabs;
+using std::frexp;
+using std::nextafter;
 #endif
 
 // Marching Cubes case table (derived on the host, see marching_cubes_tables.cpp), indexed by
@@ -88,11 +96,98 @@ OM_FN int om_face_corner(int f, int i) {
     return ((f & 1) << d) | (cu << u) | (cv << v);
 }
 
+// ---- Correctly rounded division ----------------------------------------------------------------
+// OpenCL C 1.2 lets a single-precision x / y be off by 2.5 ulp unless the program is built with
+// -cl-fp32-correctly-rounded-divide-sqrt, which a device need not support. So the quotients that
+// place vertices are computed here from an approximate quotient and an exact test: the result is
+// the IEEE round-to-nearest-even quotient wherever the approximation starts, hence the same bits on
+// every device and on the host. The test uses only operations that OpenCL defines exactly (frexp,
+// nextafter, float <-> integer conversions of exact values, 64-bit integer arithmetic). Like all
+// of oclvox's bit-for-bit results it assumes a device that keeps single-precision denormals
+// (CL_FP_DENORM), which every desktop GPU and CPU driver does.
+
+// The integer mantissa and exponent of a finite x >= 0, normalised: x = m * 2^e with m in
+// [2^23, 2^24), or m = 0 and e = -149 for x = 0.
+OM_FN OM_LONG om_mantissa(float x, int* e) {
+    int exponent;
+    float fraction = frexp(x, &exponent);  // x = fraction * 2^exponent, fraction in [0.5, 1)
+    *e = x == 0.0f ? -149 : exponent - 24;
+    return (OM_LONG)(fraction * 16777216.0f);  // exact: an integer below 2^24
+}
+
+// The same in units of x's ulp: x = m * 2^e with 2^e the spacing of floats at x (e >= -149), so
+// m < 2^24 and the parity of m says whether x is "even" for rounding ties.
+OM_FN OM_LONG om_ulp_mantissa(float x, int* e) {
+    OM_LONG m = om_mantissa(x, e);
+    if (*e < -149) {  // subnormal: the bits shifted out are zero
+        m >>= -149 - *e;
+        *e = -149;
+    }
+    return m;
+}
+
+// Sign (-1, 0, +1) of n / d minus the midpoint between q and the next float above it, computed
+// exactly, for finite n >= 0, d > 0 and q >= 0.
+OM_FN int om_above_midpoint(float n, float d, float q) {
+    int en, ed, eq;
+    OM_LONG N = om_mantissa(n, &en), D = om_mantissa(d, &ed), Q = om_ulp_mantissa(q, &eq);
+    // The midpoint is (2Q + 1) * 2^(eq - 1): compare N * 2^en with (2Q + 1) * D * 2^(eq - 1 + ed),
+    // i.e. N * 2^k with M. M is in [2^23, 2^49) and N, unless 0, in [2^23, 2^24).
+    OM_LONG M = (2 * Q + 1) * D;
+    int k = en - ed - eq + 1;
+    if (N == 0 || k < 0) return -1;  // N * 2^k < 2^23 <= M
+    if (k > 26) return 1;            // N * 2^k >= 2^50 > M
+    OM_LONG lhs = N << k;
+    return lhs > M ? 1 : (lhs < M ? -1 : 0);
+}
+
+// The correctly rounded (to nearest, ties to even) quotient n / d, for finite n >= 0 and d > 0
+// with a finite quotient, walked to from the estimate q one ulp per step. Each step moves towards
+// the answer only when the exact test proves it lies that way, so the result does not depend on
+// q; the time does, and OpenCL's bound of 2.5 ulp on x / y keeps it to a few steps. (Ties cannot
+// occur between normal floats, but can for subnormal quotients such as 2^-149 / 2.)
+OM_FN float om_divide_from(float n, float d, float q) {
+    if (!(q > 0.0f)) q = 0.0f;  // -0 (or, off any conformant device, negative or NaN): +0
+    if (q > FLT_MAX) q = FLT_MAX;
+    for (;;) {
+        int e;
+        int odd = (int)(om_ulp_mantissa(q, &e) & 1);
+        int above = om_above_midpoint(n, d, q);
+        if (above > 0 || (above == 0 && odd)) {
+            q = nextafter(q, INFINITY);
+            continue;
+        }
+        if (q > 0.0f) {
+            float below = nextafter(q, 0.0f);
+            int above_below = om_above_midpoint(n, d, below);
+            if (above_below < 0 || (above_below == 0 && odd)) {
+                q = below;
+                continue;
+            }
+        }
+        return q;
+    }
+}
+
+// n / d, correctly rounded, on any device (domain as om_divide_from).
+OM_FN float om_divide(float n, float d) {
+    return om_divide_from(n, d, n / d);
+}
+
 // Where along an edge from value a to value b the linear interpolant reaches iso. Called only
-// when exactly one end is inside, so b != a; the result is in [0, 1] even after rounding because
-// float subtraction is monotonic.
+// when exactly one end is inside, so b != a; the result is in [0, 1] because float subtraction is
+// monotonic (|iso - a| <= |b - a|) and the division is correctly rounded.
 OM_FN float om_crossing(float a, float b, float iso) {
-    return (iso - a) / (b - a);
+    float n = iso - a, d = b - a;
+    if (!(fabs(d) <= FLT_MAX)) {  // b - a overflowed: the same on halved values
+        n = iso * 0.5f - a * 0.5f;
+        d = b * 0.5f - a * 0.5f;
+    }
+    if (d < 0.0f) {
+        n = -n;
+        d = -d;
+    }
+    return om_divide(n, d);
 }
 
 OM_FN void om_cell_values(OM_GLOBAL const float* values, OmField f, int x, int y, int z,
@@ -135,7 +230,7 @@ OM_FN void om_mean_crossing(const float v[8], float iso, int edges, float p[3]) 
             sum[k] = sum[k] + (k == (e >> 2) ? t : (float)om_corner_bit(lo, k));
         ++count;
     }
-    for (int k = 0; k < 3; ++k) p[k] = sum[k] / (float)count;
+    for (int k = 0; k < 3; ++k) p[k] = om_divide(sum[k], (float)count);
 }
 
 // The cell's sign-changing edges as a 12-bit mask.

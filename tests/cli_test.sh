@@ -316,6 +316,100 @@ done
     pass "csg union and intersection differ (${csg_faces[union]} vs ${csg_faces[intersection]} faces)" ||
     fail "csg union equals intersection" "${csg_faces[union]} faces"
 
+# ---- field meshes are closed by default ---------------------------------------------------------
+# sdf and csg pad fitted grids by band + 1 voxels and mesh with Marching Cubes, so their meshes are
+# closed and manifold. "border B non-manifold N oriented O vertex-manifold M euler X" of an OBJ:
+# edges used by an odd number of triangles, edges not used by exactly two, every directed edge
+# once with its reverse once, the triangles around every vertex forming one fan, V - E + F.
+obj_topology() {
+    python3 - "$1" <<'EOF_PY'
+import sys
+from collections import defaultdict
+triangles = [tuple(int(w.split("/")[0]) - 1 for w in l.split()[1:4])
+             for l in open(sys.argv[1]) if l.startswith("f ")]
+undirected, directed, fan = defaultdict(int), defaultdict(int), defaultdict(dict)
+vertex_manifold = True
+for t in triangles:
+    for i in range(3):
+        a, b, c = t[i], t[(i + 1) % 3], t[(i + 2) % 3]
+        undirected[min(a, b), max(a, b)] += 1
+        directed[a, b] += 1
+        vertex_manifold &= b not in fan[a]
+        fan[a][b] = c
+for links in fan.values():  # following b -> c around a vertex must visit every triangle once
+    start = at = next(iter(links))
+    for steps in range(1, len(links) + 1):
+        at = links.get(at)
+        if at is None or at == start:
+            break
+    vertex_manifold &= at == start and steps == len(links)
+oriented = all(n == 1 and directed.get((b, a)) == 1 for (a, b), n in directed.items())
+print("border %d non-manifold %d oriented %d vertex-manifold %d euler %d" % (
+    sum(n % 2 for n in undirected.values()), sum(n != 2 for n in undirected.values()),
+    oriented, vertex_manifold, len(fan) - len(undirected) + len(triangles)))
+EOF_PY
+}
+
+# An icosphere OBJ (4 subdivisions of an icosahedron): centre X,Y,Z and radius.
+sphere_obj() {
+    python3 - "$@" <<'EOF_PY'
+import math, sys
+path, cx, cy, cz, r = sys.argv[1], *map(float, sys.argv[2:6])
+g = (1 + 5 ** 0.5) / 2
+v = [(-1, g, 0), (1, g, 0), (-1, -g, 0), (1, -g, 0), (0, -1, g), (0, 1, g), (0, -1, -g),
+     (0, 1, -g), (g, 0, -1), (g, 0, 1), (-g, 0, -1), (-g, 0, 1)]
+f = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+     (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9),
+     (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+for _ in range(4):
+    mid, nf = {}, []
+    def m(a, b):
+        if (b, a) in mid: return mid[b, a]
+        v.append(tuple((p + q) / 2 for p, q in zip(v[a], v[b]))); mid[a, b] = len(v) - 1
+        return mid[a, b]
+    for a, b, c in f:
+        ab, bc, ca = m(a, b), m(b, c), m(c, a)
+        nf += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+    f = nf
+with open(path, "w") as out:
+    for p in v:
+        n = math.sqrt(sum(x * x for x in p))
+        out.write("v %r %r %r\n" % (cx + r * p[0] / n, cy + r * p[1] / n, cz + r * p[2] / n))
+    for a, b, c in f:
+        out.write("f %d %d %d\n" % (a + 1, b + 1, c + 1))
+EOF_PY
+}
+
+closed_genus0="border 0 non-manifold 0 oriented 1 vertex-manifold 1 euler 2"
+run sdf "$MESH" -r 40 -o "$WORK/closed.npy" --mesh "$WORK/closed.obj"
+topology=$(obj_topology "$WORK/closed.obj")
+[ "$RC" -eq 0 ] && [ "$topology" = "$closed_genus0" ] && ! grep -q '^warning' <<<"$OUT" &&
+    pass "sdf --mesh with the defaults is closed, manifold, genus 0 like the input" ||
+    fail "sdf --mesh with the defaults" "rc=$RC $topology out=$OUT err=$ERR"
+
+sphere_obj "$WORK/ball_a.obj" 0 0 0 1
+sphere_obj "$WORK/ball_b.obj" 0.83 0.31 -0.27 0.8
+for op in union difference intersection; do
+    run csg "$WORK/ball_a.obj" "$op" "$WORK/ball_b.obj" -r 40 -o "$WORK/balls_$op.obj"
+    topology=$(obj_topology "$WORK/balls_$op.obj")
+    [ "$RC" -eq 0 ] && [ "$topology" = "$closed_genus0" ] && ! grep -q '^warning' <<<"$OUT" &&
+        pass "csg $op of overlapping spheres with the defaults is closed, manifold, genus 0" ||
+        fail "csg $op of overlapping spheres" "rc=$RC $topology out=$OUT err=$ERR"
+done
+for op in union difference; do  # spot with its shifted copy: closed and manifold, any genus
+    topology=$(obj_topology "$WORK/csg_$op.obj")
+    [[ "$topology" == "border 0 non-manifold 0 oriented 1 vertex-manifold 1 euler "* ]] &&
+        pass "csg $op of spot and its shifted copy is closed and manifold" ||
+        fail "csg $op of spot and its shifted copy" "$topology"
+done
+
+# A grid the user places (--pad 0 here) that cuts the shape: warned about in the summary.
+run sdf "$MESH" -r 24 --pad 0 -o "$WORK/cut.npy" --mesh "$WORK/cut.obj"
+[ "$RC" -eq 0 ] && grep -q '^warning  the shape reaches the grid border' <<<"$OUT" &&
+    [[ "$(obj_topology "$WORK/cut.obj")" != "border 0 "* ]] &&
+    pass "a grid that cuts the shape is warned about (and its mesh is open)" ||
+    fail "no warning for a grid that cuts the shape" "rc=$RC out=$OUT"
+
 run mesh "$WORK/sdf.npy" -o "$WORK/remeshed.obj" --mesher marching-cubes
 faces=$(obj_faces "$WORK/remeshed.obj")
 [ "$RC" -eq 0 ] && [ "$faces" -gt 100 ] && pass "mesh of the sdf .npy: $faces faces" ||

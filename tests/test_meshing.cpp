@@ -3,18 +3,23 @@
 // mesh writers read back by small independent readers.
 #include <gtest/gtest.h>
 
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <random>
 #include <sstream>
 
 #include "meshing.hpp"
+#include "meshing_math.h"
 #include "oclvox/field.hpp"
+#include "opencl_runtime.hpp"
+#include "test_support.hpp"
 
 namespace oclvox {
 namespace {
@@ -83,63 +88,8 @@ ScalarField noise_field(int n, uint32_t seed) {
 
 // ---- topology (independent of the meshing code) -----------------------------------------------
 
-struct Topology {
-    bool closed_and_oriented = true;  // every directed edge once, its reverse once
-    bool vertex_manifold = true;      // the triangles around every vertex form one fan
-    int64_t vertices = 0, edges = 0, faces = 0, components = 0, unused_vertices = 0;
-    int64_t euler() const { return vertices - edges + faces; }
-};
-
-Topology topology(const Mesh& mesh) {
-    Topology t;
-    t.faces = int64_t(mesh.triangles.size());
-    std::map<std::pair<uint32_t, uint32_t>, int> directed;
-    std::vector<std::map<uint32_t, uint32_t>> link(mesh.positions.size());  // vertex -> (b -> c)
-    std::vector<uint32_t> parent(mesh.positions.size());
-    std::iota(parent.begin(), parent.end(), 0u);
-    std::function<uint32_t(uint32_t)> root = [&](uint32_t v) {
-        return parent[v] == v ? v : parent[v] = root(parent[v]);
-    };
-    std::vector<bool> used(mesh.positions.size(), false);
-    for (const auto& tri : mesh.triangles) {
-        for (int i = 0; i < 3; ++i) {
-            const uint32_t a = tri[i], b = tri[(i + 1) % 3], c = tri[(i + 2) % 3];
-            if (a == b) t.closed_and_oriented = false;
-            ++directed[{a, b}];
-            used[a] = true;
-            if (!link[a].emplace(b, c).second) t.vertex_manifold = false;
-            parent[root(a)] = root(b);
-        }
-    }
-    for (const auto& [edge, count] : directed) {
-        auto reverse = directed.find({edge.second, edge.first});
-        if (count != 1 || reverse == directed.end() || reverse->second != 1)
-            t.closed_and_oriented = false;
-    }
-    t.edges = int64_t(directed.size()) / 2;
-    for (size_t v = 0; v < link.size(); ++v) {
-        if (!used[v]) {
-            ++t.unused_vertices;
-            continue;
-        }
-        ++t.vertices;
-        if (root(uint32_t(v)) == v) ++t.components;
-        // Walk the fan: following b -> c must return to the start after visiting every triangle.
-        size_t steps = 0;
-        uint32_t at = link[v].begin()->first;
-        do {
-            auto next = link[v].find(at);
-            if (next == link[v].end()) break;
-            at = next->second;
-            ++steps;
-        } while (at != link[v].begin()->first && steps <= link[v].size());
-        if (steps != link[v].size() || at != link[v].begin()->first) t.vertex_manifold = false;
-    }
-    return t;
-}
-
 void expect_closed_surface(const Mesh& mesh, int64_t euler, int64_t components) {
-    const Topology t = topology(mesh);
+    const test::Topology t = test::topology(mesh);
     EXPECT_TRUE(t.closed_and_oriented);
     EXPECT_TRUE(t.vertex_manifold);
     EXPECT_EQ(t.unused_vertices, 0);
@@ -332,7 +282,7 @@ TEST(Meshing, EveryMarchingCubesCornerCaseIsClosedWithOneSpherePerInsideGroup) {
 TEST(Meshing, MarchingCubesStaysClosedAndManifoldOnNoiseFullOfAmbiguousFaces) {
     for (uint32_t seed = 1; seed <= 4; ++seed) {
         const Mesh mesh = marching_cubes(noise_field(14, seed));
-        const Topology t = topology(mesh);
+        const test::Topology t = test::topology(mesh);
         EXPECT_TRUE(t.closed_and_oriented) << "seed " << seed;
         EXPECT_TRUE(t.vertex_manifold) << "seed " << seed;
         EXPECT_EQ(t.unused_vertices, 0);
@@ -349,7 +299,7 @@ TEST(Meshing, CheckerboardFieldGivesAClosedMarchingCubesMesh) {
         // Slightly uneven magnitudes so the decider goes both ways.
         return border ? 1.0 : (parity % 2 ? 1.0 + 0.1 * std::sin(p[0] * 7 + p[1] * 3) : -1.0);
     });
-    const Topology t = topology(marching_cubes(field));
+    const test::Topology t = test::topology(marching_cubes(field));
     EXPECT_TRUE(t.closed_and_oriented);
     EXPECT_TRUE(t.vertex_manifold);
     EXPECT_GT(t.faces, 0);
@@ -374,6 +324,128 @@ TEST(Meshing, DeviceEqualsHostReferenceBitForBit) {
             expect_identical(surface_nets(device(), field, iso), surface_nets(field, iso));
             expect_identical(marching_cubes(device(), field, iso), marching_cubes(field, iso));
         }
+}
+
+// ---- the same bits on any conformant device ---------------------------------------------------
+// OpenCL 1.2 allows x / y to be off by 2.5 ulp. Vertex positions therefore divide through
+// om_divide, which walks from any estimate to the correctly rounded quotient; these tests hold it
+// to the host's IEEE division, from estimates off by a few ulps (what a device may return) and
+// from far away.
+
+uint32_t bits(float x) {
+    uint32_t u;
+    std::memcpy(&u, &x, sizeof u);
+    return u;
+}
+
+float step_ulps(float x, int ulps) {
+    for (; ulps > 0; --ulps) x = std::nextafter(x, INFINITY);
+    for (; ulps < 0; ++ulps) x = std::nextafter(x, 0.0f);
+    return x;
+}
+
+// A float with a random sign-free mantissa and an exponent in [lo, hi] (2^lo .. 2^hi).
+float random_float(std::mt19937& rng, int lo, int hi) {
+    std::uniform_int_distribution<int> exponent(lo, hi);
+    std::uniform_int_distribution<uint32_t> mantissa(0, (1u << 23) - 1);
+    return std::ldexp(1.0f + float(mantissa(rng)) / float(1u << 23), exponent(rng));
+}
+
+// om_divide_from(n, d, start) must be IEEE's n / d for every start within `ulps` of it.
+void expect_correct_quotient(float n, float d, int ulps) {
+    const float exact = n / d;  // the host divides with IEEE round-to-nearest-even
+    ASSERT_EQ(bits(detail::om_divide(n, d)), bits(exact)) << n << " / " << d;
+    for (int off = -ulps; off <= ulps; ++off) {
+        const float start = step_ulps(exact, off);
+        ASSERT_EQ(bits(detail::om_divide_from(n, d, start)), bits(exact))
+            << n << " / " << d << " from an estimate off by " << off << " ulps";
+    }
+}
+
+TEST(Meshing, PortableDivisionIsCorrectlyRoundedFromAnEstimateOffByUlps) {
+    std::mt19937 rng(7);
+    // Quotients in the range vertex positions use ([0, 1]) and far outside it, including
+    // subnormal ones; operands anywhere in the float range.
+    for (int i = 0; i < 200000; ++i) {
+        const float d = random_float(rng, -126, 100);
+        const float n = random_float(rng, -149 + 30, 100);
+        if (!std::isfinite(n / d)) continue;
+        expect_correct_quotient(n, d, i % 50 == 0 ? 4 : 1);
+    }
+    // Quotients next to a rounding midpoint: n = the float nearest to (q + ulp/2) * d, and its
+    // neighbours, for random q in [0, 1] and d.
+    for (int i = 0; i < 50000; ++i) {
+        const float q = random_float(rng, -30, -1), d = random_float(rng, -20, 20);
+        const double midpoint = 0.5 * (double(q) + double(std::nextafter(q, 1.0f)));
+        const float n = float(midpoint * double(d));
+        for (const float m : {std::nextafter(n, 0.0f), n, std::nextafter(n, INFINITY)})
+            expect_correct_quotient(m, d, 3);
+    }
+    // Hand-picked: exact quotients, zero, a quotient that is exactly a tie (subnormal results
+    // only: 2^-149 / 2 rounds to 0, 3 * 2^-149 / 2 and 5 * 2^-149 / 2 to 2 * 2^-149), the
+    // largest and smallest operands, and the 1/3, 1/10 family that is never exact.
+    const float tiny = std::numeric_limits<float>::denorm_min();
+    EXPECT_EQ(bits(detail::om_divide(tiny, 2.0f)), bits(0.0f));
+    EXPECT_EQ(bits(detail::om_divide(3 * tiny, 2.0f)), bits(2 * tiny));
+    EXPECT_EQ(bits(detail::om_divide(5 * tiny, 2.0f)), bits(2 * tiny));
+    const float cases[][2] = {{0.0f, 1.0f},        {0.0f, tiny},     {1.0f, 1.0f},
+                              {1.0f, 3.0f},        {2.0f, 3.0f},     {1.0f, 10.0f},
+                              {7.0f, 12.0f},       {11.0f, 12.0f},   {tiny, 1.0f},
+                              {tiny, tiny},        {tiny, 3.0f},     {FLT_MAX, FLT_MAX},
+                              {1.0f, FLT_MAX},     {FLT_MAX, 3e38f}, {1e-30f, 1e10f},
+                              {0.1f, 0.30000001f}, {FLT_MIN, 3.0f},  {3 * tiny, 7 * tiny}};
+    for (const auto& c : cases) expect_correct_quotient(c[0], c[1], 4);
+    // The estimate only decides where the walk starts (each step is one ulp, so a far estimate
+    // costs time, not correctness): from 1000 ulps below or above it still ends on the correctly
+    // rounded quotient.
+    for (int i = 0; i < 200; ++i) {
+        const float n = random_float(rng, -12, 0), d = random_float(rng, -1, 3);
+        EXPECT_EQ(bits(detail::om_divide_from(n, d, step_ulps(n / d, -1000))), bits(n / d));
+        EXPECT_EQ(bits(detail::om_divide_from(n, d, step_ulps(n / d, 1000))), bits(n / d));
+    }
+}
+
+// The edge crossing equals IEEE's (iso - a) / (b - a) wherever that is finite (up to the sign of
+// a zero), and stays in [0, 1] when b - a overflows.
+TEST(Meshing, EdgeCrossingIsTheIeeeQuotientOfTheDifferences) {
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> value(-4.0f, 4.0f);
+    for (int i = 0; i < 100000; ++i) {
+        const float iso = i % 3 == 0 ? 0.0f : value(rng);
+        float a = value(rng), b = value(rng);
+        if ((a < iso) == (b < iso)) continue;
+        const float expected = (iso - a) / (b - a);
+        EXPECT_EQ(bits(detail::om_crossing(a, b, iso)), bits(expected + 0.0f))
+            << a << " " << b << " " << iso;
+    }
+    const float t = detail::om_crossing(-FLT_MAX, FLT_MAX, 0.0f);
+    EXPECT_EQ(t, 0.5f);
+    EXPECT_EQ(detail::om_crossing(FLT_MAX, -FLT_MAX, 0.0f), 0.5f);
+}
+
+// Programs are built with -cl-fp32-correctly-rounded-divide-sqrt exactly when the device says it
+// supports it, and never with options that relax IEEE arithmetic.
+TEST(Meshing, BuildOptionsFollowTheDevicesReportedFloatCapability) {
+    const std::string plain = detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN);
+    EXPECT_EQ(plain, "-cl-std=CL1.2");
+    const std::string with =
+        detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN | CL_FP_DENORM |
+                              CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT);
+    EXPECT_EQ(with, "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt");
+
+    // The device in use: its program was built with the options its capability calls for.
+    Device::Impl& cl = device().impl();
+    const cl_device_fp_config config = cl.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>();
+    const bool supports = (config & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) != 0;
+    (void)surface_nets(device(), sphere_field());  // builds (or loads) the meshing program
+    std::string used;
+    for (const auto& [hash, program] : cl.programs)
+        used = program.getBuildInfo<CL_PROGRAM_BUILD_OPTIONS>(cl.device);
+    std::printf("[ measured ] %s: single fp config 0x%llx, build options \"%s\"\n",
+                device().info().name.c_str(), (unsigned long long)config, used.c_str());
+    EXPECT_EQ(used.find("-cl-fp32-correctly-rounded-divide-sqrt") != std::string::npos, supports);
+    EXPECT_EQ(used.find("fast"), std::string::npos);
+    EXPECT_EQ(used.find("mad"), std::string::npos);
 }
 
 // ---- occupancy fields ---------------------------------------------------------------------------

@@ -10,6 +10,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <random>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -202,6 +204,117 @@ TEST(RoundTrip, HausdorffEstimateSeesAShiftOfOneAndAQuarterVoxels) {
     EXPECT_NEAR(one_sided_hausdorff(a, b, 0.1), 1.25, 0.03);
     EXPECT_NEAR(one_sided_hausdorff(b, a, 0.1), 1.25, 0.03);
     EXPECT_NEAR(one_sided_hausdorff(a, a, 0.1), 0.0, 1e-9);
+}
+
+// ---- field meshes are closed: padded grids and Marching Cubes (what sdf and csg do) -------------
+// A grid fitted to the mesh(es) and padded by field_padding(band) has no inside sample on its
+// border, and Marching Cubes of the field is then a closed, consistently oriented, vertex-manifold
+// surface with the input's Euler characteristic and number of parts. The unpadded fit (the old
+// default) cuts the surface, and Surface Nets (the old default mesher) is non-manifold on CSG
+// results; both are measured and printed.
+
+GridFit padded_fit(int64_t resolution) {
+    GridFit fit;
+    fit.resolution = resolution;
+    fit.pad = field_padding(band3(64).band_voxels);
+    return fit;
+}
+
+void expect_closed_manifold(const Mesh& out, int64_t euler, int64_t components,
+                            const std::string& what) {
+    const Topology t = topology(out);
+    std::printf("[ measured ] %s: %lld triangles, Euler characteristic %lld, %lld part(s)\n",
+                what.c_str(), (long long)t.faces, (long long)t.euler(), (long long)t.components);
+    EXPECT_TRUE(t.closed_and_oriented) << what;
+    EXPECT_TRUE(t.vertex_manifold) << what;
+    EXPECT_EQ(t.unused_vertices, 0) << what;
+    EXPECT_EQ(t.euler(), euler) << what;
+    EXPECT_EQ(t.components, components) << what;
+}
+
+// Undirected edges not used by exactly two triangles.
+size_t non_manifold_edges(const Mesh& m) {
+    std::map<std::pair<uint32_t, uint32_t>, int> uses;
+    for (const auto& t : m.triangles)
+        for (int e = 0; e < 3; ++e)
+            ++uses[{std::min(t[e], t[(e + 1) % 3]), std::max(t[e], t[(e + 1) % 3])}];
+    return size_t(
+        std::count_if(uses.begin(), uses.end(), [](const auto& u) { return u.second != 2; }));
+}
+
+TEST(FieldMeshes, RealMeshFieldsOnPaddedGridsMeshToClosedManifoldsOfTheInputsTopology) {
+    for (const char* name : {"bunny00.off", "spot.obj"}) {
+        const Mesh mesh = load_mesh(mesh_path(name));
+        const Topology input = topology(welded(mesh));
+        ASSERT_TRUE(input.closed_and_oriented && input.vertex_manifold) << name;
+
+        const ScalarField field =
+            signed_distance(device(), mesh, fit_grid(mesh, padded_fit(64)), band3(64));
+        EXPECT_EQ(border_samples_inside(field), 0u) << name;
+        std::printf("[ measured ] %s input: Euler characteristic %lld, %lld part(s)\n", name,
+                    (long long)input.euler(), (long long)input.components);
+        expect_closed_manifold(marching_cubes(device(), field), input.euler(), input.components,
+                               std::string(name) + ", marching cubes, padded grid");
+
+        GridFit unpadded = padded_fit(64);
+        unpadded.pad = 0;
+        const ScalarField cut =
+            signed_distance(device(), mesh, fit_grid(mesh, unpadded), band3(64));
+        const uint64_t border = border_samples_inside(cut);
+        std::printf(
+            "[ measured ] %s, unpadded grid: %llu border samples inside, marching cubes "
+            "closed: %d\n",
+            name, (unsigned long long)border,
+            int(topology(marching_cubes(device(), cut)).closed_and_oriented));
+        EXPECT_GT(border, 0u) << name << ": the unpadded fit should cut the surface";
+    }
+}
+
+TEST(FieldMeshes, CsgOfOverlappingSpheresAndBoxesMeshesToClosedGenusZeroManifolds) {
+    const std::pair<Mesh, Mesh> shapes[] = {
+        {icosphere({0.0, 0.0, 0.0}, 1.0, 3), icosphere({0.83, 0.31, -0.27}, 0.8, 3)},
+        {box_mesh({0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}),
+         box_mesh({0.61, 0.23, 0.29}, {1.37, 0.71, 1.43})}};
+    for (const auto& [a, b] : shapes) {
+        const Grid grid = fit_grid(a, b, padded_fit(40));
+        const ScalarField fa = signed_distance(device(), a, grid, band3(64));
+        const ScalarField fb = signed_distance(device(), b, grid, band3(64));
+        for (const CsgOp op : {CsgOp::Union, CsgOp::Difference, CsgOp::Intersection}) {
+            const std::string what =
+                std::string(&a == &shapes[0].first ? "spheres " : "boxes ") + to_string(op);
+            const ScalarField c = csg(fa, fb, op);
+            EXPECT_EQ(border_samples_inside(c), 0u) << what;
+            expect_closed_manifold(marching_cubes(device(), c), 2, 1, what + ", marching cubes");
+            std::printf(
+                "[ measured ] %s, surface nets: %zu edges not shared by exactly two "
+                "triangles\n",
+                what.c_str(), non_manifold_edges(surface_nets(device(), c)));
+        }
+    }
+}
+
+// The border count against a direct enumeration on a small non-cubic field.
+TEST(FieldMeshes, BorderSamplesInsideCountsExactlyTheOuterLayer) {
+    ScalarField field;
+    field.grid.dims = {4, 5, 6};
+    field.values.assign(4 * 5 * 6, 1.0f);
+    std::mt19937 rng(3);
+    uint64_t expected = 0;
+    for (int k = 0; k < 6; ++k)
+        for (int j = 0; j < 5; ++j)
+            for (int i = 0; i < 4; ++i)
+                if (rng() % 3 == 0) {
+                    field.values[size_t(i + 4 * (j + 5 * k))] = -0.5f;
+                    expected += i == 0 || j == 0 || k == 0 || i == 3 || j == 4 || k == 5;
+                }
+    ASSERT_GT(expected, 0u);
+    EXPECT_EQ(border_samples_inside(field), expected);
+    EXPECT_EQ(border_samples_inside(field, -1.0f), 0u);  // nothing is below -1
+    field.grid.dims = {1, 1, 1};
+    field.values = {-2.0f};
+    EXPECT_EQ(border_samples_inside(field), 1u);
+    field.values = {};
+    EXPECT_THROW(border_samples_inside(field), GridError);
 }
 
 }  // namespace

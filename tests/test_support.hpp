@@ -7,9 +7,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <map>
+#include <numeric>
 #include <random>
 #include <string>
+#include <vector>
 
 #include "oclvox/oclvox.hpp"
 #include "overlap_double.hpp"
@@ -241,6 +244,80 @@ inline uint64_t expect_differ_only_where_touching(const SparseVoxels& a, const S
     check(a, b);
     check(b, a);
     return differing;
+}
+
+// ---- mesh topology, independent of the meshing code
+// ----------------------------------------------
+
+struct Topology {
+    bool closed_and_oriented = true;  // every directed edge once, its reverse once
+    bool vertex_manifold = true;      // the triangles around every vertex form one fan
+    int64_t vertices = 0, edges = 0, faces = 0, components = 0, unused_vertices = 0;
+    int64_t euler() const { return vertices - edges + faces; }
+};
+
+inline Topology topology(const Mesh& mesh) {
+    Topology t;
+    t.faces = int64_t(mesh.triangles.size());
+    std::map<std::pair<uint32_t, uint32_t>, int> directed;
+    std::vector<std::map<uint32_t, uint32_t>> link(mesh.positions.size());  // vertex -> (b -> c)
+    std::vector<uint32_t> parent(mesh.positions.size());
+    std::iota(parent.begin(), parent.end(), 0u);
+    std::function<uint32_t(uint32_t)> root = [&](uint32_t v) {
+        return parent[v] == v ? v : parent[v] = root(parent[v]);
+    };
+    std::vector<bool> used(mesh.positions.size(), false);
+    for (const auto& tri : mesh.triangles) {
+        for (int i = 0; i < 3; ++i) {
+            const uint32_t a = tri[i], b = tri[(i + 1) % 3], c = tri[(i + 2) % 3];
+            if (a == b) t.closed_and_oriented = false;
+            ++directed[{a, b}];
+            used[a] = true;
+            if (!link[a].emplace(b, c).second) t.vertex_manifold = false;
+            parent[root(a)] = root(b);
+        }
+    }
+    for (const auto& [edge, count] : directed) {
+        auto reverse = directed.find({edge.second, edge.first});
+        if (count != 1 || reverse == directed.end() || reverse->second != 1)
+            t.closed_and_oriented = false;
+    }
+    t.edges = int64_t(directed.size()) / 2;
+    for (size_t v = 0; v < link.size(); ++v) {
+        if (!used[v]) {
+            ++t.unused_vertices;
+            continue;
+        }
+        ++t.vertices;
+        if (root(uint32_t(v)) == v) ++t.components;
+        // Walk the fan: following b -> c must return to the start after visiting every triangle.
+        size_t steps = 0;
+        uint32_t at = link[v].begin()->first;
+        do {
+            auto next = link[v].find(at);
+            if (next == link[v].end()) break;
+            at = next->second;
+            ++steps;
+        } while (at != link[v].begin()->first && steps <= link[v].size());
+        if (steps != link[v].size() || at != link[v].begin()->first) t.vertex_manifold = false;
+    }
+    return t;
+}
+
+// The mesh with bit-identical positions merged into one vertex (loaders may keep duplicates, e.g.
+// at texture seams), so that its topology is that of the surface.
+inline Mesh welded(const Mesh& mesh) {
+    Mesh out;
+    std::map<Vec3d, uint32_t> index;
+    std::vector<uint32_t> remap(mesh.positions.size());
+    for (size_t v = 0; v < mesh.positions.size(); ++v) {
+        auto [it, added] = index.emplace(mesh.positions[v], uint32_t(out.positions.size()));
+        if (added) out.positions.push_back(mesh.positions[v]);
+        remap[v] = it->second;
+    }
+    for (const auto& t : mesh.triangles)
+        out.triangles.push_back({remap[t[0]], remap[t[1]], remap[t[2]]});
+    return out;
 }
 
 inline std::string mesh_path(const std::string& name) {

@@ -618,7 +618,9 @@ struct FieldArgs {
     double band = 3.0;
     bool full = false;
     std::string inside = "auto";
-    std::string mesher = "surface-nets";
+    // Marching Cubes by default: its meshes are closed and manifold (Surface Nets' are not where
+    // a cell face has four sign changes, which CSG results and thin parts produce).
+    std::string mesher = "marching-cubes";
     double iso = 0.0;
     std::string device;
     bool reference = false;
@@ -662,6 +664,19 @@ bool any_given(const std::vector<CLI::Option*>& options) {
                        [](const CLI::Option* o) { return o->count() > 0; });
 }
 
+// The grid fit of sdf and csg: a fitted grid gets field_padding(band) voxels on every side, so the
+// zero level set closes inside it, unless the user places the grid (--pad, --origin or --dims).
+oclvox::GridFit field_fit(const FieldArgs& args) {
+    oclvox::GridFit fit = args.fit;
+    const bool placed =
+        std::any_of(args.grid_options.begin(), args.grid_options.end(), [](const CLI::Option* o) {
+            return o->count() > 0 &&
+                   (o->check_name("--pad") || o->check_name("--origin") || o->check_name("--dims"));
+        });
+    if (!placed) fit.pad = oclvox::field_padding(args.band);
+    return fit;
+}
+
 oclvox::SdfOptions sdf_options(const FieldArgs& args) {
     oclvox::SdfOptions options;
     options.band_voxels = args.band;
@@ -695,6 +710,7 @@ struct FieldReport {
     const oclvox::Mesh* mesh;            // null when no mesh was made
     std::vector<std::string> outputs;
     const FieldTimings& timings;
+    uint64_t border_inside;  // border samples inside: the grid cuts the shape (see below)
 };
 
 void print_field_summary(const FieldReport& r) {
@@ -713,6 +729,12 @@ void print_field_summary(const FieldReport& r) {
         std::printf("mesh     %zu triangles, %zu vertices\n", r.mesh->triangles.size(),
                     r.mesh->positions.size());
     for (const std::string& output : r.outputs) std::printf("output   %s\n", output.c_str());
+    if (r.border_inside)
+        std::printf(
+            "warning  the shape reaches the grid border (%llu border samples inside): the grid "
+            "cuts its surface, so the field is truncated and meshes are open there; grow the grid "
+            "(--pad, --dims)\n",
+            (unsigned long long)r.border_inside);
     std::printf("time     %.3f s\n", r.timings.total);
 }
 
@@ -757,7 +779,8 @@ int run_sdf(const FieldArgs& args) {
     if (!args.mesh_output.empty()) check_output_kind(args.mesh_output, kMeshExtensions);
 
     const oclvox::Mesh mesh = timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
-    const oclvox::Grid grid = timed(timings.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
+    const oclvox::Grid grid =
+        timed(timings.fit, [&] { return oclvox::fit_grid(mesh, field_fit(args)); });
     stop_if_interrupted();
     std::optional<oclvox::Device> device = open_device(args.reference, args.device, timings.device);
 
@@ -786,7 +809,8 @@ int run_sdf(const FieldArgs& args) {
                             &stats,
                             surface ? &*surface : nullptr,
                             outputs,
-                            timings});
+                            timings,
+                            oclvox::border_samples_inside(field)});
     return 0;
 }
 
@@ -827,7 +851,8 @@ int run_csg(const FieldArgs& args) {
             mesh_b = oclvox::load_mesh(args.input_b);
             return 0;
         });
-        grid = timed(timings.fit, [&] { return oclvox::fit_grid(*mesh_a, *mesh_b, args.fit); });
+        grid =
+            timed(timings.fit, [&] { return oclvox::fit_grid(*mesh_a, *mesh_b, field_fit(args)); });
         inputs = {mesh_input_text(args.input, *mesh_a), mesh_input_text(args.input_b, *mesh_b)};
         stop_if_interrupted();
         device = open_device(args.reference, args.device, timings.device);
@@ -867,7 +892,8 @@ int run_csg(const FieldArgs& args) {
                             fields_in ? nullptr : &stats,
                             surface ? &*surface : nullptr,
                             {args.output},
-                            timings});
+                            timings,
+                            oclvox::border_samples_inside(combined)});
     return 0;
 }
 
@@ -931,7 +957,8 @@ int run_mesh(const FieldArgs& args) {
                             field_in ? nullptr : &stats,
                             &surface,
                             {args.output},
-                            timings});
+                            timings,
+                            oclvox::border_samples_inside(*field, float(args.iso))});
     return 0;
 }
 
@@ -947,11 +974,23 @@ const CLI::Validator kFinite(
 void add_mesher_option(CLI::App& command, FieldArgs& args) {
     command
         .add_option("--mesher", args.mesher,
-                    "iso-surface method: surface-nets (Naive Surface Nets) or marching-cubes")
+                    "iso-surface method: marching-cubes (asymptotic decider: closed and "
+                    "manifold meshes) or surface-nets (Naive Surface Nets: fewer slivers, but "
+                    "non-manifold where a cell face has four sign changes, as at CSG seams)")
         ->type_name("METHOD")
         ->check(CLI::IsMember({"surface-nets", "marching-cubes"}))
         ->capture_default_str()
         ->group("Meshing");
+}
+
+// sdf and csg pad fitted grids by default (field_fit): say so in their --pad help.
+void describe_field_padding(const std::vector<CLI::Option*>& grid_options) {
+    for (CLI::Option* o : grid_options)
+        if (o->check_name("--pad"))
+            o->description(
+                 "empty voxels added on every side; by default band + 1 (band rounded up) so the "
+                 "zero level set closes inside the grid, or 0 when --origin or --dims place it")
+                ->default_str("band+1");
 }
 
 void add_distance_options(CLI::App& command, FieldArgs& args) {
@@ -983,6 +1022,7 @@ void add_sdf_options(CLI::App& command, FieldArgs& args) {
         ->type_name("OUTPUT")
         ->required();
     args.grid_options = add_grid_options(command, args.fit);
+    describe_field_padding(args.grid_options);
     add_distance_options(command, args);
     command
         .add_flag("--full", args.full,
@@ -1016,6 +1056,7 @@ void add_csg_options(CLI::App& command, FieldArgs& args) {
         ->type_name("OUTPUT")
         ->required();
     args.grid_options = add_grid_options(command, args.fit);
+    describe_field_padding(args.grid_options);
     add_distance_options(command, args);
     command
         .add_flag("--full", args.full,
@@ -1081,7 +1122,8 @@ int main(int argc, char** argv) {
     CLI::App* csg = app.add_subcommand(
         "csg", "union, intersection or difference of two meshes (or two .npy fields)");
     csg->footer(std::string(exits) +
-                "Both signed distance fields are computed on one grid fitted to both meshes.\n"
+                "Both signed distance fields are computed on one grid fitted to both meshes and\n"
+                "padded by band + 1 voxels, so the result's surface closes inside it.\n"
                 "Example: oclvox csg a.obj difference b.obj -r 128 -o a_minus_b.obj");
     add_csg_options(*csg, csg_args);
     CLI::App* mesh = app.add_subcommand(

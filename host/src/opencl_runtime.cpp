@@ -95,6 +95,13 @@ size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device) {
     return std::max<size_t>(1, size);
 }
 
+std::string build_options(cl_device_fp_config single_fp_config) {
+    std::string options = "-cl-std=CL1.2";
+    if (single_fp_config & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT)
+        options += " -cl-fp32-correctly-rounded-divide-sqrt";
+    return options;
+}
+
 void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group) {
     const size_t global = size_t((n + group - 1) / group * group);
     queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(group));
@@ -112,10 +119,6 @@ namespace oclvox {
 namespace {
 
 using detail::throw_device_error;
-
-// Build options are part of the determinism contract: no -cl-fast-relaxed-math, no
-// -cl-mad-enable, and the kernels themselves say FP_CONTRACT OFF.
-const char* kBuildOptions = "-cl-std=CL1.2";
 
 std::string lower(std::string s) {
     std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -224,12 +227,13 @@ uint64_t fnv1a(const std::string& s) {
     return h;
 }
 
-std::string cache_path(const DeviceInfo& info, const detail::KernelSource& source) {
+std::string cache_path(const Device::Impl& impl, const detail::KernelSource& source) {
+    const DeviceInfo& info = impl.info;
     const std::string folder = cache_folder();
     if (folder.empty()) return {};
     const std::string key = std::string(source.sha256) + "|" + info.platform + "|" + info.name +
                             "|" + info.vendor + "|" + info.version + "|" + info.driver_version +
-                            "|" + kBuildOptions;
+                            "|" + impl.build_options;
     char hex[17];
     std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(fnv1a(key)));
     return folder + "/" + source.name + "-" + hex + ".bin";
@@ -252,7 +256,7 @@ bool load_cached(Device::Impl& impl, const std::string& path, cl::Program& out) 
     if (binary.empty()) return false;
     try {
         cl::Program program(impl.context, {impl.device}, cl::Program::Binaries{binary});
-        program.build({impl.device}, kBuildOptions);
+        program.build({impl.device}, impl.build_options.c_str());
         out = program;
         return true;
     } catch (const cl::Error&) {
@@ -302,6 +306,7 @@ Device Device::open(const std::string& selector) {
     try {
         impl->context = cl::Context(f.device);
         impl->queue = cl::CommandQueue(impl->context, f.device);
+        impl->build_options = detail::build_options(f.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>());
     } catch (const cl::Error& e) {
         throw_device_error(e, "creating a context on " + f.info.name);
     }
@@ -312,7 +317,7 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
     auto it = programs.find(source.sha256);
     if (it != programs.end()) return it->second;
 
-    const std::string path = cache_path(info, source);
+    const std::string path = cache_path(*this, source);
     cl::Program program;
     if (path.empty() || !load_cached(*this, path, program)) {
         try {
@@ -321,7 +326,7 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
             throw_device_error(e, std::string("creating program ") + source.name);
         }
         try {
-            program.build({device}, kBuildOptions);
+            program.build({device}, build_options.c_str());
         } catch (const cl::Error& e) {
             throw KernelBuildError("building kernels/" + std::string(source.name) + ".cl for " +
                                        info.name + " failed: " + detail::cl_status_name(e.err()),

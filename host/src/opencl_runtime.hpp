@@ -24,6 +24,15 @@ std::string cl_status_name(cl_int status);
 // the driver pick one per launch size would recompile on almost every launch.
 size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device);
 
+// The options every program is built with on a device whose CL_DEVICE_SINGLE_FP_CONFIG is
+// `single_fp_config`. Part of the determinism contract: "-cl-std=CL1.2", never fast-math or
+// -cl-mad-enable (the kernels also say FP_CONTRACT OFF), plus
+// -cl-fp32-correctly-rounded-divide-sqrt exactly when the device reports
+// CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT (asking for it elsewhere is an invalid build option). The
+// bit-for-bit kernels do not depend on it (they divide only through meshing_math.h's exact
+// om_divide); it makes the winding number's divisions and square roots IEEE where available.
+std::string build_options(cl_device_fp_config single_fp_config);
+
 // Launches `kernel` over at least n items in groups of `group`; kernels skip the padding items.
 void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group);
 
@@ -48,6 +57,7 @@ struct Device::Impl {
     cl::Device device;
     cl::Context context;
     cl::CommandQueue queue;
+    std::string build_options;                    // detail::build_options for this device
     std::map<std::string, cl::Program> programs;  // by source hash: built once per context
 
     // The built program for `source`: from this context's cache, else the disk cache, else

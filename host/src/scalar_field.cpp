@@ -1,5 +1,6 @@
 // Scalar fields: sample access, input checks for meshing, and the signed field of a voxel
 // occupancy.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -13,6 +14,24 @@ float ScalarField::at(int64_t i, int64_t j, int64_t k) const {
         throw std::out_of_range("ScalarField::at(" + std::to_string(i) + ", " + std::to_string(j) +
                                 ", " + std::to_string(k) + ") is outside the grid");
     return values.at(size_t(i + n[0] * (j + n[1] * k)));
+}
+
+uint64_t border_samples_inside(const ScalarField& field, float iso) {
+    const auto& n = field.grid.dims;
+    if (field.values.size() != field.grid.voxel_count())
+        throw GridError("the field has " + std::to_string(field.values.size()) +
+                        " values but its grid has " + std::to_string(field.grid.voxel_count()) +
+                        " samples");
+    uint64_t inside = 0;
+    for (int64_t k = 0; k < n[2]; ++k)
+        for (int64_t j = 0; j < n[1]; ++j) {
+            const bool face = k == 0 || k == n[2] - 1 || j == 0 || j == n[1] - 1;
+            // Inside a face row every sample is on the border; elsewhere only the two ends.
+            const int64_t step = face ? 1 : std::max<int64_t>(1, n[0] - 1);
+            for (int64_t i = 0; i < n[0]; i += step)
+                inside += field.values[size_t(i + n[0] * (j + n[1] * k))] < iso;
+        }
+    return inside;
 }
 
 ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes) {

@@ -133,6 +133,13 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside) {
 
 }  // namespace detail
 
+int64_t field_padding(double band_voxels) {
+    if (!(band_voxels > 0) || !(band_voxels < double(kMaxGridAxis)))
+        throw GridError("band must be a positive number of voxels below 2^20, got " +
+                        std::to_string(band_voxels));
+    return int64_t(std::ceil(band_voxels)) + 1;
+}
+
 ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
                                         const SdfOptions& options, VoxelizeStats* stats_out) {
     VoxelizeStats stats;

@@ -40,6 +40,12 @@ struct ScalarField {
 // hold.
 ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes = 1);
 
+// How many samples of the grid's outer layer are inside (value < iso). Zero means no part of the
+// shape reaches the grid border, so both meshing methods give a closed surface; otherwise the
+// shape is cut by the grid box and its meshes are open there. Throws GridError if values.size()
+// does not match the grid.
+uint64_t border_samples_inside(const ScalarField& field, float iso = 0.0f);
+
 // Naive Surface Nets: one vertex per cell whose corners change sign, at the mean of the linearly
 // interpolated crossings on its sign-changing edges; one quad (two triangles) per sign-changing
 // grid edge, joining the vertices of the four cells around it. Closed and manifold wherever no

@@ -22,6 +22,13 @@ struct SdfOptions {
     int brick_size = 64;
 };
 
+// Margin, in voxels on every side, for a grid fitted to a mesh whose distance field is written or
+// meshed: ceil(band_voxels) + 1 (GridFit::pad). Then the whole band of exact distances lies in
+// the grid, and every border sample is at least half a voxel outside the mesh's bounding box,
+// where no closed mesh is inside: the zero level set does not reach the border and its meshes
+// are closed. The CLI's sdf and csg pad fitted grids by this much unless told otherwise.
+int64_t field_padding(double band_voxels);
+
 // Distance in world units from each voxel centre to the nearest point of the mesh's triangles.
 //
 // Inside the band (distance < band_voxels voxels) the value is the exact point-to-triangle
