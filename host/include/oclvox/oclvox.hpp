@@ -264,4 +264,13 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
 // faces that are exposed). Writes to a temporary file in the same folder, then renames it.
 void write_voxels(const std::string& path, const SparseVoxels& voxels);
 
+// Checks before any work that `path` can be written as an output: its folder exists and a file
+// can be created there, and it is neither a directory nor the same file (by file-system identity,
+// not by name) as any of `inputs`. Throws OutputError naming `path` and the reason.
+void check_output_path(const std::string& path, const std::vector<std::string>& inputs = {});
+
+// Writes `text` to `path` the way every output is written (temporary file, renamed into place).
+// Throws OutputError naming `path`.
+void write_text_file(const std::string& path, const std::string& text);
+
 }  // namespace oclvox
