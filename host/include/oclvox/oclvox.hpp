@@ -89,9 +89,14 @@ struct Grid {
 // longest axis, cubic voxels, the other axes as many voxels as they need.
 struct GridFit {
     int64_t resolution = 256;  // voxels along the longest axis (ignored if voxel_size > 0)
-    bool cubic = false;        // resolution^3 grid, mesh centred (binvox convention)
-    double voxel_size = 0;     // > 0: use this voxel size instead of resolution
-    bool has_origin = false;   // use `origin` instead of the fitted one
+    // resolution^3 grid placed by cubic_anchor: Centre puts the centre of the mesh box at the
+    // centre of the cube (cuda_voxelizer's convention), Minimum puts the box minimum at the
+    // cube's corner, so the mesh touches the low faces (binvox's: translate = box minimum, scale =
+    // longest box side).
+    bool cubic = false;
+    enum class CubicAnchor { Centre, Minimum } cubic_anchor = CubicAnchor::Centre;
+    double voxel_size = 0;    // > 0: use this voxel size instead of resolution
+    bool has_origin = false;  // use `origin` instead of the fitted one
     std::array<double, 3> origin{0, 0, 0};
     bool has_dims = false;  // use `dims` instead of the fitted ones
     std::array<int64_t, 3> dims{0, 0, 0};
