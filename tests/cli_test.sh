@@ -423,6 +423,151 @@ expect_failure "mesh of a missing file" "$o" 'no-such-field' mesh "$WORK/no-such
 expect_failure "mesh of a field with grid options" "$o" 'grid options' \
     mesh "$WORK/sdf.npy" -r 24 -o "$o"
 
+# ---- hostile .npy fields, occupancy inputs, output paths checked first ---------------------------
+# write_npy PATH DESCR SHAPE [DATA_BYTES]: a version 1.0 .npy header (padded as numpy pads it)
+# followed by DATA_BYTES zero bytes (default: none), and a valid sidecar.
+write_npy() {
+    python3 - "$@" <<'EOF_PY'
+import struct, sys
+path, descr, shape = sys.argv[1:4]
+data = int(sys.argv[4]) if len(sys.argv) > 4 else 0
+d = "{'descr': '%s', 'fortran_order': True, 'shape': %s, }" % (descr, shape)
+d += " " * ((64 - (10 + len(d) + 1) % 64) % 64) + "\n"
+with open(path, "wb") as f:
+    f.write(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(d)) + d.encode() + bytes(data))
+with open(path + ".json", "w") as f:
+    f.write('{"origin": [0, 0, 0], "voxel_size": 1}')
+EOF_PY
+}
+
+# expect_quick_failure NAME OUTPUT PATTERN ARGS...: as expect_failure (OUTPUT is a file that must
+# not appear), and also within 2 s, at most 200 MiB peak memory, and never naming a temporary
+# file. For checks that must happen before loading or computing anything.
+expect_quick_failure() {
+    local name=$1 output=$2 pattern=$3
+    shift 3
+    local start end rss
+    start=$(date +%s.%N)
+    /usr/bin/time -f '%M' -o "$WORK/rss" "$OCLVOX" "$@" >"$WORK/stdout" 2>"$WORK/stderr"
+    RC=$?
+    end=$(date +%s.%N)
+    ERR=$(cat "$WORK/stderr")
+    rss=$(tail -n1 "$WORK/rss")
+    local seconds leftovers
+    seconds=$(python3 -c "print(round($end - $start, 2))")
+    leftovers=$(find "$(dirname "$output")" -maxdepth 1 \( -name "$(basename "$output")" -o \
+        -name "*.tmp-*" \) -newer "$WORK/stamp" 2>/dev/null)
+    if [ "$RC" -ne 1 ]; then
+        fail "$name" "exit code $RC: $ERR"
+    elif ! grep -qiE "$pattern" <<<"$ERR" || grep -q '\.tmp-' <<<"$ERR"; then
+        fail "$name" "stderr does not match '$pattern' or names a temporary file: $ERR"
+    elif [ -n "$leftovers" ]; then
+        fail "$name" "left output behind: $leftovers"
+    elif python3 -c "import sys; sys.exit(not ($seconds > 2 or $rss > 204800))"; then
+        fail "$name" "took $seconds s and $((rss / 1024)) MiB"
+    else
+        pass "$name ($seconds s, $((rss / 1024)) MiB: $(head -n1 <<<"$ERR"))"
+    fi
+}
+
+if [ ! -x /usr/bin/time ]; then
+    fail "/usr/bin/time exists (Debian package time, see scripts/install_deps.sh)"
+else
+    touch "$WORK/stamp"
+    o="$WORK/hostile.obj"
+    write_npy "$WORK/huge.npy" '<f4' '(1024, 1024, 1024)'
+    expect_quick_failure "mesh of a 128-byte .npy claiming 1024^3 float32" "$o" \
+        'huge\.npy.*needs 4294967296 bytes' mesh "$WORK/huge.npy" -o "$o"
+    write_npy "$WORK/e15.npy" '<f4' '(1000000, 1000000, 1000)' 1024
+    expect_quick_failure "mesh of a 1 KB .npy claiming 10^15 values" "$o" \
+        'e15\.npy.*needs 4000000000000000 bytes' mesh "$WORK/e15.npy" -o "$o"
+    write_npy "$WORK/digits.npy" '<f4' '(12345678901234567890, 2, 2)' 64
+    expect_quick_failure "mesh of a .npy with a 20-digit axis" "$o" \
+        'digits\.npy.*12345678901234567890.*exceeds' mesh "$WORK/digits.npy" -o "$o"
+    write_npy "$WORK/dims.npy" '<f4' '(2, 3, 4)' 96
+    echo '{"origin": [0, 0, 0], "voxel_size": 1, "dims": [4, 3, 2]}' >"$WORK/dims.npy.json"
+    expect_quick_failure "mesh of a .npy whose sidecar dims disagree" "$o" \
+        'dims\.npy\.json.*disagree' mesh "$WORK/dims.npy" -o "$o"
+    echo '{"origin": [0, 0, 0], "voxel_size": "1"}' >"$WORK/dims.npy.json"
+    expect_quick_failure "mesh of a .npy whose sidecar voxel_size is a string" "$o" \
+        'dims\.npy\.json.*voxel_size' mesh "$WORK/dims.npy" -o "$o"
+
+    # Output paths: each command refuses before loading, on a grid that would take long to
+    # compute. A directory, a folder that cannot be written, the input under another name.
+    mkdir "$WORK/adir.obj" "$WORK/adir.npy" "$WORK/adir.json"
+    cp "$MESH" "$WORK/in.obj"
+    big=(-r 2048)
+    expect_quick_failure "voxelize -o a directory" "$WORK/adir.obj.x" "adir\.obj'.*directory" \
+        voxelize "$MESH" "${big[@]}" -o "$WORK/adir.obj"
+    expect_quick_failure "voxelize --stats-json a directory" "$WORK/v.binvox" \
+        "adir\.json'.*directory" voxelize "$MESH" "${big[@]}" -o "$WORK/v.binvox" \
+        --stats-json "$WORK/adir.json"
+    expect_quick_failure "voxelize -o an unwritable folder" "$WORK/none" \
+        "/proc/oclvox_out\.binvox'.*cannot be written" \
+        voxelize "$MESH" "${big[@]}" -o /proc/oclvox_out.binvox
+    expect_quick_failure "voxelize -o its own input (as ./in.obj)" "$WORK/none" \
+        "in\.obj'.*is the input file" voxelize "$WORK/in.obj" "${big[@]}" -o "$WORK/./in.obj"
+    expect_quick_failure "sdf -o a directory" "$WORK/none" "adir\.npy'.*directory" \
+        sdf "$MESH" "${big[@]}" -o "$WORK/adir.npy"
+    expect_quick_failure "sdf --mesh its own input" "$WORK/s.npy" "in\.obj'.*is the input file" \
+        sdf "$WORK/in.obj" "${big[@]}" -o "$WORK/s.npy" --mesh "$WORK/./in.obj"
+    expect_quick_failure "csg -o its second input" "$WORK/none" "in\.obj'.*is the input file" \
+        csg "$MESH" union "$WORK/in.obj" "${big[@]}" -o "$WORK/./in.obj"
+    expect_quick_failure "mesh -o a missing folder" "$WORK/missing/m.obj" "missing'.*not exist" \
+        mesh "$MESH" "${big[@]}" -o "$WORK/missing/m.obj"
+    expect_quick_failure "mesh -o its own input" "$WORK/none" "in\.obj'.*is the input file" \
+        mesh "$WORK/in.obj" "${big[@]}" -o "$WORK/./in.obj"
+    cmp -s "$MESH" "$WORK/in.obj" && pass "the input survives every refused run" ||
+        fail "the input was modified"
+fi
+
+# The occupancy .npy voxelize writes is a field input: meshed exactly as a mesh input's voxels
+# are (same grid, same occupancy_to_field), and its union with itself is itself.
+run voxelize "$MESH" -r 20 --mode solid -q -o "$WORK/occ.npy"
+run mesh "$WORK/occ.npy" --mesher surface-nets -o "$WORK/occ_mesh.obj"
+occ_rc=$RC
+grep -q 'occ.npy (occupancy)' <<<"$OUT" || occ_rc="summary: $OUT"
+run mesh "$MESH" -r 20 --pad 0 --mesher surface-nets -q -o "$WORK/direct_mesh.obj"
+if [ "$occ_rc" = 0 ] && [ "$RC" -eq 0 ] && [ "$(obj_faces "$WORK/occ_mesh.obj")" -gt 100 ] &&
+    cmp -s "$WORK/occ_mesh.obj" "$WORK/direct_mesh.obj"; then
+    pass "mesh of an occupancy .npy equals mesh of its mesh ($(obj_faces "$WORK/occ_mesh.obj") faces)"
+else
+    fail "mesh of an occupancy .npy" "rc=$occ_rc/$RC err=$ERR"
+fi
+run csg "$WORK/occ.npy" union "$WORK/occ.npy" --mesher surface-nets -q -o "$WORK/occ_union.obj"
+[ "$RC" -eq 0 ] && cmp -s "$WORK/occ_union.obj" "$WORK/occ_mesh.obj" &&
+    pass "csg of occupancy .npy files: A union A is A" || fail "csg of occupancy .npy" "rc=$RC err=$ERR"
+expect_failure "csg of occupancy .npy files into a field" "$WORK/occ_union.npy" 'occupancy.*mesh' \
+    csg "$WORK/occ.npy" union "$WORK/occ.npy" -o "$WORK/occ_union.npy"
+
+# --cubic: centred (cuda_voxelizer) by default, --cubic=min is binvox's placement. Checked on the
+# .binvox header against the sample's bounding box computed here: binvox maps the cube to
+# [translate, translate + scale], so min has translate = box minimum and scale = longest side.
+for anchor in centre min; do
+    run voxelize "$MESH" -r 16 "--cubic=$anchor" -q -o "$WORK/cubic_$anchor.binvox"
+    verdict=$(python3 - "$MESH" "$WORK/cubic_$anchor.binvox" "$anchor" <<'EOF_PY'
+import sys
+vs = [list(map(float, l.split()[1:4])) for l in open(sys.argv[1]) if l.startswith("v ")]
+lo = [min(v[k] for v in vs) for k in range(3)]
+hi = [max(v[k] for v in vs) for k in range(3)]
+side = max(hi[k] - lo[k] for k in range(3))
+header = open(sys.argv[2], "rb").read(200).split(b"data\n")[0].decode().split("\n")
+t = [float(x) for x in next(l for l in header if l.startswith("translate")).split()[1:]]
+s = float(next(l for l in header if l.startswith("scale")).split()[1])
+want = lo if sys.argv[3] == "min" else [(lo[k] + hi[k] - side) / 2 for k in range(3)]
+ok = abs(s - side) <= 1e-12 * side and all(abs(t[k] - want[k]) <= 1e-12 * side for k in range(3))
+print("ok" if ok else "translate %s scale %s, expected %s and %s" % (t, s, want, side))
+EOF_PY
+)
+    [ "$RC" -eq 0 ] && [ "$verdict" = ok ] && pass "--cubic=$anchor places the cube as documented" ||
+        fail "--cubic=$anchor" "rc=$RC $verdict err=$ERR"
+done
+run voxelize "$MESH" -r 16 --cubic -q -o "$WORK/cubic_plain.binvox"
+cmp -s "$WORK/cubic_plain.binvox" "$WORK/cubic_centre.binvox" && pass "--cubic is --cubic=centre" ||
+    fail "--cubic differs from --cubic=centre"
+expect_failure "--cubic=middle" "$WORK/cubic_x.binvox" 'cubic' \
+    voxelize "$MESH" -r 16 --cubic=middle -o "$WORK/cubic_x.binvox"
+
 # ---- Ctrl-C -------------------------------------------------------------------------------------
 # A run that voxelizes for about 3 s on PoCL, in many small batches, gets one SIGINT after 1 s,
 # sent to its whole process group as a terminal's Ctrl-C is (job control gives the run its own

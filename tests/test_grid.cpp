@@ -28,6 +28,31 @@ TEST(FitGrid, CubicIsResolutionCubedWithMeshCentred) {
     EXPECT_DOUBLE_EQ(g.origin[2], 2.25 - 2);
 }
 
+// binvox's convention (translate = box minimum, scale = longest side): the box minimum is the
+// cube's corner on every axis, so the mesh touches the cube's three low faces.
+TEST(FitGrid, CubicAtMinimumPutsTheBoxMinimumAtTheCorner) {
+    GridFit fit;
+    fit.resolution = 8;
+    fit.cubic = true;
+    fit.cubic_anchor = GridFit::CubicAnchor::Minimum;
+    const Grid g = fit_grid(long_box(), fit);
+    EXPECT_EQ(g.dims, (std::array<int64_t, 3>{8, 8, 8}));
+    EXPECT_DOUBLE_EQ(g.voxel_size, 0.5);  // binvox scale 4 = longest side, over 8 voxels
+    EXPECT_EQ(g.origin, (std::array<double, 3>{-1, 0, 2}));
+
+    // Where the box lands: x in [-1, 3] fills voxels 0..7, y in [0, 1] touches 0..2 (closed boxes:
+    // y = 1 is the face between voxels 1 and 2), z in [2, 2.5] touches 0..1.
+    VoxelizeOptions options;
+    const SparseVoxels voxels = voxelize_reference(long_box(), g, options);
+    int64_t hi[3] = {-1, -1, -1}, lo[3] = {99, 99, 99};
+    voxels.for_each([&](int64_t i, int64_t j, int64_t k) {
+        const int64_t v[3] = {i, j, k};
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[a]), hi[a] = std::max(hi[a], v[a]);
+    });
+    EXPECT_EQ((std::array<int64_t, 3>{lo[0], lo[1], lo[2]}), (std::array<int64_t, 3>{0, 0, 0}));
+    EXPECT_EQ((std::array<int64_t, 3>{hi[0], hi[1], hi[2]}), (std::array<int64_t, 3>{7, 2, 1}));
+}
+
 TEST(FitGrid, VoxelSizeOriginDimsAndPadAreHonoured) {
     GridFit fit;
     fit.voxel_size = 0.25;

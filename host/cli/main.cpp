@@ -18,14 +18,13 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <thread>
+#include <variant>
 #include <vector>
 
 #include "oclvox/field.hpp"
@@ -160,42 +159,26 @@ std::string lowercase_extension(const std::string& path) {
 }
 
 // Mistakes in output paths are cheap to find before the run and expensive after a long one, so
-// they are checked up front. The format list mirrors what write_voxels accepts.
-void check_output_path(const std::string& path, bool voxel_file) {
-    const fs::path parent = fs::path(path).parent_path();
-    if (!parent.empty() && !fs::is_directory(parent))
-        throw oclvox::OutputError("cannot write '" + path + "': folder '" + parent.string() +
-                                  "' does not exist");
-    if (!voxel_file) return;
+// every output is checked before any input is read: its extension against the formats the
+// command writes (`allowed`; empty: any), then the library's check_output_path (folder exists and
+// is writable, not a directory, not one of the inputs), also for a .npy output's .json sidecar.
+void check_output(const std::string& path, const std::vector<std::string>& inputs,
+                  const std::vector<std::string>& allowed) {
     const std::string ext = lowercase_extension(path);
-    if (ext != ".binvox" && ext != ".npy" && ext != ".vox" && ext != ".obj" && ext != ".ply")
+    if (!allowed.empty() && std::find(allowed.begin(), allowed.end(), ext) == allowed.end()) {
+        std::string list;
+        for (const std::string& a : allowed) list += (list.empty() ? "" : ", ") + a;
         throw oclvox::OutputError(
             "cannot write '" + path + "': " +
             (ext.empty() ? "the file name has no extension" : "unknown extension '" + ext + "'") +
-            " (supported: .binvox, .npy, .vox, .obj, .ply)");
+            " (supported: " + list + ")");
+    }
+    oclvox::check_output_path(path, inputs);
+    if (ext == ".npy") oclvox::check_output_path(path + ".json", inputs);
 }
 
-// Same contract as the library's outputs: a temporary file beside the target, renamed into
-// place, so a reader never sees a half-written file.
-void write_text_atomically(const std::string& path, const std::string& text) {
-    const fs::path target(path);
-    const fs::path temp = target.parent_path() /
-                          ("." + target.filename().string() + ".tmp-" + std::to_string(getpid()));
-    std::ofstream out(temp, std::ios::binary);
-    if (!out)
-        throw oclvox::OutputError("cannot write '" + temp.string() + "': " + std::strerror(errno));
-    out << text;
-    out.close();
-    if (!out) {
-        fs::remove(temp);
-        throw oclvox::OutputError("cannot write '" + path + "': write failed");
-    }
-    if (std::rename(temp.c_str(), path.c_str()) != 0) {
-        const int error = errno;
-        fs::remove(temp);
-        throw oclvox::OutputError("cannot write '" + path + "': " + std::strerror(error));
-    }
-}
+// What write_voxels accepts.
+const std::vector<std::string> kVoxelExtensions{".binvox", ".npy", ".vox", ".obj", ".ply"};
 
 // ---------------------------------------------------------------------------------------------
 // Timing and reports
@@ -397,8 +380,8 @@ int run_voxelize(const VoxelizeArgs& args) {
     start_interrupt_watcher();
 
     // Phase 1: output paths, before any work is spent.
-    check_output_path(args.output, true);
-    if (!args.stats_json.empty()) check_output_path(args.stats_json, false);
+    check_output(args.output, {args.input}, kVoxelExtensions);
+    if (!args.stats_json.empty()) check_output(args.stats_json, {args.input}, {});
 
     // Phase 2: the mesh and the grid around it.
     const oclvox::Mesh mesh = timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
@@ -439,7 +422,7 @@ int run_voxelize(const VoxelizeArgs& args) {
     if (!args.quiet) print_summary(report);
     if (args.stats) print_stats(report);
     if (!args.stats_json.empty())
-        write_text_atomically(args.stats_json, stats_json(report).dump(2) + "\n");
+        oclvox::write_text_file(args.stats_json, stats_json(report).dump(2) + "\n");
     return 0;
 }
 
@@ -452,10 +435,20 @@ std::vector<CLI::Option*> add_grid_options(CLI::App& command, oclvox::GridFit& f
             ->check(CLI::Range(int64_t(1), oclvox::kMaxGridAxis))
             ->capture_default_str()
             ->group("Grid");
-    auto* cubic = command
-                      .add_flag("--cubic", fit.cubic,
-                                "resolution^3 grid with the mesh centred (the binvox convention)")
-                      ->group("Grid");
+    auto* cubic =
+        command
+            .add_flag("--cubic{centre}",
+                      "resolution^3 grid. --cubic (or --cubic=centre) centres the mesh box in the "
+                      "cube, as cuda_voxelizer does; --cubic=min puts the box minimum at the "
+                      "cube's corner, as binvox does (translate = box minimum, scale = longest "
+                      "side)")
+            ->check(CLI::IsMember({"centre", "min"}))
+            ->each([&fit](const std::string& anchor) {
+                fit.cubic = true;
+                fit.cubic_anchor = anchor == "min" ? oclvox::GridFit::CubicAnchor::Minimum
+                                                   : oclvox::GridFit::CubicAnchor::Centre;
+            })
+            ->group("Grid");
     auto* voxel_size = command
                            .add_option("--voxel-size", fit.voxel_size,
                                        "edge length of a voxel, instead of --resolution")
@@ -636,21 +629,6 @@ bool is_field_path(const std::string& path) {
     return lowercase_extension(path) == ".npy";
 }
 
-// The output's folder exists and its extension is one of `allowed` (e.g. ".npy .vdb").
-void check_output_kind(const std::string& path, const std::vector<std::string>& allowed) {
-    check_output_path(path, false);
-    const std::string ext = lowercase_extension(path);
-    std::string list;
-    for (const std::string& a : allowed) {
-        if (ext == a) return;
-        list += (list.empty() ? "" : ", ") + a;
-    }
-    throw oclvox::OutputError(
-        "cannot write '" + path + "': " +
-        (ext.empty() ? "the file name has no extension" : "unknown extension '" + ext + "'") +
-        " (supported: " + list + ")");
-}
-
 const std::vector<std::string> kMeshExtensions{".obj", ".ply", ".stl"};
 const std::vector<std::string> kFieldExtensions{".npy", ".vdb"};
 
@@ -770,13 +748,26 @@ std::string mesh_input_text(const std::string& path, const oclvox::Mesh& mesh) {
     return path + " (" + std::to_string(mesh.triangles.size()) + " triangles)";
 }
 
+// A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
+// occupancy_to_field, as a mesh input's voxels do in `mesh`; `occupancy` says which it was.
+oclvox::ScalarField read_field_input(const std::string& path, bool& occupancy) {
+    std::variant<oclvox::ScalarField, oclvox::SparseVoxels> data = oclvox::read_npy(path);
+    occupancy = std::holds_alternative<oclvox::SparseVoxels>(data);
+    if (occupancy) return oclvox::occupancy_to_field(std::get<oclvox::SparseVoxels>(data));
+    return std::get<oclvox::ScalarField>(std::move(data));
+}
+
+std::string field_input_text(const std::string& path, bool occupancy) {
+    return path + (occupancy ? " (occupancy)" : " (field)");
+}
+
 int run_sdf(const FieldArgs& args) {
     const Clock::time_point start = Clock::now();
     FieldTimings timings;
     start_interrupt_watcher();
 
-    check_output_kind(args.output, kFieldExtensions);
-    if (!args.mesh_output.empty()) check_output_kind(args.mesh_output, kMeshExtensions);
+    check_output(args.output, {args.input}, kFieldExtensions);
+    if (!args.mesh_output.empty()) check_output(args.mesh_output, {args.input}, kMeshExtensions);
 
     const oclvox::Mesh mesh = timed(timings.load, [&] { return oclvox::load_mesh(args.input); });
     const oclvox::Grid grid =
@@ -821,7 +812,7 @@ int run_csg(const FieldArgs& args) {
 
     const oclvox::CsgOp op = oclvox::csg_op_from_string(args.op);
     const bool mesh_out = is_mesh_output(args.output);
-    check_output_kind(args.output, {".obj", ".ply", ".stl", ".npy", ".vdb"});
+    check_output(args.output, {args.input, args.input_b}, {".obj", ".ply", ".stl", ".npy", ".vdb"});
 
     const bool fields_in = is_field_path(args.input) && is_field_path(args.input_b);
     if (!fields_in && (is_field_path(args.input) || is_field_path(args.input_b)))
@@ -836,13 +827,20 @@ int run_csg(const FieldArgs& args) {
     oclvox::VoxelizeStats stats_a, stats_b;
     std::optional<oclvox::Device> device;
     if (fields_in) {
+        bool occupancy_a = false, occupancy_b = false;
         timed(timings.load, [&] {
-            a = oclvox::read_field(args.input);
-            b = oclvox::read_field(args.input_b);
+            a = read_field_input(args.input, occupancy_a);
+            b = read_field_input(args.input_b, occupancy_b);
             return 0;
         });
         grid = a->grid;
-        inputs = {args.input + " (field)", args.input_b + " (field)"};
+        inputs = {field_input_text(args.input, occupancy_a),
+                  field_input_text(args.input_b, occupancy_b)};
+        // occupancy_to_field's values step by +-0.5 across the surface; they are not distances.
+        if ((occupancy_a || occupancy_b) && !mesh_out)
+            throw UsageError(
+                "csg of an occupancy .npy writes a mesh (.obj, .ply, .stl), not a "
+                "distance field");
         stop_if_interrupted();
         if (mesh_out) device = open_device(args.reference, args.device, timings.device);
     } else {
@@ -902,7 +900,7 @@ int run_mesh(const FieldArgs& args) {
     FieldTimings timings;
     start_interrupt_watcher();
 
-    check_output_kind(args.output, kMeshExtensions);
+    check_output(args.output, {args.input}, kMeshExtensions);
     const bool field_in = is_field_path(args.input);
     if (field_in && any_given(args.grid_options))
         throw UsageError("grid options do not apply to a .npy field input (its grid is used)");
@@ -912,8 +910,9 @@ int run_mesh(const FieldArgs& args) {
     oclvox::VoxelizeStats stats;
     std::optional<oclvox::Device> device;
     if (field_in) {
-        field = timed(timings.load, [&] { return oclvox::read_field(args.input); });
-        input_text = args.input + " (field)";
+        bool occupancy = false;
+        field = timed(timings.load, [&] { return read_field_input(args.input, occupancy); });
+        input_text = field_input_text(args.input, occupancy);
         stop_if_interrupted();
         device = open_device(args.reference, args.device, timings.device);
     } else {

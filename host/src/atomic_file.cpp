@@ -3,9 +3,12 @@
 // The temporary file lives in the target's folder (same file system, so std::rename is atomic)
 // and is named after the target plus the process id and a per-process counter, so concurrent
 // writers in one process or across processes never share a temporary file. There is no fsync:
-// this protects against interrupted runs, not against power loss.
+// this protects against interrupted runs, not against power loss. Errors name the user's path;
+// the temporary file is an implementation detail they never see.
 #include "atomic_file.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -29,6 +32,13 @@ std::string last_system_error() {
     return errno != 0 ? std::strerror(errno) : "unknown I/O error";
 }
 
+// The folder a path's file lives in, as the user would name it.
+std::string folder_of(const std::string& path) {
+    const size_t slash = path.find_last_of('/');
+    if (slash == std::string::npos) return ".";
+    return slash == 0 ? "/" : path.substr(0, slash);
+}
+
 // Removes the temporary file unless the rename into place succeeded.
 struct TemporaryFile {
     std::string name;
@@ -48,8 +58,8 @@ void write_file_atomically(const std::string& path,
     errno = 0;
     std::ofstream stream(temporary.name, std::ios::binary | std::ios::trunc);
     if (!stream.is_open())
-        throw OutputError("cannot write " + path + ": cannot create " + temporary.name + ": " +
-                          last_system_error());
+        throw OutputError("cannot write " + path + ": cannot create a file in folder '" +
+                          folder_of(path) + "': " + last_system_error());
 
     // Phase 2: let the format write its bytes. Failures other than OutputError are reported as
     // OutputError too, so callers of write_voxels only need to handle one type.
@@ -69,11 +79,50 @@ void write_file_atomically(const std::string& path,
     if (!written || stream.fail())
         throw OutputError("cannot write " + path + ": " + last_system_error());
 
-    // Phase 4: replace the target in one step.
+    // Phase 4: replace the target in one step (a directory of that name makes this fail).
     if (std::rename(temporary.name.c_str(), path.c_str()) != 0)
-        throw OutputError("cannot write " + path + ": cannot rename " + temporary.name +
-                          " into place: " + std::strerror(errno));
+        throw OutputError("cannot write " + path + ": " + std::strerror(errno));
     temporary.renamed = true;
 }
 
 }  // namespace oclvox::detail
+
+namespace oclvox {
+
+void check_output_path(const std::string& path, const std::vector<std::string>& inputs) {
+    auto refuse = [&](const std::string& why) {
+        throw OutputError("cannot write '" + path + "': " + why);
+    };
+    if (path.empty()) refuse("the output path is empty");
+
+    // Phase 1: the target itself is a file or nothing; never a directory, never an input. Identity
+    // is the file system's (device and inode), so "./a.obj", "a.obj" and links all compare equal.
+    struct stat target {};
+    if (::stat(path.c_str(), &target) == 0) {
+        if (S_ISDIR(target.st_mode)) refuse("it is a directory");
+        for (const std::string& input : inputs) {
+            struct stat source {};
+            if (::stat(input.c_str(), &source) == 0 && source.st_dev == target.st_dev &&
+                source.st_ino == target.st_ino)
+                refuse("it is the input file '" + input + "'");
+        }
+    }
+
+    // Phase 2: the folder exists and a file can be created in it (what write_file_atomically
+    // does first), so a run never computes for minutes and then fails to save.
+    const std::string folder = detail::folder_of(path);
+    struct stat folder_stat {};
+    if (::stat(folder.c_str(), &folder_stat) != 0 || !S_ISDIR(folder_stat.st_mode))
+        refuse("folder '" + folder + "' does not exist");
+    const std::string probe = detail::temporary_name_for(path);
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+    if (fd < 0) refuse("folder '" + folder + "' cannot be written: " + std::strerror(errno));
+    ::close(fd);
+    ::unlink(probe.c_str());
+}
+
+void write_text_file(const std::string& path, const std::string& text) {
+    detail::write_file_atomically(path, [&](std::ostream& out) { out << text; });
+}
+
+}  // namespace oclvox

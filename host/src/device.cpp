@@ -5,13 +5,12 @@
 // budget: per batch, upload the (triangle, brick) pairs and their work-item offsets, clear the
 // batch's brick bits, run the voxel kernel over all work items, and merge the bits that come
 // back into the sparse result.
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstring>
 
 #include "binning.hpp"
+#include "host_memory.hpp"
 #include "opencl_runtime.hpp"
 #include "prepare.hpp"
 #include "solid.hpp"
@@ -30,11 +29,6 @@ double seconds_since(Clock::time_point t) {
 // single enqueue is enormous (keeps drivers' watchdogs and PoCL's scheduling happy).
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
-
-uint64_t physical_memory() {
-    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
-    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : uint64_t(8) << 30;
-}
 
 std::string mib(uint64_t bytes) {
     return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB";
@@ -130,7 +124,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     // holds one batch of bricks at a time.
     const uint64_t brick_bytes = result.blocks_per_brick() * sizeof(uint64_t);
     const uint64_t host_budget =
-        options.host_budget_bytes ? options.host_budget_bytes : physical_memory() / 2;
+        options.host_budget_bytes ? options.host_budget_bytes : detail::physical_memory() / 2;
     if (stats.bricks_active * brick_bytes > host_budget)
         throw GridError("the result may need " + mib(stats.bricks_active * brick_bytes) +
                         " of host memory for " + std::to_string(stats.bricks_active) +

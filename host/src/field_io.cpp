@@ -4,17 +4,22 @@
 // .npy format version 1.0 (numpy.org/neps/nep-0001-npy-format.html). Shape (nx, ny, nz) in
 // Fortran order means x fastest, which is exactly ScalarField's layout, so numpy's arr[i, j, k]
 // is voxel (i, j, k) and the data needs no reordering. The sidecar is `<path>.json`, as for the
-// voxel writer's .npy.
+// voxel writer's .npy. Reading also takes the occupancy .npy that write_voxels writes (uint8 0/1,
+// same layout, same sidecar placement).
 #include <algorithm>
+#include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <regex>
+#include <variant>
 
 #include "atomic_file.hpp"
 #include "field_vdb.hpp"
+#include "host_memory.hpp"
 #include "oclvox/sdf.hpp"
 
 namespace oclvox {
@@ -98,23 +103,341 @@ void write_npy_field(const std::string& path, const ScalarField& field, double b
     }
 }
 
+// ---- Reading ----------------------------------------------------------------------------------
+// Everything a .npy file says about itself is checked before anything is allocated for its data:
+// the header is parsed strictly, the data length its shape implies must be exactly what the file
+// holds, and the samples must fit the memory budget. Only oclvox::Error subclasses leave.
+
 [[noreturn]] void bad_npy(const std::string& path, const std::string& why) {
     throw InputError("cannot read field " + path + ": " + why);
 }
 
-// Grid placement from the sidecar `<path>.json`.
-Grid read_sidecar(const std::string& path) {
-    std::ifstream in(path + ".json");
-    if (!in) bad_npy(path, "its sidecar " + path + ".json (origin and voxel size) is missing");
-    Grid grid;
-    try {
-        const nlohmann::json j = nlohmann::json::parse(in);
-        grid.origin = j.at("origin").get<std::array<double, 3>>();
-        grid.voxel_size = j.at("voxel_size").get<double>();
-    } catch (const nlohmann::json::exception& e) {
-        bad_npy(path, "its sidecar " + path + ".json is not valid: " + e.what());
+// What the header says about the data.
+enum class NpyType { Float32, Float64, Uint8 };
+
+struct NpyHeader {
+    NpyType type = NpyType::Float32;
+    bool fortran_order = false;
+    std::array<int64_t, 3> shape{0, 0, 0};
+    uint64_t data_offset = 0;  // bytes before the first sample
+    uint64_t data_bytes = 0;   // what the shape implies
+};
+
+size_t item_size(NpyType type) {
+    return type == NpyType::Float64 ? 8 : type == NpyType::Float32 ? 4 : 1;
+}
+
+// A strict reader for the one dict literal .npy headers hold:
+// {'descr': '<f4', 'fortran_order': False, 'shape': (2, 3, 4), }
+// Keys may come in any order but each exactly once; anything else is an error.
+class HeaderDict {
+  public:
+    HeaderDict(const std::string& text, const std::string& path) : text_(text), path_(path) {}
+
+    void parse(NpyHeader& header) {
+        bool have_descr = false, have_order = false, have_shape = false;
+        expect('{');
+        while (!next_is('}')) {
+            const std::string key = quoted();
+            expect(':');
+            bool* seen = key == "descr"           ? &have_descr
+                         : key == "fortran_order" ? &have_order
+                         : key == "shape"         ? &have_shape
+                                                  : nullptr;
+            if (!seen) fail("unexpected key '" + key + "'");
+            if (*seen) fail("key '" + key + "' appears twice");
+            *seen = true;
+            if (key == "descr") header.type = dtype(quoted());
+            if (key == "fortran_order") header.fortran_order = boolean();
+            if (key == "shape") header.shape = shape();
+            if (!next_is('}')) expect(',');
+        }
+        expect('}');
+        // numpy pads the header with spaces and ends it with a newline.
+        for (; pos_ < text_.size(); ++pos_)
+            if (!std::isspace(static_cast<unsigned char>(text_[pos_])))
+                fail("unexpected text after the header dict");
+        if (!have_descr || !have_order || !have_shape)
+            fail("the header lacks one of 'descr', 'fortran_order', 'shape'");
     }
+
+  private:
+    [[noreturn]] void fail(const std::string& why) const {
+        bad_npy(path_, "its header is not a valid .npy header (" + why + "): " + text_);
+    }
+
+    void skip_space() {
+        while (pos_ < text_.size() && std::isspace(static_cast<unsigned char>(text_[pos_]))) ++pos_;
+    }
+    bool next_is(char c) {
+        skip_space();
+        return pos_ < text_.size() && text_[pos_] == c;
+    }
+    void expect(char c) {
+        if (!next_is(c)) fail(std::string("expected '") + c + "'");
+        ++pos_;
+    }
+    std::string quoted() {
+        skip_space();
+        if (pos_ >= text_.size() || (text_[pos_] != '\'' && text_[pos_] != '"'))
+            fail("expected a quoted string");
+        const char quote = text_[pos_++];
+        const size_t end = text_.find(quote, pos_);
+        if (end == std::string::npos) fail("unterminated string");
+        std::string value = text_.substr(pos_, end - pos_);
+        pos_ = end + 1;
+        return value;
+    }
+    bool boolean() {
+        skip_space();
+        for (const char* word : {"True", "False"})
+            if (text_.compare(pos_, std::strlen(word), word) == 0) {
+                pos_ += std::strlen(word);
+                return word[0] == 'T';
+            }
+        fail("fortran_order is neither True nor False");
+    }
+    NpyType dtype(const std::string& descr) {
+        // Byte order does not matter for one-byte types; numpy writes '|' for them.
+        if (descr == "|u1" || descr == "<u1" || descr == ">u1" || descr == "|b1")
+            return NpyType::Uint8;
+        if (descr == "<f4") return NpyType::Float32;
+        if (descr == "<f8") return NpyType::Float64;
+        if (descr == ">f4" || descr == ">f8")
+            bad_npy(path_, "big-endian arrays are not supported (dtype '" + descr + "')");
+        bad_npy(path_, "its dtype '" + descr +
+                           "' is none of float32, float64 (fields) and uint8, bool (occupancy)");
+    }
+    // A tuple of exactly three whole numbers, each an axis length in [1, kMaxGridAxis].
+    std::array<int64_t, 3> shape() {
+        expect('(');
+        std::vector<uint64_t> dims;
+        while (!next_is(')')) {
+            const size_t begin = pos_;
+            while (pos_ < text_.size() && std::isdigit(static_cast<unsigned char>(text_[pos_])))
+                ++pos_;
+            uint64_t value = 0;
+            const auto [end, error] =
+                std::from_chars(text_.data() + begin, text_.data() + pos_, value);
+            if (begin == pos_ || end != text_.data() + pos_)
+                fail("a shape entry is not a whole number");
+            if (error == std::errc::result_out_of_range || value > uint64_t(kMaxGridAxis))
+                bad_npy(path_, "its shape axis " + text_.substr(begin, pos_ - begin) +
+                                   " exceeds the maximum of " + std::to_string(kMaxGridAxis) +
+                                   " voxels per axis");
+            if (value == 0) bad_npy(path_, "its shape has an empty axis (length 0)");
+            dims.push_back(value);
+            if (!next_is(')')) expect(',');
+        }
+        expect(')');
+        if (dims.size() != 3)
+            bad_npy(path_, "it is not a 3-D array (its shape has " + std::to_string(dims.size()) +
+                               " axes)");
+        return {int64_t(dims[0]), int64_t(dims[1]), int64_t(dims[2])};
+    }
+
+    const std::string& text_;
+    const std::string& path_;
+    size_t pos_ = 0;
+};
+
+// Phase 1 of every read: open, parse the header, and check the data length against the file.
+NpyHeader read_npy_header(const std::string& path, std::ifstream& in) {
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(path, error))
+        bad_npy(path, std::filesystem::exists(path, error) ? "it is not a regular file"
+                                                           : "it does not exist");
+    const uint64_t file_size = std::filesystem::file_size(path, error);
+    in.open(path, std::ios::binary);
+    if (error || !in) bad_npy(path, "it cannot be opened");
+
+    // Magic, version, header length (2 bytes in version 1, 4 in versions 2 and 3).
+    char preamble[8];
+    if (!in.read(preamble, 8) || std::memcmp(preamble, "\x93NUMPY", 6) != 0)
+        bad_npy(path, "it is not a .npy file");
+    const int major = preamble[6];
+    if (major < 1 || major > 3) bad_npy(path, "unsupported .npy version " + std::to_string(major));
+    unsigned char length_bytes[4] = {0, 0, 0, 0};
+    const int length_size = major == 1 ? 2 : 4;
+    if (!in.read(reinterpret_cast<char*>(length_bytes), length_size))
+        bad_npy(path, "truncated header");
+    const uint64_t header_length = uint64_t(length_bytes[0]) | uint64_t(length_bytes[1]) << 8 |
+                                   uint64_t(length_bytes[2]) << 16 |
+                                   uint64_t(length_bytes[3]) << 24;
+    NpyHeader header;
+    header.data_offset = 8 + uint64_t(length_size) + header_length;
+    if (header.data_offset > file_size) bad_npy(path, "truncated header");
+    if (header_length > (1u << 20)) bad_npy(path, "implausible header length");
+    std::string text(header_length, '\0');
+    if (!in.read(text.data(), std::streamsize(header_length))) bad_npy(path, "truncated header");
+    HeaderDict(text, path).parse(header);
+
+    // The byte count cannot overflow (three axes of at most 2^20, items of at most 8 bytes), but
+    // it is multiplied checked so that a larger kMaxGridAxis cannot make it wrap silently.
+    uint64_t bytes = item_size(header.type);
+    for (int64_t n : header.shape)
+        if (__builtin_mul_overflow(bytes, uint64_t(n), &bytes))
+            bad_npy(path, "its shape is too large to address");
+    header.data_bytes = bytes;
+    const uint64_t held = file_size - header.data_offset;
+    if (held != bytes)
+        bad_npy(path, "its shape (" + std::to_string(header.shape[0]) + ", " +
+                          std::to_string(header.shape[1]) + ", " + std::to_string(header.shape[2]) +
+                          ") needs " + std::to_string(bytes) +
+                          " bytes of data but the file holds " + std::to_string(held));
+    return header;
+}
+
+// What the samples will take in memory, against half the physical memory (the same default
+// budget as the voxelizer's host budget), before anything is allocated.
+void check_memory_budget(const std::string& path, uint64_t bytes, const char* what) {
+    const uint64_t budget = detail::physical_memory() / 2;
+    if (bytes > budget)
+        bad_npy(path, std::string(what) + " would need " + std::to_string(bytes >> 20) +
+                          " MiB, over the memory budget of " + std::to_string(budget >> 20) +
+                          " MiB (half the physical memory)");
+}
+
+// Grid placement from the sidecar `<path>.json`: origin and voxel_size are required, dims (if
+// present) must agree with the array's shape. Both kinds of sidecar put origin at the corner of
+// voxel (0,0,0): the field's samples sit at voxel centres, the occupancy's voxels are the boxes.
+Grid read_sidecar(const std::string& path, const std::array<int64_t, 3>& shape) {
+    const std::string sidecar = path + ".json";
+    auto bad = [&](const std::string& why) {
+        bad_npy(path, "its sidecar " + sidecar + " is not valid: " + why);
+    };
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(sidecar, error))
+        bad_npy(path, "its sidecar " + sidecar + " (origin and voxel size) is missing");
+    if (std::filesystem::file_size(sidecar, error) > (1u << 20) || error)
+        bad("it is larger than 1 MiB or cannot be sized");
+    std::ifstream in(sidecar, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (!in.good() && !in.eof()) bad("it cannot be read");
+
+    const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+    if (j.is_discarded()) bad("it is not JSON");
+    if (!j.is_object()) bad("it is not a JSON object");
+    auto triple = [&](const char* key, bool integers) {
+        const auto it = j.find(key);
+        if (it == j.end()) return false;
+        if (!it->is_array() || it->size() != 3)
+            bad(std::string("'") + key + "' is not a list of 3");
+        for (const nlohmann::json& v : *it)
+            if (integers ? !v.is_number_integer() : !v.is_number())
+                bad(std::string("'") + key + "' holds a value that is not a " +
+                    (integers ? "whole number" : "number"));
+        return true;
+    };
+    if (!triple("origin", false)) bad("'origin' is missing");
+    const auto voxel_size = j.find("voxel_size");
+    if (voxel_size == j.end() || !voxel_size->is_number()) bad("'voxel_size' is not a number");
+
+    Grid grid;
+    for (int k = 0; k < 3; ++k) grid.origin[k] = j["origin"][size_t(k)].get<double>();
+    grid.voxel_size = voxel_size->get<double>();
+    grid.dims = shape;
+    if (!std::isfinite(grid.voxel_size) || !(grid.voxel_size > 0))
+        bad("'voxel_size' must be a positive finite number");
+    for (double o : grid.origin)
+        if (!std::isfinite(o)) bad("'origin' is not finite");
+    if (triple("dims", true))
+        for (int k = 0; k < 3; ++k) {
+            const nlohmann::json& d = j["dims"][size_t(k)];
+            if (!(d.is_number_unsigned() && d.get<uint64_t>() == uint64_t(shape[k])))
+                bad("'dims' " + j["dims"].dump() + " disagree with the array's shape");
+        }
     return grid;
+}
+
+// Phase 3 of every read: the samples, a chunk at a time (no second copy of the file), each passed
+// to `take(v, bytes)` with its x-fastest index v; C order (z fastest) is transposed on the way.
+template <class Take>
+void read_samples(const std::string& path, std::ifstream& in, const NpyHeader& header, Take take) {
+    const size_t item = item_size(header.type);
+    const uint64_t count = header.data_bytes / item;
+    const int64_t nx = header.shape[0], ny = header.shape[1], nz = header.shape[2];
+    std::vector<unsigned char> chunk(size_t(1) << 20);
+    const uint64_t per_chunk = chunk.size() / item;
+    for (uint64_t first = 0; first < count; first += per_chunk) {
+        const uint64_t n = std::min(per_chunk, count - first);
+        if (!in.read(reinterpret_cast<char*>(chunk.data()), std::streamsize(n * item)))
+            bad_npy(path, "the data is shorter than its shape says");
+        for (uint64_t s = first; s < first + n; ++s) {
+            uint64_t v = s;
+            if (!header.fortran_order) {  // s = k + nz * (j + ny * i)
+                const int64_t k = int64_t(s) % nz, j = int64_t(s) / nz % ny,
+                              i = int64_t(s) / (nz * ny);
+                v = uint64_t(i + nx * (j + ny * k));
+            }
+            take(v, chunk.data() + (s - first) * item);
+        }
+    }
+}
+
+// Little-endian float32 or float64 bytes as a float.
+float float_sample(NpyType type, const unsigned char* bytes) {
+    uint64_t bits = 0;
+    for (size_t b = 0; b < item_size(type); ++b) bits |= uint64_t(bytes[b]) << (8 * b);
+    if (type == NpyType::Float64) {
+        double d;
+        std::memcpy(&d, &bits, 8);
+        return float(d);
+    }
+    const auto b32 = uint32_t(bits);
+    float value;
+    std::memcpy(&value, &b32, 4);
+    return value;
+}
+
+ScalarField read_float_samples(const std::string& path, std::ifstream& in, const NpyHeader& header,
+                               const Grid& grid) {
+    ScalarField field;
+    field.grid = grid;
+    field.values.resize(size_t(grid.voxel_count()));
+    read_samples(path, in, header, [&](uint64_t v, const unsigned char* bytes) {
+        field.values[size_t(v)] = float_sample(header.type, bytes);
+    });
+    return field;
+}
+
+SparseVoxels read_occupancy_samples(const std::string& path, std::ifstream& in,
+                                    const NpyHeader& header, const Grid& grid) {
+    SparseVoxels voxels(grid, VoxelizeOptions{}.brick_size);
+    const int64_t nx = grid.dims[0], ny = grid.dims[1];
+    read_samples(path, in, header, [&](uint64_t v, const unsigned char* bytes) {
+        if (bytes[0] > 1)
+            bad_npy(path, "occupancy value " + std::to_string(bytes[0]) + " at voxel index " +
+                              std::to_string(v) + " is neither 0 nor 1");
+        if (bytes[0]) voxels.set(int64_t(v) % nx, int64_t(v) / nx % ny, int64_t(v) / (nx * ny));
+    });
+    return voxels;
+}
+
+// Both kinds, read only after every check of the header, sidecar and budget has passed. Any
+// exception not of oclvox's hierarchy (an allocation failing despite the budget) is reported as
+// an InputError naming the file.
+std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path) {
+    if (lowercase_extension(path) != ".npy")
+        throw InputError("cannot read field " + path + ": only .npy fields can be read");
+    try {
+        std::ifstream in;
+        const NpyHeader header = read_npy_header(path, in);
+        const Grid grid = read_sidecar(path, header.shape);
+        if (header.type == NpyType::Uint8) {
+            // The sparse result holds at most one bit per voxel.
+            check_memory_budget(path, grid.voxel_count() / 8, "its occupancy");
+            return read_occupancy_samples(path, in, header, grid);
+        }
+        check_memory_budget(path, grid.voxel_count() * sizeof(float), "its samples");
+        return read_float_samples(path, in, header, grid);
+    } catch (const Error&) {
+        throw;
+    } catch (const std::bad_alloc&) {
+        bad_npy(path, "out of memory holding its samples");
+    } catch (const std::exception& e) {
+        bad_npy(path, e.what());
+    }
 }
 
 }  // namespace
@@ -129,79 +452,15 @@ void write_field(const std::string& path, const ScalarField& field, double band_
                       "' (expected .npy or .vdb)");
 }
 
+std::variant<ScalarField, SparseVoxels> read_npy(const std::string& path) {
+    return read_npy_checked(path);
+}
+
 ScalarField read_field(const std::string& path) {
-    if (lowercase_extension(path) != ".npy")
-        throw InputError("cannot read field " + path + ": only .npy fields can be read");
-    std::ifstream in(path, std::ios::binary);
-    if (!in) bad_npy(path, "it cannot be opened");
-
-    // Phase 1: magic, version and header dict.
-    char preamble[8];
-    if (!in.read(preamble, 8) || std::memcmp(preamble, "\x93NUMPY", 6) != 0)
-        bad_npy(path, "it is not a .npy file");
-    const int major = preamble[6];
-    if (major < 1 || major > 3) bad_npy(path, "unsupported .npy version " + std::to_string(major));
-    unsigned char length_bytes[4] = {0, 0, 0, 0};
-    const int length_size = major == 1 ? 2 : 4;
-    if (!in.read(reinterpret_cast<char*>(length_bytes), length_size))
-        bad_npy(path, "truncated header");
-    const size_t header_length = size_t(length_bytes[0]) | size_t(length_bytes[1]) << 8 |
-                                 size_t(length_bytes[2]) << 16 | size_t(length_bytes[3]) << 24;
-    if (header_length > (1u << 20)) bad_npy(path, "implausible header length");
-    std::string header(header_length, '\0');
-    if (!in.read(header.data(), std::streamsize(header_length))) bad_npy(path, "truncated header");
-
-    std::smatch m;
-    if (!std::regex_search(header, m, std::regex("'descr'\\s*:\\s*'([<>|=]?)(f4|f8)'")))
-        bad_npy(path, "its dtype is not float32 or float64 (header " + header + ")");
-    const bool doubles = m[2] == "f8";
-    if (m[1] == ">") bad_npy(path, "big-endian arrays are not supported");
-    if (!std::regex_search(header, m, std::regex("'fortran_order'\\s*:\\s*(True|False)")))
-        bad_npy(path, "its header has no fortran_order");
-    const bool fortran = m[1] == "True";
-    if (!std::regex_search(
-            header, m,
-            std::regex("'shape'\\s*:\\s*\\(\\s*(\\d+)\\s*,\\s*(\\d+)\\s*,\\s*(\\d+)\\s*,?\\s*\\)")))
-        bad_npy(path, "it is not a 3-D array (header " + header + ")");
-
-    // Phase 2: placement from the sidecar, dims from the array.
-    ScalarField field;
-    field.grid = read_sidecar(path);
-    for (int k = 0; k < 3; ++k) field.grid.dims[k] = std::stoll(m[k + 1].str());
-    try {
-        validate_grid(field.grid);
-    } catch (const GridError& e) {
-        bad_npy(path, e.what());
-    }
-
-    // Phase 3: the samples, little-endian; C order (z fastest) is transposed to x fastest.
-    const size_t count = size_t(field.grid.voxel_count());
-    const size_t item = doubles ? 8 : 4;
-    std::vector<unsigned char> bytes(count * item);
-    if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
-        bad_npy(path, "the data is shorter than its shape says");
-    field.values.resize(count);
-    const int64_t nx = field.grid.dims[0], ny = field.grid.dims[1], nz = field.grid.dims[2];
-    for (size_t s = 0; s < count; ++s) {
-        uint64_t bits = 0;
-        for (size_t b = 0; b < item; ++b) bits |= uint64_t(bytes[s * item + b]) << (8 * b);
-        float value;
-        if (doubles) {
-            double d;
-            std::memcpy(&d, &bits, 8);
-            value = float(d);
-        } else {
-            const auto b32 = uint32_t(bits);
-            std::memcpy(&value, &b32, 4);
-        }
-        size_t v = s;
-        if (!fortran) {  // s = k + nz * (j + ny * i)
-            const int64_t k = int64_t(s) % nz, j = int64_t(s) / nz % ny, i = int64_t(s) / (nz * ny);
-            v = size_t(i + nx * (j + ny * k));
-        }
-        field.values[v] = value;
-    }
-    return field;
+    std::variant<ScalarField, SparseVoxels> data = read_npy_checked(path);
+    if (std::holds_alternative<SparseVoxels>(data))
+        bad_npy(path, "it holds an occupancy (uint8 0/1), not float samples (read_npy reads both)");
+    return std::get<ScalarField>(std::move(data));
 }
 
 }  // namespace oclvox

@@ -65,7 +65,7 @@ Grid fit_grid(const Mesh& mesh, const GridFit& fit) {
         throw GridError("voxel size must be a positive finite number");
 
     // Phase 2: dimensions. Fitted axes get as many voxels as the mesh needs (at least one); a
-    // cubic grid is resolution^3 with the mesh centred in it.
+    // cubic grid is resolution^3.
     for (int k = 0; k < 3; ++k) {
         const double cells = std::ceil((hi[k] - lo[k]) / grid.voxel_size);
         if (!(cells < double(kMaxGridAxis)))
@@ -77,12 +77,13 @@ Grid fit_grid(const Mesh& mesh, const GridFit& fit) {
         if (fit.has_dims) grid.dims[k] = fit.dims[k];
     }
 
-    // Phase 3: origin: the box minimum, or centred when the grid is larger than the mesh.
+    // Phase 3: origin: the box minimum, or the box centred in a grid larger than the mesh
+    // (given dims, or a cube anchored at its centre).
+    const bool centred =
+        fit.has_dims || (fit.cubic && fit.cubic_anchor == GridFit::CubicAnchor::Centre);
     for (int k = 0; k < 3; ++k) {
         const double centre = 0.5 * (lo[k] + hi[k]);
-        grid.origin[k] = fit.cubic || fit.has_dims
-                             ? centre - 0.5 * double(grid.dims[k]) * grid.voxel_size
-                             : lo[k];
+        grid.origin[k] = centred ? centre - 0.5 * double(grid.dims[k]) * grid.voxel_size : lo[k];
         if (fit.has_origin) grid.origin[k] = fit.origin[k];
     }
 

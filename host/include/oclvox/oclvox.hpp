@@ -91,9 +91,14 @@ struct Grid {
 // longest axis, cubic voxels, the other axes as many voxels as they need.
 struct GridFit {
     int64_t resolution = 256;  // voxels along the longest axis (ignored if voxel_size > 0)
-    bool cubic = false;        // resolution^3 grid, mesh centred (binvox convention)
-    double voxel_size = 0;     // > 0: use this voxel size instead of resolution
-    bool has_origin = false;   // use `origin` instead of the fitted one
+    // resolution^3 grid placed by cubic_anchor: Centre puts the centre of the mesh box at the
+    // centre of the cube (cuda_voxelizer's convention), Minimum puts the box minimum at the
+    // cube's corner, so the mesh touches the low faces (binvox's: translate = box minimum, scale =
+    // longest box side).
+    bool cubic = false;
+    enum class CubicAnchor { Centre, Minimum } cubic_anchor = CubicAnchor::Centre;
+    double voxel_size = 0;    // > 0: use this voxel size instead of resolution
+    bool has_origin = false;  // use `origin` instead of the fitted one
     std::array<double, 3> origin{0, 0, 0};
     bool has_dims = false;  // use `dims` instead of the fitted ones
     std::array<int64_t, 3> dims{0, 0, 0};
@@ -265,5 +270,14 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
 // Writes by extension: .binvox, .npy (+ .json sidecar), .vox (MagicaVoxel), .obj / .ply (cube
 // faces that are exposed). Writes to a temporary file in the same folder, then renames it.
 void write_voxels(const std::string& path, const SparseVoxels& voxels);
+
+// Checks before any work that `path` can be written as an output: its folder exists and a file
+// can be created there, and it is neither a directory nor the same file (by file-system identity,
+// not by name) as any of `inputs`. Throws OutputError naming `path` and the reason.
+void check_output_path(const std::string& path, const std::vector<std::string>& inputs = {});
+
+// Writes `text` to `path` the way every output is written (temporary file, renamed into place).
+// Throws OutputError naming `path`.
+void write_text_file(const std::string& path, const std::string& text);
 
 }  // namespace oclvox

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <variant>
 
 #include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
@@ -100,9 +101,16 @@ Grid fit_grid(const Mesh& a, const Mesh& b, const GridFit& fit);
 // narrow-band field. Written to a temporary file and renamed into place; throws OutputError.
 void write_field(const std::string& path, const ScalarField& field, double band_voxels = 0);
 
-// Reads a .npy field with its JSON sidecar (written by write_field, or any float32 or float64
-// 3-D array in either order with a sidecar giving origin and voxel_size). Throws InputError
-// naming the file and the problem.
+// Reads a .npy file with its JSON sidecar `<path>.json`: a field (float32 or float64, as
+// write_field writes) or an occupancy (uint8 or bool, 0 or 1, as write_voxels writes), 3-D, in
+// either order. The sidecar must give origin (the corner of voxel (0,0,0)) and voxel_size; dims,
+// if present, must equal the array's shape. Before anything is allocated for the data, the header
+// is parsed strictly, the data length its shape implies must be exactly what the file holds, and
+// the result must fit half the physical memory. Throws InputError naming the file and the
+// problem, and no other exception.
+std::variant<ScalarField, SparseVoxels> read_npy(const std::string& path);
+
+// read_npy for a field only: an occupancy .npy is an InputError.
 ScalarField read_field(const std::string& path);
 
 }  // namespace oclvox
