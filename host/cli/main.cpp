@@ -28,6 +28,7 @@
 #include <thread>
 #include <vector>
 
+#include "file_names.hpp"
 #include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
 #include "oclvox/sdf.hpp"
@@ -152,12 +153,7 @@ const CLI::Validator kBrickSize(
 // ---------------------------------------------------------------------------------------------
 // Output files
 // ---------------------------------------------------------------------------------------------
-std::string lowercase_extension(const std::string& path) {
-    std::string ext = fs::path(path).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
-    return ext;
-}
+using oclvox::detail::lowercase_extension;
 
 // Mistakes in output paths are cheap to find before the run and expensive after a long one, so
 // they are checked up front. The format list mirrors what write_voxels accepts.
@@ -168,11 +164,12 @@ void check_output_path(const std::string& path, bool voxel_file) {
                                   "' does not exist");
     if (!voxel_file) return;
     const std::string ext = lowercase_extension(path);
-    if (ext != ".binvox" && ext != ".npy" && ext != ".vox" && ext != ".obj" && ext != ".ply")
+    if (ext != ".vdb" && ext != ".binvox" && ext != ".npy" && ext != ".vox" && ext != ".obj" &&
+        ext != ".ply" && ext != ".stl")
         throw oclvox::OutputError(
             "cannot write '" + path + "': " +
             (ext.empty() ? "the file name has no extension" : "unknown extension '" + ext + "'") +
-            " (supported: .binvox, .npy, .vox, .obj, .ply)");
+            " (supported: .vdb, .binvox, .npy, .vox, .obj, .ply, .stl)");
 }
 
 // Same contract as the library's outputs: a temporary file beside the target, renamed into
@@ -537,8 +534,9 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
         ->required();
     command
         .add_option("-o,--output", args.output,
-                    "voxel file; the format follows from the extension: .binvox, .npy (with a "
-                    ".json sidecar), .vox (MagicaVoxel), .obj or .ply (exposed cube faces)")
+                    "voxel file; the format follows from the extension: .vdb (OpenVDB, sparse), "
+                    ".binvox, .npy (with a .json sidecar), .vox (MagicaVoxel), .obj, .ply or .stl "
+                    "(exposed cube faces)")
         ->type_name("OUTPUT")
         ->required();
 
