@@ -13,7 +13,9 @@
 //
 // Streaming: the file order is x slowest, so the grid is read from the bricks an x-slab at a
 // time into a buffer laid out in file order (y fastest, then z) and run-length encoded from
-// there; the largest buffer is one slab. Runs are found a machine word at a time.
+// there; the largest buffer is one slab. Only row pieces inside stored bricks are scanned, runs
+// are found a machine word at a time, and scanned set bytes are cleared as they are encoded, so
+// the cost follows the stored bricks, not the grid volume.
 //
 // Placement: binvox maps voxel (i,j,k) to the point translate + scale * (i,j,k) / D (plus half a
 // voxel for centres), so translate = grid origin and scale = D * voxel_size reproduce our grid.
@@ -38,7 +40,7 @@ constexpr int64_t kMaxBinvoxDim = 4096;
 // large pieces.
 class RunWriter {
   public:
-    explicit RunWriter(std::ostream& out) : out_(out) {}
+    explicit RunWriter(std::ostream& out) : out_(out) { buffer_.reserve(kFlushBytes); }
 
     void add(uint8_t value, uint64_t count) {
         if (count == 0) return;
@@ -48,25 +50,37 @@ class RunWriter {
         }
         pending_ += count;
     }
-    // Adds the voxels bytes[0, n) (each 0 or 1), run by run.
-    void add_bytes(const uint8_t* bytes, size_t n) {
+    // Adds the voxels bytes[0, n) (each 0 or 1), run by run, and zeroes them: the caller's
+    // buffer is all zero again afterwards at a cost proportional to the set voxels, not to the
+    // buffer.
+    void take_bytes(uint8_t* bytes, size_t n) {
         for (size_t start = 0; start < n;) {
-            const size_t length = run_length(bytes + start, n - start, bytes[start]);
-            add(bytes[start], length);
+            const uint8_t value = bytes[start];
+            const size_t length = run_length(bytes + start, n - start, value);
+            add(value, length);
+            if (value) std::memset(bytes + start, 0, length);
             start += length;
         }
     }
     void finish() {
         emit();
-        out_.write(buffer_.data(), std::streamsize(buffer_.size()));
-        buffer_.clear();
+        flush();
     }
 
   private:
-    // Length of the run of `value` at the start of bytes[0, n), comparing eight bytes at once.
+    // Length of the run of `value` at the start of bytes[0, n). Empty space, most of a surface
+    // grid, is skipped 64 bytes at a time, set runs 8 at a time.
     static size_t run_length(const uint8_t* bytes, size_t n, uint8_t value) {
-        const uint64_t same = value ? 0x0101010101010101u : 0;
         size_t i = 0;
+        if (value == 0) {
+            for (; i + 64 <= n; i += 64) {
+                uint64_t words[8], any = 0;
+                std::memcpy(words, bytes + i, 64);
+                for (uint64_t word : words) any |= word;
+                if (any) break;
+            }
+        }
+        const uint64_t same = value ? 0x0101010101010101u : 0;
         for (uint64_t word; i + 8 <= n; i += 8) {
             std::memcpy(&word, bytes + i, 8);
             if (word != same) break;
@@ -74,17 +88,31 @@ class RunWriter {
         while (i < n && bytes[i] == value) ++i;
         return i;
     }
+    // Writes the pending run as pairs: full (value, 255) pairs first, filled a buffer at a time
+    // (the padding of a large cube is tens of millions of them), then the remainder.
     void emit() {
-        while (pending_ > 0) {
-            const uint64_t run = std::min<uint64_t>(pending_, 255);
+        while (pending_ >= 255) {
+            if (buffer_.size() + 2 > kFlushBytes) flush();
+            const uint64_t room = (kFlushBytes - buffer_.size()) / 2;
+            const uint64_t pairs = std::min(pending_ / 255, room);
+            const size_t at = buffer_.size();
+            buffer_.resize(at + 2 * pairs);
+            for (uint64_t p = 0; p < pairs; ++p) {
+                buffer_[at + 2 * p] = char(value_);
+                buffer_[at + 2 * p + 1] = char(255);
+            }
+            pending_ -= 255 * pairs;
+        }
+        if (pending_ > 0) {
+            if (buffer_.size() + 2 > kFlushBytes) flush();
             buffer_.push_back(char(value_));
-            buffer_.push_back(char(run));
-            pending_ -= run;
+            buffer_.push_back(char(pending_));
+            pending_ = 0;
         }
-        if (buffer_.size() >= kFlushBytes) {
-            out_.write(buffer_.data(), std::streamsize(buffer_.size()));
-            buffer_.clear();
-        }
+    }
+    void flush() {
+        out_.write(buffer_.data(), std::streamsize(buffer_.size()));
+        buffer_.clear();
     }
 
     static constexpr size_t kFlushBytes = size_t(1) << 20;
@@ -116,25 +144,47 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, uint64_t 
         out << "data\n";
 
         // Phase 2: x-slabs of the grid in file order (plane x, then y fastest, then z), each
-        // followed by its padding up to the cube; then the padding planes beyond nx.
+        // followed by its padding up to the cube; then the padding planes beyond nx. Only the
+        // row pieces that lie in a stored brick are scanned: the rest is known to be empty.
         const int64_t nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
         const int64_t plane = ny * nz;
         const int64_t thickness = slab_thickness(uint64_t(plane), nx, slab_bytes);
-        std::vector<uint8_t> slab(size_t(plane * thickness));
+        const int64_t b = voxels.brick_size();
+        const auto nbricks = voxels.brick_dims();
+        std::vector<uint8_t> slab(size_t(plane * thickness), 0);  // all zero between slabs
+        // Per brick row bz: the y ranges [begin, end) of the stored bricks in the slab, merged.
+        std::vector<std::vector<std::pair<int64_t, int64_t>>> stored(
+            static_cast<size_t>(nbricks[2]));
         RunWriter runs(out);
         for (int64_t x0 = 0; x0 < nx; x0 += thickness) {
             const int64_t depth = std::min(thickness, nx - x0);
-            std::fill(slab.begin(), slab.end(), uint8_t(0));
             voxels.mark_box({x0, 0, 0}, {x0 + depth, ny, nz}, {plane, 1, ny}, slab.data());
+            for (int64_t bz = 0; bz < nbricks[2]; ++bz) {
+                auto& ranges = stored[size_t(bz)];
+                ranges.clear();
+                for (int64_t by = 0; by < nbricks[1]; ++by) {
+                    bool any = false;
+                    for (int64_t bx = x0 / b; bx <= (x0 + depth - 1) / b && !any; ++bx)
+                        any = voxels.brick_blocks(
+                                  uint64_t(bx + nbricks[0] * (by + nbricks[1] * bz))) != nullptr;
+                    if (!any) continue;
+                    const int64_t end = std::min((by + 1) * b, ny);
+                    if (!ranges.empty() && ranges.back().second == by * b)
+                        ranges.back().second = end;
+                    else
+                        ranges.push_back({by * b, end});
+                }
+            }
             for (int64_t x = 0; x < depth; ++x) {
-                const uint8_t* rows = slab.data() + x * plane;
-                if (ny == dim) {  // rows are contiguous in the file too
-                    runs.add_bytes(rows, size_t(plane));
-                } else {
-                    for (int64_t z = 0; z < nz; ++z) {
-                        runs.add_bytes(rows + z * ny, size_t(ny));
-                        runs.add(0, uint64_t(dim - ny));
+                uint8_t* rows = slab.data() + x * plane;
+                for (int64_t z = 0; z < nz; ++z) {
+                    int64_t y = 0;  // the row is encoded up to here
+                    for (const auto& [begin, end] : stored[size_t(z / b)]) {
+                        runs.add(0, uint64_t(begin - y));
+                        runs.take_bytes(rows + z * ny + begin, size_t(end - begin));
+                        y = end;
                     }
+                    runs.add(0, uint64_t(dim - y));
                 }
                 runs.add(0, uint64_t(dim - nz) * uint64_t(dim));
             }
