@@ -512,6 +512,40 @@ std::set<Face> check_exposed_face_mesh(const PolygonMesh& mesh, const Grid& grid
 }
 
 // ---------------------------------------------------------------------------------------------
+// OpenVDB occupancy reader: OpenVDB's own C++ API, tiles expanded to their voxels
+// ---------------------------------------------------------------------------------------------
+struct VdbOccupancy {
+    VoxelSet active;  // tiles expanded to their voxels
+    uint64_t active_count = 0;
+    bool all_true = true;
+    openvdb::math::Transform::Ptr transform;
+    openvdb::Vec3d origin;
+    openvdb::Vec3i dims;
+};
+
+VdbOccupancy read_vdb_occupancy(const std::string& path, bool expand = true) {
+    openvdb::initialize();
+    openvdb::io::File file(path);
+    file.open();
+    const openvdb::BoolGrid::Ptr grid =
+        openvdb::gridPtrCast<openvdb::BoolGrid>(file.readGrid("occupancy"));
+    file.close();
+    if (!grid) throw std::runtime_error("occupancy is not a BoolGrid");
+    VdbOccupancy result;
+    result.active_count = grid->activeVoxelCount();
+    for (auto it = grid->cbeginValueOn(); it; ++it) {
+        result.all_true = result.all_true && *it;
+        if (!expand) continue;
+        const openvdb::CoordBBox box = it.getBoundingBox();
+        for (auto c = box.begin(); c; ++c) result.active.insert({(*c)[0], (*c)[1], (*c)[2]});
+    }
+    result.transform = grid->transformPtr();
+    result.origin = grid->metaValue<openvdb::Vec3d>("oclvox_origin");
+    result.dims = grid->metaValue<openvdb::Vec3i>("oclvox_dims");
+    return result;
+}
+
+// ---------------------------------------------------------------------------------------------
 // binvox
 // ---------------------------------------------------------------------------------------------
 TEST_F(WriterTest, BinvoxNonCubicGridIsPaddedToACubeWithTheSameVoxels) {
@@ -662,7 +696,7 @@ TEST_F(WriterTest, MeshFileDoesNotDependOnBrickSize) {
 
 TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
     const SparseVoxels empty(make_grid({3, 4, 5}), 4);
-    for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply"})
+    for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply", "e.stl", "e.vdb"})
         oclvox::write_voxels(path(name), empty);
 
     EXPECT_TRUE(read_binvox(read_bytes(path("e.binvox"))).set.empty());
@@ -673,6 +707,8 @@ TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
     EXPECT_TRUE(vox.world.empty());
     EXPECT_TRUE(read_obj(read_bytes(path("e.obj"))).faces.empty());
     EXPECT_TRUE(read_ply(read_bytes(path("e.ply"))).faces.empty());
+    EXPECT_EQ(read_bytes(path("e.stl")).size(), 84u);  // header and a zero triangle count
+    EXPECT_EQ(read_vdb_occupancy(path("e.vdb")).active_count, 0u);
 }
 
 TEST_F(WriterTest, HugeSparseGridWorksForSparseFormatsAndFailsCleanlyForDenseOnes) {
@@ -940,37 +976,6 @@ TEST_F(WriterTest, StlCubeMeshEnclosesExactlyTheVoxelVolumeFacingOutwards) {
 // ---------------------------------------------------------------------------------------------
 // OpenVDB occupancy, read back through OpenVDB's own API
 // ---------------------------------------------------------------------------------------------
-struct VdbOccupancy {
-    VoxelSet active;  // tiles expanded to their voxels
-    uint64_t active_count = 0;
-    bool all_true = true;
-    openvdb::math::Transform::Ptr transform;
-    openvdb::Vec3d origin;
-    openvdb::Vec3i dims;
-};
-
-VdbOccupancy read_vdb_occupancy(const std::string& path, bool expand = true) {
-    openvdb::initialize();
-    openvdb::io::File file(path);
-    file.open();
-    const openvdb::BoolGrid::Ptr grid =
-        openvdb::gridPtrCast<openvdb::BoolGrid>(file.readGrid("occupancy"));
-    file.close();
-    if (!grid) throw std::runtime_error("occupancy is not a BoolGrid");
-    VdbOccupancy result;
-    result.active_count = grid->activeVoxelCount();
-    for (auto it = grid->cbeginValueOn(); it; ++it) {
-        result.all_true = result.all_true && *it;
-        if (!expand) continue;
-        const openvdb::CoordBBox box = it.getBoundingBox();
-        for (auto c = box.begin(); c; ++c) result.active.insert({(*c)[0], (*c)[1], (*c)[2]});
-    }
-    result.transform = grid->transformPtr();
-    result.origin = grid->metaValue<openvdb::Vec3d>("oclvox_origin");
-    result.dims = grid->metaValue<openvdb::Vec3i>("oclvox_dims");
-    return result;
-}
-
 TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits) {
     for (int brick : {4, 12, 64}) {
         SCOPED_TRACE("brick " + std::to_string(brick));
