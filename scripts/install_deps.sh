@@ -8,6 +8,7 @@ packages=(
   ocl-icd-opencl-dev opencl-c-headers opencl-clhpp-headers pocl-opencl-icd clinfo
   libtinyobjloader-dev libassimp-dev nlohmann-json3-dev libcli11-dev
   libopenvdb-dev libboost-iostreams-dev
+  python3-openvdb python3-numpy
   libgtest-dev libgmock-dev
 )
 

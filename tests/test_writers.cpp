@@ -1,11 +1,15 @@
 // Output writers: every format is read back by a minimal reader written here from the format's
 // specification (not from the writer), and must give back exactly the voxels that were written.
 #include <gtest/gtest.h>
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -19,6 +23,7 @@
 
 #include "atomic_file.hpp"
 #include "oclvox/oclvox.hpp"
+#include "writers.hpp"
 
 namespace fs = std::filesystem;
 using oclvox::Grid;
@@ -243,6 +248,8 @@ struct VoxModel {
 struct Vox {
     std::vector<VoxModel> models;
     VoxelSet world;
+    int32_t pack_models = -1;                     // PACK chunk's model count, -1 if absent
+    std::set<int32_t> layers_used, layers_named;  // nTRN layer ids (not -1), LAYR ids
 };
 
 std::map<std::string, std::string> read_dict(ByteReader& in) {
@@ -291,7 +298,7 @@ Vox read_vox(const std::string& bytes) {
             Node transform{'T', {}, {}};
             transform.children.push_back(in.i32());
             if (in.i32() != -1) throw std::runtime_error("nTRN reserved id is not -1");
-            in.i32();  // layer
+            if (const int32_t layer = in.i32(); layer != -1) file.layers_used.insert(layer);
             if (in.i32() != 1) throw std::runtime_error("nTRN must have one frame");
             const auto frame = read_dict(in);
             if (frame.count("_t")) {
@@ -300,6 +307,11 @@ Vox read_vox(const std::string& bytes) {
                     transform.translation[2];
             }
             nodes[node] = transform;
+        } else if (id == "PACK") {
+            if (!file.models.empty()) throw std::runtime_error("PACK after a model");
+            file.pack_models = in.i32();
+        } else if (id == "LAYR") {
+            file.layers_named.insert(in.i32());
         } else if (id == "nGRP") {
             const int32_t node = in.i32();
             read_dict(in);
@@ -500,6 +512,40 @@ std::set<Face> check_exposed_face_mesh(const PolygonMesh& mesh, const Grid& grid
 }
 
 // ---------------------------------------------------------------------------------------------
+// OpenVDB occupancy reader: OpenVDB's own C++ API, tiles expanded to their voxels
+// ---------------------------------------------------------------------------------------------
+struct VdbOccupancy {
+    VoxelSet active;  // tiles expanded to their voxels
+    uint64_t active_count = 0;
+    bool all_true = true;
+    openvdb::math::Transform::Ptr transform;
+    openvdb::Vec3d origin;
+    openvdb::Vec3i dims;
+};
+
+VdbOccupancy read_vdb_occupancy(const std::string& path, bool expand = true) {
+    openvdb::initialize();
+    openvdb::io::File file(path);
+    file.open();
+    const openvdb::BoolGrid::Ptr grid =
+        openvdb::gridPtrCast<openvdb::BoolGrid>(file.readGrid("occupancy"));
+    file.close();
+    if (!grid) throw std::runtime_error("occupancy is not a BoolGrid");
+    VdbOccupancy result;
+    result.active_count = grid->activeVoxelCount();
+    for (auto it = grid->cbeginValueOn(); it; ++it) {
+        result.all_true = result.all_true && *it;
+        if (!expand) continue;
+        const openvdb::CoordBBox box = it.getBoundingBox();
+        for (auto c = box.begin(); c; ++c) result.active.insert({(*c)[0], (*c)[1], (*c)[2]});
+    }
+    result.transform = grid->transformPtr();
+    result.origin = grid->metaValue<openvdb::Vec3d>("oclvox_origin");
+    result.dims = grid->metaValue<openvdb::Vec3i>("oclvox_dims");
+    return result;
+}
+
+// ---------------------------------------------------------------------------------------------
 // binvox
 // ---------------------------------------------------------------------------------------------
 TEST_F(WriterTest, BinvoxNonCubicGridIsPaddedToACubeWithTheSameVoxels) {
@@ -650,7 +696,7 @@ TEST_F(WriterTest, MeshFileDoesNotDependOnBrickSize) {
 
 TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
     const SparseVoxels empty(make_grid({3, 4, 5}), 4);
-    for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply"})
+    for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply", "e.stl", "e.vdb"})
         oclvox::write_voxels(path(name), empty);
 
     EXPECT_TRUE(read_binvox(read_bytes(path("e.binvox"))).set.empty());
@@ -661,6 +707,8 @@ TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
     EXPECT_TRUE(vox.world.empty());
     EXPECT_TRUE(read_obj(read_bytes(path("e.obj"))).faces.empty());
     EXPECT_TRUE(read_ply(read_bytes(path("e.ply"))).faces.empty());
+    EXPECT_EQ(read_bytes(path("e.stl")).size(), 84u);  // header and a zero triangle count
+    EXPECT_EQ(read_vdb_occupancy(path("e.vdb")).active_count, 0u);
 }
 
 TEST_F(WriterTest, HugeSparseGridWorksForSparseFormatsAndFailsCleanlyForDenseOnes) {
@@ -695,7 +743,7 @@ TEST_F(WriterTest, UnknownExtensionThrowsOutputErrorListingSupportedOnes) {
     } catch (const OutputError& e) {
         const std::string what = e.what();
         EXPECT_NE(what.find(".xyz"), std::string::npos) << what;
-        for (const char* supported : {".binvox", ".npy", ".vox", ".obj", ".ply"})
+        for (const char* supported : {".vdb", ".binvox", ".npy", ".vox", ".obj", ".ply", ".stl"})
             EXPECT_NE(what.find(supported), std::string::npos) << what;
     }
     EXPECT_TRUE(entries().empty());
@@ -767,6 +815,238 @@ TEST_F(WriterTest, FailedRenameRemovesTheTemporaryFile) {
                  OutputError);
     EXPECT_EQ(entries(), std::vector<std::string>{"out.obj"});
     EXPECT_TRUE(fs::is_directory(path("out.obj")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Streamed dense formats against their definitions, built here voxel by voxel from
+// SparseVoxels::get (not from the bricks the writers read)
+// ---------------------------------------------------------------------------------------------
+
+// A pattern with long runs (a solid box, > 255 voxels per run), empty stretches and noise, on a
+// non-cubic grid that is not a multiple of any brick size used.
+SparseVoxels mixed_voxels(int brick_size) {
+    const Grid grid = make_grid({37, 21, 45}, {0.5, -2.0, 3.0}, 0.25);
+    SparseVoxels voxels(grid, brick_size);
+    uint32_t state = 12345;
+    for (int64_t k = 0; k < 45; ++k)
+        for (int64_t j = 0; j < 21; ++j)
+            for (int64_t i = 0; i < 37; ++i) {
+                state = state * 1664525u + 1013904223u;
+                const bool box = i >= 3 && i < 30 && j >= 2 && j < 21 && k >= 10 && k < 40;
+                if (box || (k < 8 && (state >> 24) < 80)) voxels.set(i, j, k);
+            }
+    return voxels;
+}
+
+// The .npy data section: uint8, Fortran order (x fastest).
+std::string npy_data_by_definition(const SparseVoxels& voxels) {
+    const auto& d = voxels.grid().dims;
+    std::string data;
+    for (int64_t k = 0; k < d[2]; ++k)
+        for (int64_t j = 0; j < d[1]; ++j)
+            for (int64_t i = 0; i < d[0]; ++i) data.push_back(char(voxels.get(i, j, k)));
+    return data;
+}
+
+// The binvox data section: the cube of side max(dims) in x, z, y order (y fastest), as maximal
+// runs of at most 255.
+std::string binvox_data_by_definition(const SparseVoxels& voxels) {
+    const auto& d = voxels.grid().dims;
+    const int64_t side = std::max({d[0], d[1], d[2]});
+    std::string data;
+    int value = -1, count = 0;
+    auto flush = [&] {
+        if (count > 0) data += std::string{char(value), char(count)};
+    };
+    for (int64_t x = 0; x < side; ++x)
+        for (int64_t z = 0; z < side; ++z)
+            for (int64_t y = 0; y < side; ++y) {
+                const int v = voxels.get(x, y, z) ? 1 : 0;
+                if (v != value || count == 255) {
+                    flush();
+                    value = v;
+                    count = 0;
+                }
+                ++count;
+            }
+    flush();
+    return data;
+}
+
+std::string after(const std::string& bytes, const std::string& marker) {
+    const size_t at = bytes.find(marker);
+    if (at == std::string::npos) throw std::runtime_error("no " + marker);
+    return bytes.substr(at + marker.size());
+}
+
+VoxelSet set_of(const SparseVoxels& voxels) {
+    VoxelSet set;
+    voxels.for_each([&](int64_t i, int64_t j, int64_t k) { set.insert({i, j, k}); });
+    return set;
+}
+
+TEST_F(WriterTest, StreamedNpyAndBinvoxEqualTheDenseDefinitionForAnySlabAndBrickSize) {
+    for (int brick : {4, 12, 64}) {
+        const SparseVoxels voxels = mixed_voxels(brick);
+        const std::string npy = npy_data_by_definition(voxels);
+        const std::string binvox = binvox_data_by_definition(voxels);
+        // 1 byte: one layer per slab; 3000: a few layers, not a multiple of 4; default: one slab.
+        for (uint64_t slab : {uint64_t(1), uint64_t(3000), oclvox::detail::kSlabBytes}) {
+            SCOPED_TRACE("brick " + std::to_string(brick) + ", slab " + std::to_string(slab));
+            oclvox::detail::write_npy(path("s.npy"), voxels, slab);
+            const std::string npy_file = read_bytes(path("s.npy"));
+            const Npy parsed = read_npy(npy_file);
+            EXPECT_EQ(npy_file.substr(parsed.data_offset), npy);
+            oclvox::detail::write_binvox(path("s.binvox"), voxels, slab);
+            EXPECT_EQ(after(read_bytes(path("s.binvox")), "data\n"), binvox);
+        }
+    }
+}
+
+TEST_F(WriterTest, NpyReadsBackThroughNumpy) {
+    if (std::system("/usr/bin/python3 -c 'import numpy' 2>/dev/null") != 0)
+        GTEST_SKIP() << "python3-numpy is not installed (scripts/install_deps.sh installs it)";
+    const SparseVoxels voxels = mixed_voxels(12);
+    oclvox::write_voxels(path("n.npy"), voxels);
+    const std::string listing = path("n.txt");
+    const std::string command = "/usr/bin/python3 -c \"import numpy; a = numpy.load('" +
+                                path("n.npy") +
+                                "'); assert a.dtype == numpy.uint8 and a.shape == (37, 21, 45); "
+                                "[print(i, j, k) for i, j, k in numpy.argwhere(a)]\" > " +
+                                listing;
+    ASSERT_EQ(std::system(command.c_str()), 0);
+    VoxelSet from_numpy;
+    std::istringstream lines(read_bytes(listing));
+    for (Voxel v; lines >> v[0] >> v[1] >> v[2];) from_numpy.insert(v);
+    EXPECT_EQ(from_numpy, set_of(voxels));
+}
+
+TEST_F(WriterTest, StreamedVoxMatchesTheVoxelsAcrossTilesWithBricksStraddlingThem) {
+    // Bricks of 12 do not divide 256, so bricks straddle tile borders; the box crosses x = 256.
+    const Grid grid = make_grid({300, 20, 270});
+    VoxelSet set;
+    for (int64_t i = 250; i < 262; ++i)
+        for (int64_t j = 3; j < 9; ++j)
+            for (int64_t k = 250; k < 260; ++k) set.insert({i, j, k});
+    set.insert({0, 0, 0});
+    set.insert({299, 19, 269});
+    oclvox::write_voxels(path("t.vox"), make_voxels(grid, set, 12));
+    oclvox::write_voxels(path("u.vox"), make_voxels(grid, set, 64));
+
+    const Vox file = read_vox(read_bytes(path("t.vox")));
+    EXPECT_EQ(file.world, set);
+    EXPECT_EQ(file.models.size(), 4u);  // tiles (0,0,0), (1,0,0), (0,0,1), (1,0,1)
+    EXPECT_EQ(file.pack_models, int32_t(file.models.size()));
+    EXPECT_FALSE(file.layers_used.empty());
+    EXPECT_EQ(file.layers_used, file.layers_named);
+    EXPECT_EQ(read_bytes(path("t.vox")), read_bytes(path("u.vox")));  // brick size invisible
+}
+
+TEST_F(WriterTest, StlCubeMeshEnclosesExactlyTheVoxelVolumeFacingOutwards) {
+    // Divergence theorem: the signed volume of a closed, outward-wound triangle mesh is the
+    // volume it encloses; a flipped or missing triangle changes it.
+    const VoxelSet set = odd_pattern();
+    oclvox::write_voxels(path("out.stl"), make_voxels(odd_grid(), set));
+    const std::string bytes = read_bytes(path("out.stl"));
+    ByteReader in{bytes};
+    in.pos = 80;
+    const uint64_t triangles = in.uint(4);
+    ASSERT_EQ(bytes.size(), 84 + 50 * triangles);
+    EXPECT_EQ(triangles, 2 * exposed_faces_by_brute_force(set).size());
+    double volume = 0;
+    for (uint64_t t = 0; t < triangles; ++t) {
+        in.pos += 12;  // normal
+        std::array<std::array<double, 3>, 3> p{};
+        for (auto& corner : p)
+            for (double& c : corner) {
+                const uint32_t bits = uint32_t(in.uint(4));
+                float f;
+                std::memcpy(&f, &bits, 4);
+                c = f;
+            }
+        in.pos += 2;
+        volume += (p[0][0] * (p[1][1] * p[2][2] - p[1][2] * p[2][1]) -
+                   p[0][1] * (p[1][0] * p[2][2] - p[1][2] * p[2][0]) +
+                   p[0][2] * (p[1][0] * p[2][1] - p[1][1] * p[2][0])) /
+                  6;
+    }
+    EXPECT_NEAR(volume, double(set.size()) * 0.125, 1e-9);
+}
+
+// ---------------------------------------------------------------------------------------------
+// OpenVDB occupancy, read back through OpenVDB's own API
+// ---------------------------------------------------------------------------------------------
+TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits) {
+    for (int brick : {4, 12, 64}) {
+        SCOPED_TRACE("brick " + std::to_string(brick));
+        // The mixed pattern has whole 8^3 leaves (pruned to tiles) and partial ones.
+        const SparseVoxels voxels = mixed_voxels(brick);
+        oclvox::write_voxels(path("o.vdb"), voxels);
+        const VdbOccupancy vdb = read_vdb_occupancy(path("o.vdb"));
+        const VoxelSet expected = set_of(voxels);
+        EXPECT_EQ(vdb.active_count, expected.size());
+        EXPECT_EQ(vdb.active, expected);
+        EXPECT_TRUE(vdb.all_true);
+
+        const Grid& g = voxels.grid();
+        for (const Voxel& v : {Voxel{0, 0, 0}, Voxel{36, 20, 44}, Voxel{5, 17, 30}}) {
+            const openvdb::Vec3d world =
+                vdb.transform->indexToWorld(openvdb::Coord(int(v[0]), int(v[1]), int(v[2])));
+            for (int a = 0; a < 3; ++a)
+                EXPECT_NEAR(world[a], g.origin[a] + (double(v[a]) + 0.5) * g.voxel_size, 1e-12);
+        }
+        EXPECT_EQ(vdb.origin, openvdb::Vec3d(0.5, -2.0, 3.0));
+        EXPECT_EQ(vdb.dims, openvdb::Vec3i(37, 21, 45));
+    }
+}
+
+TEST_F(WriterTest, VdbReadsBackThroughOpenVdbsPythonModule) {
+    if (std::system("/usr/bin/python3 -c 'import pyopenvdb' 2>/dev/null") != 0)
+        GTEST_SKIP() << "python3-openvdb is not installed (scripts/install_deps.sh installs it)";
+    const SparseVoxels voxels = mixed_voxels(12);
+    oclvox::write_voxels(path("p.vdb"), voxels);
+    const std::string listing = path("p.txt");
+    // Prints the transform's image of index (1, 2, 3), then every active voxel (tiles expanded).
+    const std::string script =
+        "import pyopenvdb as vdb, itertools\n"
+        "g = vdb.read('" +
+        path("p.vdb") +
+        "', 'occupancy')\n"
+        "assert g.valueTypeName == 'bool', g.valueTypeName\n"
+        "print(*g.transform.indexToWorld((1, 2, 3)))\n"
+        "for v in g.citerOnValues():\n"
+        "    assert v['value']\n"
+        "    lo, hi = v['min'], v['max']\n"
+        "    for c in itertools.product(*(range(lo[a], hi[a] + 1) for a in range(3))):\n"
+        "        print(*c)\n";
+    std::ofstream(path("p.py")) << script;
+    ASSERT_EQ(std::system(("/usr/bin/python3 " + path("p.py") + " > " + listing).c_str()), 0);
+    std::istringstream lines(read_bytes(listing));
+    std::array<double, 3> world{};
+    lines >> world[0] >> world[1] >> world[2];
+    EXPECT_NEAR(world[0], 0.5 + 1.5 * 0.25, 1e-12);
+    EXPECT_NEAR(world[1], -2.0 + 2.5 * 0.25, 1e-12);
+    EXPECT_NEAR(world[2], 3.0 + 3.5 * 0.25, 1e-12);
+    VoxelSet from_python;
+    for (Voxel v; lines >> v[0] >> v[1] >> v[2];) from_python.insert(v);
+    EXPECT_EQ(from_python, set_of(voxels));
+}
+
+TEST_F(WriterTest, GridTooLargeForADenseCopyStillWritesVdb) {
+    // 2^20 x 2^20 x 64 voxels (2^46 bytes dense) with a 16^3 solid block and two far corners.
+    const int64_t n = int64_t(1) << 20;
+    const Grid grid = make_grid({n, n, 64});
+    VoxelSet set = {{0, 0, 0}, {n - 1, n - 1, 63}};
+    for (int64_t i = 0; i < 16; ++i)
+        for (int64_t j = 0; j < 16; ++j)
+            for (int64_t k = 0; k < 16; ++k) set.insert({n / 2 + i, 7 + j, 40 + k});
+    const SparseVoxels voxels = make_voxels(grid, set, 64);
+    EXPECT_THROW(voxels.to_dense(), oclvox::GridError);
+
+    oclvox::write_voxels(path("huge.vdb"), voxels);
+    const VdbOccupancy vdb = read_vdb_occupancy(path("huge.vdb"));
+    EXPECT_EQ(vdb.active, set);
+    EXPECT_EQ(vdb.dims, openvdb::Vec3i(int(n), int(n), 64));
 }
 
 }  // namespace

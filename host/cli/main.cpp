@@ -27,6 +27,7 @@
 #include <variant>
 #include <vector>
 
+#include "file_names.hpp"
 #include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
 #include "oclvox/sdf.hpp"
@@ -151,12 +152,7 @@ const CLI::Validator kBrickSize(
 // ---------------------------------------------------------------------------------------------
 // Output files
 // ---------------------------------------------------------------------------------------------
-std::string lowercase_extension(const std::string& path) {
-    std::string ext = fs::path(path).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
-    return ext;
-}
+using oclvox::detail::lowercase_extension;
 
 // Mistakes in output paths are cheap to find before the run and expensive after a long one, so
 // every output is checked before any input is read: its extension against the formats the
@@ -178,7 +174,8 @@ void check_output(const std::string& path, const std::vector<std::string>& input
 }
 
 // What write_voxels accepts.
-const std::vector<std::string> kVoxelExtensions{".binvox", ".npy", ".vox", ".obj", ".ply"};
+const std::vector<std::string> kVoxelExtensions{".vdb", ".binvox", ".npy", ".vox",
+                                                ".obj", ".ply",    ".stl"};
 
 // ---------------------------------------------------------------------------------------------
 // Timing and reports
@@ -530,8 +527,9 @@ void add_voxelize_options(CLI::App& command, VoxelizeArgs& args) {
         ->required();
     command
         .add_option("-o,--output", args.output,
-                    "voxel file; the format follows from the extension: .binvox, .npy (with a "
-                    ".json sidecar), .vox (MagicaVoxel), .obj or .ply (exposed cube faces)")
+                    "voxel file; the format follows from the extension: .vdb (OpenVDB, sparse), "
+                    ".binvox, .npy (with a .json sidecar), .vox (MagicaVoxel), .obj, .ply or .stl "
+                    "(exposed cube faces)")
         ->type_name("OUTPUT")
         ->required();
 

@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cstdint>
 
+#include "file_names.hpp"
 #include "oclvox/sdf.hpp"
 
 namespace oclvox {
@@ -51,9 +52,7 @@ const char* to_string(CsgOp op) {
 }
 
 CsgOp csg_op_from_string(const std::string& name) {
-    std::string lower = name;
-    std::transform(lower.begin(), lower.end(), lower.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
+    const std::string lower = detail::lowercase(name);
     if (lower == "union") return CsgOp::Union;
     if (lower == "intersection") return CsgOp::Intersection;
     if (lower == "difference") return CsgOp::Difference;

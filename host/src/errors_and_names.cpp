@@ -2,23 +2,17 @@
 #include <algorithm>
 #include <cctype>
 
+#include "file_names.hpp"
 #include "oclvox/oclvox.hpp"
 
 namespace oclvox {
-
-namespace {
-std::string lower(std::string s) {
-    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-    return s;
-}
-}  // namespace
 
 const char* to_string(OverlapTest test) {
     return test == OverlapTest::SAT ? "sat" : "pef";
 }
 
 OverlapTest overlap_test_from_string(const std::string& name) {
-    const std::string n = lower(name);
+    const std::string n = detail::lowercase(name);
     if (n == "sat") return OverlapTest::SAT;
     if (n == "pef") return OverlapTest::PEF;
     throw GridError("unknown overlap test '" + name + "' (expected sat or pef)");
@@ -39,7 +33,7 @@ const char* to_string(VoxelizeMode mode) {
 }
 
 VoxelizeMode voxelize_mode_from_string(const std::string& name) {
-    const std::string n = lower(name);
+    const std::string n = detail::lowercase(name);
     for (VoxelizeMode m :
          {VoxelizeMode::Surface, VoxelizeMode::Thin, VoxelizeMode::Solid, VoxelizeMode::Filled})
         if (n == to_string(m)) return m;
@@ -59,7 +53,7 @@ const char* to_string(InsideTest test) {
 }
 
 InsideTest inside_test_from_string(const std::string& name) {
-    const std::string n = lower(name);
+    const std::string n = detail::lowercase(name);
     for (InsideTest t : {InsideTest::Auto, InsideTest::Parity, InsideTest::Winding})
         if (n == to_string(t)) return t;
     throw GridError("unknown inside test '" + name + "' (expected auto, parity or winding)");
@@ -70,7 +64,7 @@ const char* to_string(Boundary boundary) {
 }
 
 Boundary boundary_from_string(const std::string& name) {
-    const std::string n = lower(name);
+    const std::string n = detail::lowercase(name);
     if (n == "closed") return Boundary::Closed;
     if (n == "half-open") return Boundary::HalfOpen;
     throw GridError("unknown boundary rule '" + name + "' (expected closed or half-open)");

@@ -17,23 +17,16 @@
 #include <nlohmann/json.hpp>
 #include <variant>
 
-#include "atomic_file.hpp"
 #include "field_vdb.hpp"
+#include "file_names.hpp"
 #include "host_memory.hpp"
+#include "little_endian.hpp"
+#include "npy_format.hpp"
 #include "oclvox/sdf.hpp"
 
 namespace oclvox {
 
 namespace {
-
-std::string lowercase_extension(const std::string& path) {
-    const size_t dot = path.find_last_of('.');
-    const size_t slash = path.find_last_of('/');
-    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-    std::string extension = path.substr(dot);
-    for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
-    return extension;
-}
 
 void check_field(const ScalarField& field, const std::string& path) {
     validate_grid(field.grid);
@@ -41,17 +34,6 @@ void check_field(const ScalarField& field, const std::string& path) {
         throw OutputError("cannot write " + path + ": the field has " +
                           std::to_string(field.values.size()) + " values for a grid of " +
                           std::to_string(field.grid.voxel_count()) + " voxels");
-}
-
-// The samples as little-endian float32 bytes, whatever the host's byte order.
-std::vector<char> little_endian_bytes(const std::vector<float>& values) {
-    std::vector<char> bytes(values.size() * 4);
-    for (size_t v = 0; v < values.size(); ++v) {
-        uint32_t bits;
-        std::memcpy(&bits, &values[v], 4);
-        for (size_t b = 0; b < 4; ++b) bytes[v * 4 + b] = char((bits >> (8 * b)) & 0xffu);
-    }
-    return bytes;
 }
 
 // The largest |value| in voxels: the band of a narrow-band field.
@@ -62,45 +44,23 @@ double inferred_band(const ScalarField& field) {
 }
 
 void write_npy_field(const std::string& path, const ScalarField& field, double band_voxels) {
-    // Phase 1: the array, its header padded so the data starts at a multiple of 64 bytes.
-    detail::write_file_atomically(path, [&](std::ostream& out) {
-        const Grid& g = field.grid;
-        const std::string dict = "{'descr': '<f4', 'fortran_order': True, 'shape': (" +
-                                 std::to_string(g.dims[0]) + ", " + std::to_string(g.dims[1]) +
-                                 ", " + std::to_string(g.dims[2]) + "), }";
-        const size_t unpadded = 10 + dict.size() + 1;  // magic, version, length, dict, '\n'
-        const std::string header = dict + std::string((64 - unpadded % 64) % 64, ' ') + '\n';
-        out.write("\x93NUMPY\x01\x00", 8);
-        out.put(char(header.size() & 0xff));
-        out.put(char(header.size() >> 8));
-        out << header;
-        const std::vector<char> bytes = little_endian_bytes(field.values);
-        out.write(bytes.data(), std::streamsize(bytes.size()));
-    });
-
-    // Phase 2: the sidecar; without it the array is unplaced, so a failure removes both.
-    const size_t slash = path.find_last_of('/');
-    const Grid& g = field.grid;
-    const nlohmann::json sidecar = {
-        {"file", slash == std::string::npos ? path : path.substr(slash + 1)},
-        {"dtype", "float32, distance in world units"},
-        {"dims", g.dims},
-        {"origin", g.origin},
-        {"voxel_size", g.voxel_size},
-        {"axis_order",
-         "arr[i, j, k] is voxel (x=i, y=j, z=k); stored in Fortran order (x fastest)"},
-        {"sample_position", "voxel centres: origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size"},
-        {"sign_convention", "negative inside, positive outside"},
-        {"band_voxels", band_voxels},
-        {"background", band_voxels * g.voxel_size},
+    // The samples as little-endian float32, converted a chunk at a time so the copy stays small.
+    auto write_samples = [&](std::ostream& out) {
+        constexpr size_t kChunk = size_t(1) << 16;
+        std::vector<char> bytes(kChunk * 4);
+        for (size_t first = 0; first < field.values.size(); first += kChunk) {
+            const size_t n = std::min(kChunk, field.values.size() - first);
+            for (size_t v = 0; v < n; ++v) detail::store_le(&bytes[v * 4], field.values[first + v]);
+            out.write(bytes.data(), std::streamsize(n * 4));
+        }
     };
-    try {
-        const std::string text = sidecar.dump(2) + "\n";
-        detail::write_file_atomically(path + ".json", [&](std::ostream& out) { out << text; });
-    } catch (...) {
-        std::remove(path.c_str());
-        throw;
-    }
+    nlohmann::json sidecar = detail::npy_sidecar(path, field.grid);
+    sidecar["dtype"] = "float32, distance in world units";
+    sidecar["sample_position"] = "voxel centres: origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size";
+    sidecar["sign_convention"] = "negative inside, positive outside";
+    sidecar["band_voxels"] = band_voxels;
+    sidecar["background"] = band_voxels * field.grid.voxel_size;
+    detail::write_npy_with_sidecar(path, "<f4", field.grid, write_samples, sidecar);
 }
 
 // ---- Reading ----------------------------------------------------------------------------------
@@ -418,7 +378,7 @@ SparseVoxels read_occupancy_samples(const std::string& path, std::ifstream& in,
 // exception not of oclvox's hierarchy (an allocation failing despite the budget) is reported as
 // an InputError naming the file.
 std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path) {
-    if (lowercase_extension(path) != ".npy")
+    if (detail::lowercase_extension(path) != ".npy")
         throw InputError("cannot read field " + path + ": only .npy fields can be read");
     try {
         std::ifstream in;
@@ -445,7 +405,7 @@ std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path
 void write_field(const std::string& path, const ScalarField& field, double band_voxels) {
     check_field(field, path);
     if (!(band_voxels > 0)) band_voxels = inferred_band(field);
-    const std::string extension = lowercase_extension(path);
+    const std::string extension = detail::lowercase_extension(path);
     if (extension == ".npy") return write_npy_field(path, field, band_voxels);
     if (extension == ".vdb") return detail::write_field_vdb(path, field, band_voxels);
     throw OutputError("cannot write field " + path + ": unknown extension '" + extension +

@@ -1,14 +1,10 @@
-// OpenVDB level-set output. OpenVDB's index space has sample (i, j, k) at index point (i, j, k);
-// ours has it at the centre of voxel (i, j, k), origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size.
-// So the transform scales by voxel_size and translates by origin + 0.5 * voxel_size: the same
-// integer (i, j, k) addresses the same sample in both, and world positions agree.
+// OpenVDB level-set output: sample (i, j, k) of the field at OpenVDB index (i, j, k), placed by
+// the shared voxel-centre transform (vdb_format.hpp).
 #include "field_vdb.hpp"
 
-#include <openvdb/io/Stream.h>
-#include <openvdb/openvdb.h>
 #include <openvdb/tools/SignedFloodFill.h>
 
-#include "atomic_file.hpp"
+#include "vdb_format.hpp"
 
 namespace oclvox::detail {
 
@@ -19,14 +15,7 @@ void write_field_vdb(const std::string& path, const ScalarField& field, double b
 
     // Phase 1: grid, transform and metadata.
     openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
-    openvdb::math::Transform::Ptr transform =
-        openvdb::math::Transform::createLinearTransform(g.voxel_size);
-    transform->postTranslate(openvdb::Vec3d(g.origin[0] + 0.5 * g.voxel_size,
-                                            g.origin[1] + 0.5 * g.voxel_size,
-                                            g.origin[2] + 0.5 * g.voxel_size));
-    grid->setTransform(transform);
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
-    grid->setName("sdf");
+    place_vdb_grid(*grid, g, "sdf", openvdb::GRID_LEVEL_SET);
     grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(band_voxels));
 
     // Phase 2: the narrow band as active voxels. The rest stays background, and the signed flood
@@ -44,10 +33,7 @@ void write_field_vdb(const std::string& path, const ScalarField& field, double b
     openvdb::tools::signedFloodFill(grid->tree());
 
     // Phase 3: the file.
-    write_file_atomically(path, [&](std::ostream& out) {
-        openvdb::io::Stream stream(out);
-        stream.write(openvdb::GridCPtrVec{grid});
-    });
+    write_vdb_file(path, grid);
 }
 
 }  // namespace oclvox::detail

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "file_names.hpp"
 #include "mesh_reading.hpp"
 #include "oclvox/oclvox.hpp"
 
@@ -24,17 +25,6 @@ std::string position_text(const Position& p) {
     text.precision(9);
     text << "(" << p[0] << ", " << p[1] << ", " << p[2] << ")";
     return text.str();
-}
-
-// The extension after the last dot of the file name, lower-cased; empty if there is none.
-std::string lowercase_extension(const std::string& path) {
-    const std::string name = std::filesystem::path(path).filename().string();
-    const size_t dot = name.rfind('.');
-    if (dot == std::string::npos || dot == 0) return "";
-    std::string extension = name.substr(dot + 1);
-    std::transform(extension.begin(), extension.end(), extension.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
-    return extension;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -115,22 +105,22 @@ Mesh load_mesh(const std::string& path) {
     // Phase 1: read the file as it is, with its own vertex numbering, so that problems are
     // reported in the file's terms.
     constexpr const char* kExpected = "expected .obj, .stl, .ply, .off, .gltf, .glb or .3mf";
-    const std::string extension = lowercase_extension(path);
+    const std::string extension = detail::lowercase_extension(path);
     mesh_reading::Polygons polygons;
-    if (extension == "obj")
+    if (extension == ".obj")
         polygons = mesh_reading::read_obj(path);
-    else if (extension == "stl")
+    else if (extension == ".stl")
         polygons = mesh_reading::read_stl(path);
-    else if (extension == "ply")
+    else if (extension == ".ply")
         polygons = mesh_reading::read_ply(path);
-    else if (extension == "off")
+    else if (extension == ".off")
         polygons = mesh_reading::read_off(path);
-    else if (extension == "gltf" || extension == "glb" || extension == "3mf")
+    else if (extension == ".gltf" || extension == ".glb" || extension == ".3mf")
         polygons = mesh_reading::read_scene_assimp(path);
     else if (extension.empty())
         fail(path, std::string("the file name has no extension; ") + kExpected);
     else
-        fail(path, "unknown extension '." + extension + "'; " + kExpected);
+        fail(path, "unknown extension '" + extension + "'; " + kExpected);
 
     // Phase 2: triangulate (checking every index), check, then weld.
     const Mesh raw = mesh_reading::triangulated(path, std::move(polygons));

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "atomic_file.hpp"
+#include "file_names.hpp"
 
 namespace oclvox::detail {
 
@@ -120,11 +121,6 @@ namespace {
 
 using detail::throw_device_error;
 
-std::string lower(std::string s) {
-    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-    return s;
-}
-
 std::string type_name(cl_device_type type) {
     if (type & CL_DEVICE_TYPE_GPU) return "GPU";
     if (type & CL_DEVICE_TYPE_CPU) return "CPU";
@@ -199,9 +195,11 @@ const Found& select_device(const std::vector<Found>& found, const std::string& s
     }
     for (const Found& f : found)
         if (f.info.id == selector) return f;
-    const std::string needle = lower(selector);
+    const std::string needle = detail::lowercase(selector);
     for (const Found& f : found)
-        if (lower(f.info.platform + " " + f.info.name).find(needle) != std::string::npos) return f;
+        if (detail::lowercase(f.info.platform + " " + f.info.name).find(needle) !=
+            std::string::npos)
+            return f;
     throw DeviceError("no OpenCL device matches '" + selector +
                       "'; available:" + device_list_text(found));
 }

@@ -1,4 +1,5 @@
 // Sparse brick storage of a bit grid. See SparseVoxels in oclvox.hpp for the layout.
+#include <algorithm>
 #include <cstring>
 
 #include "oclvox/oclvox.hpp"
@@ -46,6 +47,16 @@ Address address_of(const SparseVoxels& v, int64_t i, int64_t j, int64_t k) {
     const size_t word = size_t(li / 4 + nb * (lj / 4 + nb * (lk / 4)));
     const int bit = int(li % 4 + 4 * (lj % 4 + 4 * (lk % 4)));
     return {brick, word, bit};
+}
+
+// The bits of a 4x4x4 block whose coordinate along `axis` lies in [from, to] (clipped to 0..3).
+uint64_t block_mask_within(int axis, int64_t from, int64_t to) {
+    uint64_t mask = 0;
+    for (int bit = 0; bit < 64; ++bit) {
+        const int64_t c = axis == 0 ? (bit & 3) : axis == 1 ? (bit >> 2 & 3) : (bit >> 4);
+        if (c >= from && c <= to) mask |= uint64_t(1) << bit;
+    }
+    return mask;
 }
 
 bool inside(const Grid& g, int64_t i, int64_t j, int64_t k) {
@@ -110,6 +121,71 @@ void SparseVoxels::for_each(const std::function<void(int64_t, int64_t, int64_t)>
     }
 }
 
+std::vector<uint64_t> SparseVoxels::brick_indices() const {
+    std::vector<uint64_t> indices;
+    indices.reserve(bricks_.size());
+    for (const auto& entry : bricks_) indices.push_back(entry.first);
+    std::sort(indices.begin(), indices.end());
+    return indices;
+}
+
+const uint64_t* SparseVoxels::brick_blocks(uint64_t brick_index) const {
+    const auto it = bricks_.find(brick_index);
+    return it == bricks_.end() ? nullptr : it->second.data();
+}
+
+void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
+                            const std::array<int64_t, 3>& strides, uint8_t* out) const {
+    std::array<int64_t, 3> first{}, last{};  // inclusive voxel range, clipped to the grid
+    for (int a = 0; a < 3; ++a) {
+        first[a] = std::max<int64_t>(lo[a], 0);
+        last[a] = std::min(hi[a], grid_.dims[a]) - 1;
+        if (last[a] < first[a]) return;
+    }
+    const auto nbricks = brick_dims();
+    const int64_t b = brick_size_, nb = blocks_per_brick_axis();
+    // Phase 1: the bricks the box touches, found by lookup rather than by scanning all bricks.
+    for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
+        for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
+            for (int64_t bx = first[0] / b; bx <= last[0] / b; ++bx) {
+                const auto it = bricks_.find(
+                    uint64_t(bx) +
+                    uint64_t(nbricks[0]) * (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz)));
+                if (it == bricks_.end()) continue;
+                const uint64_t* blocks = it->second.data();
+                // Phase 2: the brick's blocks inside the box; a block partly outside it keeps
+                // only its bits inside.
+                const std::array<int64_t, 3> brick_origin{bx * b, by * b, bz * b};
+                std::array<int64_t, 3> block_first{}, block_last{};
+                for (int a = 0; a < 3; ++a) {
+                    block_first[a] = std::max<int64_t>(first[a] - brick_origin[a], 0) / kBlock;
+                    block_last[a] = std::min<int64_t>(last[a] - brick_origin[a], b - 1) / kBlock;
+                }
+                for (int64_t wz = block_first[2]; wz <= block_last[2]; ++wz)
+                    for (int64_t wy = block_first[1]; wy <= block_last[1]; ++wy)
+                        for (int64_t wx = block_first[0]; wx <= block_last[0]; ++wx) {
+                            uint64_t mask = blocks[size_t(wx + nb * (wy + nb * wz))];
+                            if (!mask) continue;
+                            const std::array<int64_t, 3> o{brick_origin[0] + wx * kBlock,
+                                                           brick_origin[1] + wy * kBlock,
+                                                           brick_origin[2] + wz * kBlock};
+                            for (int a = 0; a < 3; ++a)
+                                if (o[a] < first[a] || o[a] + kBlock - 1 > last[a])
+                                    mask &= block_mask_within(a, first[a] - o[a], last[a] - o[a]);
+                            // Phase 3: one byte per set voxel.
+                            uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
+                                            (o[1] - lo[1]) * strides[1] +
+                                            (o[2] - lo[2]) * strides[2];
+                            while (mask) {
+                                const int bit = __builtin_ctzll(mask);
+                                mask &= mask - 1;
+                                base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
+                                     (bit >> 4) * strides[2]] = 1;
+                            }
+                        }
+            }
+}
+
 std::vector<uint8_t> SparseVoxels::to_dense() const {
     const uint64_t n = grid_.voxel_count();
     if (n > (uint64_t(1) << 36))
@@ -119,7 +195,7 @@ std::vector<uint8_t> SparseVoxels::to_dense() const {
                         " GiB; choose a sparse output or a lower resolution");
     std::vector<uint8_t> dense(n, 0);
     const int64_t nx = grid_.dims[0], ny = grid_.dims[1];
-    for_each([&](int64_t i, int64_t j, int64_t k) { dense[size_t(i + nx * (j + ny * k))] = 1; });
+    mark_box({0, 0, 0}, grid_.dims, {1, nx, nx * ny}, dense.data());
     return dense;
 }
 

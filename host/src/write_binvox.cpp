@@ -11,9 +11,16 @@
 // D = max(nx, ny, nz) voxels with ours in the low corner and the rest empty. Every reader then
 // agrees on every voxel, and the runs of padding cost two bytes per 255 voxels.
 //
+// Streaming: the file order is x slowest, so the grid is read from the bricks an x-slab at a
+// time into a buffer laid out in file order (y fastest, then z) and run-length encoded from
+// there; the largest buffer is one slab. Only row pieces inside stored bricks are scanned, runs
+// are found a machine word at a time, and scanned set bytes are cleared as they are encoded, so
+// the cost follows the stored bricks, not the grid volume.
+//
 // Placement: binvox maps voxel (i,j,k) to the point translate + scale * (i,j,k) / D (plus half a
 // voxel for centres), so translate = grid origin and scale = D * voxel_size reproduce our grid.
 #include <algorithm>
+#include <cstring>
 #include <iomanip>
 #include <limits>
 #include <vector>
@@ -29,18 +36,78 @@ namespace {
 // and readers expand it to one byte (or bit) per voxel.
 constexpr int64_t kMaxBinvoxDim = 4096;
 
-// Appends run-length pairs to a buffer that is written out in large pieces.
+// Collects voxels into maximal runs and writes them as (value, count) pairs, count <= 255, in
+// large pieces.
 class RunWriter {
   public:
-    explicit RunWriter(std::ostream& out) : out_(out) {}
+    explicit RunWriter(std::ostream& out) : out_(out) { buffer_.reserve(kFlushBytes); }
 
     void add(uint8_t value, uint64_t count) {
-        while (count > 0) {
-            const uint64_t run = std::min<uint64_t>(count, 255);
-            buffer_.push_back(char(value));
-            buffer_.push_back(char(run));
-            count -= run;
-            if (buffer_.size() >= kFlushBytes) flush();
+        if (count == 0) return;
+        if (value != value_) {
+            emit();
+            value_ = value;
+        }
+        pending_ += count;
+    }
+    // Adds the voxels bytes[0, n) (each 0 or 1), run by run, and zeroes them: the caller's
+    // buffer is all zero again afterwards at a cost proportional to the set voxels, not to the
+    // buffer.
+    void take_bytes(uint8_t* bytes, size_t n) {
+        for (size_t start = 0; start < n;) {
+            const uint8_t value = bytes[start];
+            const size_t length = run_length(bytes + start, n - start, value);
+            add(value, length);
+            if (value) std::memset(bytes + start, 0, length);
+            start += length;
+        }
+    }
+    void finish() {
+        emit();
+        flush();
+    }
+
+  private:
+    // Length of the run of `value` at the start of bytes[0, n). Empty space, most of a surface
+    // grid, is skipped 64 bytes at a time, set runs 8 at a time.
+    static size_t run_length(const uint8_t* bytes, size_t n, uint8_t value) {
+        size_t i = 0;
+        if (value == 0) {
+            for (; i + 64 <= n; i += 64) {
+                uint64_t words[8], any = 0;
+                std::memcpy(words, bytes + i, 64);
+                for (uint64_t word : words) any |= word;
+                if (any) break;
+            }
+        }
+        const uint64_t same = value ? 0x0101010101010101u : 0;
+        for (uint64_t word; i + 8 <= n; i += 8) {
+            std::memcpy(&word, bytes + i, 8);
+            if (word != same) break;
+        }
+        while (i < n && bytes[i] == value) ++i;
+        return i;
+    }
+    // Writes the pending run as pairs: full (value, 255) pairs first, filled a buffer at a time
+    // (the padding of a large cube is tens of millions of them), then the remainder.
+    void emit() {
+        while (pending_ >= 255) {
+            if (buffer_.size() + 2 > kFlushBytes) flush();
+            const uint64_t room = (kFlushBytes - buffer_.size()) / 2;
+            const uint64_t pairs = std::min(pending_ / 255, room);
+            const size_t at = buffer_.size();
+            buffer_.resize(at + 2 * pairs);
+            for (uint64_t p = 0; p < pairs; ++p) {
+                buffer_[at + 2 * p] = char(value_);
+                buffer_[at + 2 * p + 1] = char(255);
+            }
+            pending_ -= 255 * pairs;
+        }
+        if (pending_ > 0) {
+            if (buffer_.size() + 2 > kFlushBytes) flush();
+            buffer_.push_back(char(value_));
+            buffer_.push_back(char(pending_));
+            pending_ = 0;
         }
     }
     void flush() {
@@ -48,35 +115,26 @@ class RunWriter {
         buffer_.clear();
     }
 
-  private:
     static constexpr size_t kFlushBytes = size_t(1) << 20;
     std::ostream& out_;
     std::string buffer_;
+    uint8_t value_ = 0;
+    uint64_t pending_ = 0;  // voxels of value_ not yet written
 };
 
 }  // namespace
 
-void write_binvox(const std::string& path, const SparseVoxels& voxels) {
+void write_binvox(const std::string& path, const SparseVoxels& voxels, uint64_t slab_bytes) {
     const Grid& grid = voxels.grid();
     const int64_t dim = std::max({grid.dims[0], grid.dims[1], grid.dims[2]});
     if (dim > kMaxBinvoxDim)
         throw OutputError("cannot write " + path + ": binvox grids are cubic and this grid needs " +
                           std::to_string(dim) + "^3 voxels, more than the " +
                           std::to_string(kMaxBinvoxDim) +
-                          "^3 this writer allows; use .vox, .obj or .ply for large grids");
-
-    // Phase 1: binvox indices of the set voxels, in file order. Sorting the sparse set avoids a
-    // dense copy of the grid.
-    const uint64_t d = uint64_t(dim);
-    std::vector<uint64_t> set_indices;
-    set_indices.reserve(voxels.count());
-    voxels.for_each([&](int64_t x, int64_t y, int64_t z) {
-        set_indices.push_back(uint64_t(x) * d * d + uint64_t(z) * d + uint64_t(y));
-    });
-    std::sort(set_indices.begin(), set_indices.end());
+                          "^3 this writer allows; use .vdb, .vox, .obj or .ply for large grids");
 
     write_file_atomically(path, [&](std::ostream& out) {
-        // Phase 2: header, with enough digits that the numbers read back exactly.
+        // Phase 1: header, with enough digits that the numbers read back exactly.
         out << "#binvox 1\n";
         out << "dim " << dim << ' ' << dim << ' ' << dim << '\n';
         out << std::setprecision(std::numeric_limits<double>::max_digits10);
@@ -85,19 +143,54 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels) {
         out << "scale " << double(dim) * grid.voxel_size << '\n';
         out << "data\n";
 
-        // Phase 3: alternate runs of empty and set voxels up to the end of the cube.
+        // Phase 2: x-slabs of the grid in file order (plane x, then y fastest, then z), each
+        // followed by its padding up to the cube; then the padding planes beyond nx. Only the
+        // row pieces that lie in a stored brick are scanned: the rest is known to be empty.
+        const int64_t nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
+        const int64_t plane = ny * nz;
+        const int64_t thickness = slab_thickness(uint64_t(plane), nx, slab_bytes);
+        const int64_t b = voxels.brick_size();
+        const auto nbricks = voxels.brick_dims();
+        std::vector<uint8_t> slab(size_t(plane * thickness), 0);  // all zero between slabs
+        // Per brick row bz: the y ranges [begin, end) of the stored bricks in the slab, merged.
+        std::vector<std::vector<std::pair<int64_t, int64_t>>> stored(
+            static_cast<size_t>(nbricks[2]));
         RunWriter runs(out);
-        uint64_t next = 0;  // first voxel index not yet covered by a run
-        for (size_t s = 0; s < set_indices.size();) {
-            size_t end = s + 1;
-            while (end < set_indices.size() && set_indices[end] == set_indices[end - 1] + 1) ++end;
-            runs.add(0, set_indices[s] - next);
-            runs.add(1, end - s);
-            next = set_indices[end - 1] + 1;
-            s = end;
+        for (int64_t x0 = 0; x0 < nx; x0 += thickness) {
+            const int64_t depth = std::min(thickness, nx - x0);
+            voxels.mark_box({x0, 0, 0}, {x0 + depth, ny, nz}, {plane, 1, ny}, slab.data());
+            for (int64_t bz = 0; bz < nbricks[2]; ++bz) {
+                auto& ranges = stored[size_t(bz)];
+                ranges.clear();
+                for (int64_t by = 0; by < nbricks[1]; ++by) {
+                    bool any = false;
+                    for (int64_t bx = x0 / b; bx <= (x0 + depth - 1) / b && !any; ++bx)
+                        any = voxels.brick_blocks(
+                                  uint64_t(bx + nbricks[0] * (by + nbricks[1] * bz))) != nullptr;
+                    if (!any) continue;
+                    const int64_t end = std::min((by + 1) * b, ny);
+                    if (!ranges.empty() && ranges.back().second == by * b)
+                        ranges.back().second = end;
+                    else
+                        ranges.push_back({by * b, end});
+                }
+            }
+            for (int64_t x = 0; x < depth; ++x) {
+                uint8_t* rows = slab.data() + x * plane;
+                for (int64_t z = 0; z < nz; ++z) {
+                    int64_t y = 0;  // the row is encoded up to here
+                    for (const auto& [begin, end] : stored[size_t(z / b)]) {
+                        runs.add(0, uint64_t(begin - y));
+                        runs.take_bytes(rows + z * ny + begin, size_t(end - begin));
+                        y = end;
+                    }
+                    runs.add(0, uint64_t(dim - y));
+                }
+                runs.add(0, uint64_t(dim - nz) * uint64_t(dim));
+            }
         }
-        runs.add(0, d * d * d - next);
-        runs.flush();
+        runs.add(0, uint64_t(dim - nx) * uint64_t(dim) * uint64_t(dim));
+        runs.finish();
     });
 }
 

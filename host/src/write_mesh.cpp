@@ -4,47 +4,19 @@
 // OBJ and PLY keep the double coordinates exactly (shortest round-trip decimal text; 64-bit
 // floats); STL is single precision by definition, with each facet's normal computed from its
 // corners. Indices are checked first so a bad mesh fails before anything is written.
-#include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <limits>
 
 #include "atomic_file.hpp"
+#include "file_names.hpp"
+#include "little_endian.hpp"
+#include "number_text.hpp"
 #include "oclvox/field.hpp"
 
 namespace oclvox {
 
 namespace {
-
-// Little-endian bytes regardless of the host's byte order.
-template <typename T, typename Bits>
-void write_le(std::ostream& out, T value) {
-    static_assert(sizeof(T) == sizeof(Bits));
-    Bits bits;
-    std::memcpy(&bits, &value, sizeof bits);
-    char bytes[sizeof bits];
-    for (size_t i = 0; i < sizeof bits; ++i) bytes[i] = char((bits >> (8 * i)) & 0xff);
-    out.write(bytes, sizeof bytes);
-}
-void write_f32(std::ostream& out, float v) {
-    write_le<float, uint32_t>(out, v);
-}
-void write_f64(std::ostream& out, double v) {
-    write_le<double, uint64_t>(out, v);
-}
-void write_u32(std::ostream& out, uint32_t v) {
-    write_le<uint32_t, uint32_t>(out, v);
-}
-void write_u16(std::ostream& out, uint16_t v) {
-    write_le<uint16_t, uint16_t>(out, v);
-}
-
-void write_number(std::ostream& out, double value) {
-    char text[32];
-    const auto result = std::to_chars(text, text + sizeof text, value);
-    out.write(text, result.ptr - text);
-}
 
 void write_obj(std::ostream& out, const Mesh& mesh) {
     out << "# oclvox: " << mesh.positions.size() << " vertices, " << mesh.triangles.size()
@@ -53,7 +25,7 @@ void write_obj(std::ostream& out, const Mesh& mesh) {
         out << 'v';
         for (double c : p) {
             out << ' ';
-            write_number(out, c);
+            detail::write_shortest_number(out, c);
         }
         out << '\n';
     }
@@ -68,10 +40,10 @@ void write_ply(std::ostream& out, const Mesh& mesh) {
         << "element face " << mesh.triangles.size() << '\n'
         << "property list uchar int vertex_indices\nend_header\n";
     for (const auto& p : mesh.positions)
-        for (double c : p) write_f64(out, c);
+        for (double c : p) detail::write_le(out, c);
     for (const auto& t : mesh.triangles) {
         out.put(char(3));
-        for (uint32_t index : t) write_u32(out, index);
+        for (uint32_t index : t) detail::write_le(out, index);
     }
 }
 
@@ -79,7 +51,7 @@ void write_stl(std::ostream& out, const Mesh& mesh) {
     char header[80] = {};
     std::strncpy(header, "oclvox iso-surface", sizeof header);
     out.write(header, sizeof header);
-    write_u32(out, uint32_t(mesh.triangles.size()));
+    detail::write_le(out, uint32_t(mesh.triangles.size()));
     for (const auto& t : mesh.triangles) {
         const auto& a = mesh.positions[t[0]];
         const auto& b = mesh.positions[t[1]];
@@ -90,28 +62,18 @@ void write_stl(std::ostream& out, const Mesh& mesh) {
                        u[0] * v[1] - u[1] * v[0]};
         const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         for (double& x : n) x = length > 0 ? x / length : 0.0;  // degenerate facets: zero normal
-        for (double x : n) write_f32(out, float(x));
+        for (double x : n) detail::write_le(out, float(x));
         for (const auto* p : {&a, &b, &c})
-            for (double x : *p) write_f32(out, float(x));
-        write_u16(out, 0);
+            for (double x : *p) detail::write_le(out, float(x));
+        detail::write_le(out, uint16_t(0));
     }
-}
-
-std::string lower_extension(const std::string& path) {
-    const size_t dot = path.find_last_of('.');
-    const size_t slash = path.find_last_of("/\\");
-    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-    std::string ext = path.substr(dot);
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char c) { return char(std::tolower(c)); });
-    return ext;
 }
 
 }  // namespace
 
 void write_mesh(const std::string& path, const Mesh& mesh) {
     // Phase 1: format and checks, before any file exists.
-    const std::string ext = lower_extension(path);
+    const std::string ext = detail::lowercase_extension(path);
     void (*write)(std::ostream&, const Mesh&) = ext == ".obj"   ? write_obj
                                                 : ext == ".ply" ? write_ply
                                                 : ext == ".stl" ? write_stl

@@ -7,16 +7,27 @@
 // transform's translation "_t" is where the model's centre goes, and the centre of a model of
 // size s is voxel floor(s / 2), so a tile starting at voxel o gets _t = o + floor(s / 2).
 //
+// Older readers (before the scene graph) take the file too: a PACK chunk gives the model count,
+// the scene graph chunks are ones they skip, and every shape sits in layer 0, which a LAYR
+// chunk names.
+//
+// Streaming: the models are written tile by tile straight from the bricks. A first pass counts
+// each tile's voxels (popcounts of its blocks), which fixes every chunk size before anything is
+// written; the second writes each tile's voxels in a fixed order (4^3 blocks in z, y, x order
+// within the tile, bits in block order), so the file does not depend on the brick size or hash
+// order and the largest buffer is one tile's block list.
+//
 // Axes are kept as they are (MagicaVoxel treats z as up). The format has no units, so the grid's
 // origin and voxel size are not recorded; positions are voxel indices. Every voxel uses colour
 // index 1 of the default palette, so no RGBA chunk is written.
 #include <algorithm>
 #include <limits>
-#include <map>
 #include <sstream>
 #include <vector>
 
 #include "atomic_file.hpp"
+#include "brick_layout.hpp"
+#include "little_endian.hpp"
 #include "writers.hpp"
 
 namespace oclvox::detail {
@@ -24,31 +35,37 @@ namespace oclvox::detail {
 namespace {
 
 constexpr int64_t kTile = 256;
+constexpr int64_t kBlocksPerTileAxis = kTile / SparseVoxels::kBlock;
 constexpr uint8_t kColorIndex = 1;
 // 150 is the version MagicaVoxel 0.99 wrote when it introduced the scene graph chunks; readers
 // that know the scene graph accept it.
 constexpr int32_t kVersion = 150;
+constexpr size_t kChunkHeader = 12;  // id, content size, children size
 
-using Tile = std::array<int64_t, 3>;        // tile coordinates (voxel index / 256)
-using LocalVoxel = std::array<uint8_t, 3>;  // voxel within its tile
+void write_i32(std::ostream& out, int32_t value) {
+    write_le(out, value);
+}
+
+void write_chunk_header(std::ostream& out, const char* id, size_t content, size_t children) {
+    out.write(id, 4);
+    write_i32(out, int32_t(content));
+    write_i32(out, int32_t(children));
+}
 
 // Chunk: 4-byte id, content size, children size, content, children.
-void write_chunk(std::ostream& out, const char* id, const std::string& content,
-                 const std::string& children = "") {
-    out.write(id, 4);
-    write_le_i32(out, int32_t(content.size()));
-    write_le_i32(out, int32_t(children.size()));
-    out << content << children;
+void write_chunk(std::ostream& out, const char* id, const std::string& content) {
+    write_chunk_header(out, id, content.size(), 0);
+    out << content;
 }
 
 void write_string(std::ostream& out, const std::string& text) {
-    write_le_i32(out, int32_t(text.size()));
+    write_i32(out, int32_t(text.size()));
     out << text;
 }
 
 // DICT of key/value strings.
 void write_dict(std::ostream& out, const std::vector<std::pair<std::string, std::string>>& dict) {
-    write_le_i32(out, int32_t(dict.size()));
+    write_i32(out, int32_t(dict.size()));
     for (const auto& [key, value] : dict) {
         write_string(out, key);
         write_string(out, value);
@@ -59,12 +76,12 @@ void write_dict(std::ostream& out, const std::vector<std::pair<std::string, std:
 std::string transform_node(int32_t id, int32_t child, int32_t layer,
                            const std::string& translation) {
     std::ostringstream out;
-    write_le_i32(out, id);
+    write_i32(out, id);
     write_dict(out, {});
-    write_le_i32(out, child);
-    write_le_i32(out, -1);  // reserved
-    write_le_i32(out, layer);
-    write_le_i32(out, 1);  // frames
+    write_i32(out, child);
+    write_i32(out, -1);  // reserved
+    write_i32(out, layer);
+    write_i32(out, 1);  // frames
     if (translation.empty())
         write_dict(out, {});
     else
@@ -74,29 +91,150 @@ std::string transform_node(int32_t id, int32_t child, int32_t layer,
 
 std::string group_node(int32_t id, const std::vector<int32_t>& children) {
     std::ostringstream out;
-    write_le_i32(out, id);
+    write_i32(out, id);
     write_dict(out, {});
-    write_le_i32(out, int32_t(children.size()));
-    for (int32_t child : children) write_le_i32(out, child);
+    write_i32(out, int32_t(children.size()));
+    for (int32_t child : children) write_i32(out, child);
     return out.str();
 }
 
 std::string shape_node(int32_t id, int32_t model) {
     std::ostringstream out;
-    write_le_i32(out, id);
+    write_i32(out, id);
     write_dict(out, {});
-    write_le_i32(out, 1);  // models
-    write_le_i32(out, model);
+    write_i32(out, 1);  // models
+    write_i32(out, model);
     write_dict(out, {});
     return out.str();
 }
 
 std::string layer_chunk(int32_t id) {
     std::ostringstream out;
-    write_le_i32(out, id);
-    write_dict(out, {});
-    write_le_i32(out, -1);  // reserved
+    write_i32(out, id);
+    write_dict(out, {{"_name", "oclvox"}});
+    write_i32(out, -1);  // reserved
     return out.str();
+}
+
+// One 256^3 tile of the grid and the stored bricks that overlap it.
+struct Tile {
+    std::array<int64_t, 3> coords{};  // tile index along each axis
+    std::vector<uint64_t> bricks;
+    uint64_t voxels = 0;
+};
+
+// A set 4^3 block inside a tile: its position (x fastest over the tile's 64^3 blocks) and bits.
+struct TileBlock {
+    uint32_t position;
+    uint64_t bits;
+    bool operator<(const TileBlock& o) const { return position < o.position; }
+};
+
+class TileWalker {
+  public:
+    explicit TileWalker(const SparseVoxels& voxels)
+        : voxels_(voxels), layout_(voxels), brick_size_(voxels.brick_size()) {}
+
+    // The tiles with a set voxel, in (z, y, x) tile order, with their bricks and voxel counts.
+    std::vector<Tile> tiles() const {
+        const auto& dims = voxels_.grid().dims;
+        const std::array<int64_t, 3> ntiles{(dims[0] + kTile - 1) / kTile,
+                                            (dims[1] + kTile - 1) / kTile,
+                                            (dims[2] + kTile - 1) / kTile};
+        std::vector<std::pair<uint64_t, uint64_t>> tile_of_brick;  // (tile key, brick)
+        for (const uint64_t brick : voxels_.brick_indices()) {
+            const auto lo = layout_.brick_origin(brick);
+            std::array<int64_t, 3> first{}, last{};
+            for (int a = 0; a < 3; ++a) {
+                first[a] = lo[a] / kTile;
+                last[a] = (std::min(lo[a] + brick_size_, dims[a]) - 1) / kTile;
+            }
+            for (int64_t tz = first[2]; tz <= last[2]; ++tz)
+                for (int64_t ty = first[1]; ty <= last[1]; ++ty)
+                    for (int64_t tx = first[0]; tx <= last[0]; ++tx)
+                        tile_of_brick.push_back(
+                            {uint64_t(tx + ntiles[0] * (ty + ntiles[1] * tz)), brick});
+        }
+        std::sort(tile_of_brick.begin(), tile_of_brick.end());
+
+        std::vector<Tile> tiles;
+        for (size_t e = 0; e < tile_of_brick.size(); ++e) {
+            const uint64_t key = tile_of_brick[e].first;
+            if (e == 0 || tile_of_brick[e - 1].first != key) {
+                Tile tile;
+                tile.coords = {int64_t(key % uint64_t(ntiles[0])),
+                               int64_t(key / uint64_t(ntiles[0]) % uint64_t(ntiles[1])),
+                               int64_t(key / uint64_t(ntiles[0] * ntiles[1]))};
+                tiles.push_back(tile);
+            }
+            tiles.back().bricks.push_back(tile_of_brick[e].second);
+        }
+        for (Tile& tile : tiles)
+            for (const TileBlock& block : blocks(tile))
+                tile.voxels += uint64_t(__builtin_popcountll(block.bits));
+        tiles.erase(
+            std::remove_if(tiles.begin(), tiles.end(), [](const Tile& t) { return t.voxels == 0; }),
+            tiles.end());
+        return tiles;
+    }
+
+    // The tile's set blocks in position order.
+    std::vector<TileBlock> blocks(const Tile& tile) const {
+        std::vector<TileBlock> found;
+        for (const uint64_t brick : tile.bricks) {
+            const uint64_t* words = voxels_.brick_blocks(brick);
+            for (size_t w = 0; w < layout_.blocks_per_brick(); ++w) {
+                if (!words[w]) continue;
+                const auto o = layout_.block_origin(brick, w);
+                std::array<int64_t, 3> local{};
+                bool inside = true;
+                for (int a = 0; a < 3; ++a) {
+                    local[a] = (o[a] - tile.coords[a] * kTile) / SparseVoxels::kBlock;
+                    inside =
+                        inside && o[a] >= tile.coords[a] * kTile && local[a] < kBlocksPerTileAxis;
+                }
+                if (!inside) continue;
+                found.push_back(
+                    {uint32_t(local[0] +
+                              kBlocksPerTileAxis * (local[1] + kBlocksPerTileAxis * local[2])),
+                     words[w]});
+            }
+        }
+        std::sort(found.begin(), found.end());
+        return found;
+    }
+
+  private:
+    const SparseVoxels& voxels_;
+    BrickLayout layout_;
+    int64_t brick_size_;
+};
+
+std::array<int64_t, 3> tile_size(const Grid& grid, const Tile& tile) {
+    std::array<int64_t, 3> size{};
+    for (int a = 0; a < 3; ++a) size[a] = std::min(kTile, grid.dims[a] - tile.coords[a] * kTile);
+    return size;
+}
+
+// XYZI content: the count, then x, y, z, colour per voxel.
+void write_tile_voxels(std::ostream& out, const std::vector<TileBlock>& blocks) {
+    std::vector<char> bytes;
+    bytes.reserve(64 * 4);
+    for (const TileBlock& block : blocks) {
+        const int64_t x = int64_t(block.position % kBlocksPerTileAxis) * 4;
+        const int64_t y = int64_t(block.position / kBlocksPerTileAxis % kBlocksPerTileAxis) * 4;
+        const int64_t z = int64_t(block.position / (kBlocksPerTileAxis * kBlocksPerTileAxis)) * 4;
+        bytes.clear();
+        for (uint64_t mask = block.bits; mask; mask &= mask - 1) {
+            const int bit = __builtin_ctzll(mask);
+            const auto v = voxel_in_block(bit);
+            bytes.push_back(char(x + v[0]));
+            bytes.push_back(char(y + v[1]));
+            bytes.push_back(char(z + v[2]));
+            bytes.push_back(char(kColorIndex));
+        }
+        out.write(bytes.data(), std::streamsize(bytes.size()));
+    }
 }
 
 }  // namespace
@@ -104,63 +242,56 @@ std::string layer_chunk(int32_t id) {
 void write_vox(const std::string& path, const SparseVoxels& voxels) {
     const Grid& grid = voxels.grid();
 
-    // Phase 1: sort the set voxels into tiles. An empty grid still gets one (empty) model so the
-    // file has the structure every reader expects.
-    std::map<Tile, std::vector<LocalVoxel>> tiles;
-    voxels.for_each([&](int64_t i, int64_t j, int64_t k) {
-        tiles[{i / kTile, j / kTile, k / kTile}].push_back(
-            {uint8_t(i % kTile), uint8_t(j % kTile), uint8_t(k % kTile)});
-    });
-    if (tiles.empty()) tiles[{0, 0, 0}];
+    // Phase 1: the tiles with set voxels and their counts. An empty grid still gets one (empty)
+    // model so the file has the structure every reader expects.
+    const TileWalker walker(voxels);
+    std::vector<Tile> tiles = walker.tiles();
+    if (tiles.empty()) tiles.push_back(Tile{});
 
-    // Phase 2: the children of MAIN: models first (a model's id is its position among them),
-    // then the scene graph. Node ids: 0 root transform, 1 group, then 2m + 2 and 2m + 3 for the
-    // transform and shape of model m.
-    std::ostringstream children;
-    std::vector<int32_t> group_children;
+    // Phase 2: the scene graph (small), and the size of everything inside MAIN. Node ids: 0 root
+    // transform, 1 group, then 2m + 2 and 2m + 3 for the transform and shape of model m.
     std::ostringstream scene;
-    int32_t model = 0;
-    for (auto& [tile, local] : tiles) {
-        std::sort(local.begin(), local.end());  // same file whatever the brick order
-        std::array<int64_t, 3> size{}, centre{};
-        for (int a = 0; a < 3; ++a) {
-            const int64_t start = tile[a] * kTile;
-            size[a] = std::min(kTile, grid.dims[a] - start);
-            centre[a] = start + size[a] / 2;
-        }
-
-        std::ostringstream size_content, xyzi_content;
-        for (int a = 0; a < 3; ++a) write_le_i32(size_content, int32_t(size[a]));
-        write_le_i32(xyzi_content, int32_t(local.size()));
-        for (const LocalVoxel& v : local) {
-            xyzi_content.write(reinterpret_cast<const char*>(v.data()), 3);
-            xyzi_content.put(char(kColorIndex));
-        }
-        write_chunk(children, "SIZE", size_content.str());
-        write_chunk(children, "XYZI", xyzi_content.str());
-
-        const int32_t transform_id = 2 * model + 2, shape_id = transform_id + 1;
+    std::vector<int32_t> group_children;
+    uint64_t models_bytes = 0;
+    for (size_t m = 0; m < tiles.size(); ++m) {
+        const auto size = tile_size(grid, tiles[m]);
+        std::array<int64_t, 3> centre{};
+        for (int a = 0; a < 3; ++a) centre[a] = tiles[m].coords[a] * kTile + size[a] / 2;
+        const int32_t transform_id = 2 * int32_t(m) + 2, shape_id = transform_id + 1;
         group_children.push_back(transform_id);
         const std::string translation = std::to_string(centre[0]) + " " +
                                         std::to_string(centre[1]) + " " + std::to_string(centre[2]);
         write_chunk(scene, "nTRN", transform_node(transform_id, shape_id, 0, translation));
-        write_chunk(scene, "nSHP", shape_node(shape_id, model));
-        ++model;
+        write_chunk(scene, "nSHP", shape_node(shape_id, int32_t(m)));
+        models_bytes += kChunkHeader + 12 + kChunkHeader + 4 + 4 * tiles[m].voxels;
     }
-    write_chunk(children, "nTRN", transform_node(0, 1, -1, ""));
-    write_chunk(children, "nGRP", group_node(1, group_children));
-    children << scene.str();
-    write_chunk(children, "LAYR", layer_chunk(0));
-
-    // Phase 3: the file is the magic, the version and the MAIN chunk around everything else.
-    const std::string main_children = children.str();
-    if (main_children.size() > size_t(std::numeric_limits<int32_t>::max()))
+    std::ostringstream graph;
+    write_chunk(graph, "nTRN", transform_node(0, 1, -1, ""));
+    write_chunk(graph, "nGRP", group_node(1, group_children));
+    graph << scene.str();
+    write_chunk(graph, "LAYR", layer_chunk(0));
+    const std::string graph_bytes = graph.str();
+    const uint64_t main_children = kChunkHeader + 4 + models_bytes + graph_bytes.size();
+    if (main_children > uint64_t(std::numeric_limits<int32_t>::max()))
         throw OutputError("cannot write " + path + ": " + std::to_string(voxels.count()) +
-                          " voxels exceed the 2 GiB a .vox file can hold");
+                          " voxels exceed the 2 GiB a .vox file can hold; write .vdb instead");
+
+    // Phase 3: magic, version, MAIN, PACK, the models tile by tile, then the scene graph.
     write_file_atomically(path, [&](std::ostream& out) {
         out.write("VOX ", 4);
-        write_le_i32(out, kVersion);
-        write_chunk(out, "MAIN", "", main_children);
+        write_i32(out, kVersion);
+        write_chunk_header(out, "MAIN", 0, main_children);
+        write_chunk_header(out, "PACK", 4, 0);
+        write_i32(out, int32_t(tiles.size()));
+        for (const Tile& tile : tiles) {
+            const auto size = tile_size(grid, tile);
+            write_chunk_header(out, "SIZE", 12, 0);
+            for (int a = 0; a < 3; ++a) write_i32(out, int32_t(size[a]));
+            write_chunk_header(out, "XYZI", 4 + 4 * tile.voxels, 0);
+            write_i32(out, int32_t(tile.voxels));
+            write_tile_voxels(out, walker.blocks(tile));
+        }
+        out << graph_bytes;
     });
 }
 

@@ -2,45 +2,35 @@
 // write_file_atomically and throws OutputError naming the path on failure.
 #pragma once
 
-#include <cstdint>
-#include <cstring>
-#include <ostream>
 #include <string>
 
 #include "oclvox/oclvox.hpp"
+#include "slabs.hpp"
 
 namespace oclvox::detail {
 
 // binvox (Patrick Min): a cubic grid, run-length encoded. See write_binvox.cpp.
-void write_binvox(const std::string& path, const SparseVoxels& voxels);
+// `slab_bytes` bounds the streaming buffer (tests make it small to cross many slab boundaries).
+void write_binvox(const std::string& path, const SparseVoxels& voxels,
+                  uint64_t slab_bytes = kSlabBytes);
+
+// Dense formats stream from the bricks a slab at a time (see slabs.hpp).
 
 // NumPy .npy (dense uint8, arr[i, j, k] is voxel (x=i, y=j, z=k)) plus `<path>.json` describing
 // where the voxels are in space.
-void write_npy(const std::string& path, const SparseVoxels& voxels);
+void write_npy(const std::string& path, const SparseVoxels& voxels,
+               uint64_t slab_bytes = kSlabBytes);
 
 // MagicaVoxel .vox: models of at most 256^3 voxels, placed by a scene graph.
 void write_vox(const std::string& path, const SparseVoxels& voxels);
 
-// The exposed faces of the voxel cubes as a quad mesh in world coordinates.
+// The exposed faces of the voxel cubes as a quad mesh in world coordinates (.stl: each quad as
+// two triangles).
 void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels);
 void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels);
+void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels);
 
-// Binary formats are little-endian on disk whatever the host's byte order.
-inline void write_le(std::ostream& out, uint64_t value, int bytes) {
-    char buffer[8];
-    for (int b = 0; b < bytes; ++b) buffer[b] = char((value >> (8 * b)) & 0xffu);
-    out.write(buffer, bytes);
-}
-inline void write_le_u16(std::ostream& out, uint16_t value) {
-    write_le(out, value, 2);
-}
-inline void write_le_i32(std::ostream& out, int32_t value) {
-    write_le(out, uint32_t(value), 4);
-}
-inline void write_le_f64(std::ostream& out, double value) {
-    uint64_t bits;
-    std::memcpy(&bits, &value, sizeof bits);
-    write_le(out, bits, 8);
-}
+// OpenVDB occupancy: a BoolGrid "occupancy", voxel (i,j,k) at index (i,j,k). See write_vdb.cpp.
+void write_vdb(const std::string& path, const SparseVoxels& voxels);
 
 }  // namespace oclvox::detail

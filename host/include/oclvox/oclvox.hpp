@@ -138,6 +138,10 @@ class SparseVoxels {
 
     // Brick storage, keyed by linear brick index bx + nbx*(by + nby*bz).
     const std::unordered_map<uint64_t, std::vector<uint64_t>>& bricks() const { return bricks_; }
+    // The linear indices of the stored bricks (those with a set voxel), in increasing order.
+    std::vector<uint64_t> brick_indices() const;
+    // The blocks_per_brick() words of a stored brick, or nullptr if the brick has no set voxel.
+    const uint64_t* brick_blocks(uint64_t brick_index) const;
     // Adds (ORs) a brick's blocks; all-zero bricks are dropped.
     void merge_brick(uint64_t brick_index, const uint64_t* blocks);
 
@@ -146,6 +150,13 @@ class SparseVoxels {
 
     // Dense occupancy, x fastest: index i + nx*(j + ny*k). Throws GridError if it cannot fit.
     std::vector<uint8_t> to_dense() const;
+
+    // A dense window for streaming writers: for every set voxel (i,j,k) in the box [lo, hi),
+    // writes 1 at out[(i-lo[0])*strides[0] + (j-lo[1])*strides[1] + (k-lo[2])*strides[2]].
+    // Other bytes are left as they are (zero them first). Costs one lookup per brick the box
+    // touches plus one step per set voxel, so slabs of any orientation are cheap.
+    void mark_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
+                  const std::array<int64_t, 3>& strides, uint8_t* out) const;
 
     // Same grid and same set voxels (brick size may differ).
     bool same_voxels(const SparseVoxels& other) const;

@@ -1,0 +1,30 @@
+// File-name helpers shared by every reader and writer that picks a format by extension.
+#pragma once
+
+#include <cctype>
+#include <string>
+
+namespace oclvox::detail {
+
+// ASCII lower case, for case-insensitive names (extensions, option values, device names).
+inline std::string lowercase(std::string text) {
+    for (char& c : text) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return text;
+}
+
+// The extension of the file name, lower-cased, with its dot; "" if the name has none. Dots in
+// folder names do not count (either slash separates folders).
+inline std::string lowercase_extension(const std::string& path) {
+    const size_t slash = path.find_last_of("/\\");
+    const size_t dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+    return lowercase(path.substr(dot));
+}
+
+// The name without its folders (what a sidecar records to point at its data file).
+inline std::string file_name_of(const std::string& path) {
+    const size_t slash = path.find_last_of("/\\");
+    return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+}  // namespace oclvox::detail

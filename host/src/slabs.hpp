@@ -1,0 +1,32 @@
+// How thick a slab the streaming writers cut the grid into: as many layers as fit a fixed byte
+// budget, a multiple of the 4-voxel block edge when more than one fits, so each slab reads
+// whole blocks from the bricks.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+
+namespace oclvox::detail {
+
+// Bytes of one dense slab buffer: small next to any grid worth streaming, large enough that the
+// per-slab brick lookups and write calls are negligible.
+constexpr uint64_t kSlabBytes = uint64_t(32) << 20;
+
+// Layers (of `layer_bytes` each) per slab of at most `slab_bytes` for an axis of `layers` voxels;
+// at least one.
+inline int64_t slab_thickness(uint64_t layer_bytes, int64_t layers, uint64_t slab_bytes) {
+    int64_t thickness = int64_t(slab_bytes / std::max<uint64_t>(layer_bytes, 1));
+    if (thickness >= 4) thickness -= thickness % 4;
+    return std::clamp<int64_t>(thickness, 1, std::max<int64_t>(layers, 1));
+}
+
+// Dense formats cost a byte or more per voxel on disk; past this many voxels (64 GiB) a sparse
+// format is the only sensible one, so the writer refuses before creating anything.
+constexpr uint64_t kMaxDenseVoxels = uint64_t(1) << 36;
+
+// Throws OutputError naming `path` if a dense file of `voxels` bytes is over kMaxDenseVoxels or
+// larger than the free space of its folder.
+void check_dense_size(const std::string& path, uint64_t voxels, const std::string& what);
+
+}  // namespace oclvox::detail

@@ -1,0 +1,38 @@
+// Shared .vdb pieces; see vdb_format.hpp.
+#include "vdb_format.hpp"
+
+#include <openvdb/io/Stream.h>
+
+#include "atomic_file.hpp"
+
+namespace oclvox::detail {
+
+openvdb::math::Transform::Ptr voxel_centre_transform(const Grid& grid) {
+    openvdb::math::Transform::Ptr transform =
+        openvdb::math::Transform::createLinearTransform(grid.voxel_size);
+    transform->postTranslate(openvdb::Vec3d(grid.origin[0] + 0.5 * grid.voxel_size,
+                                            grid.origin[1] + 0.5 * grid.voxel_size,
+                                            grid.origin[2] + 0.5 * grid.voxel_size));
+    return transform;
+}
+
+void place_vdb_grid(openvdb::GridBase& vdb, const Grid& grid, const std::string& name,
+                    openvdb::GridClass grid_class) {
+    vdb.setTransform(voxel_centre_transform(grid));
+    vdb.setName(name);
+    vdb.setGridClass(grid_class);
+    vdb.insertMeta("oclvox_origin", openvdb::Vec3DMetadata(openvdb::Vec3d(
+                                        grid.origin[0], grid.origin[1], grid.origin[2])));
+    vdb.insertMeta("oclvox_voxel_size", openvdb::DoubleMetadata(grid.voxel_size));
+    vdb.insertMeta("oclvox_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(
+                                      int(grid.dims[0]), int(grid.dims[1]), int(grid.dims[2]))));
+}
+
+void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb) {
+    write_file_atomically(path, [&](std::ostream& out) {
+        openvdb::io::Stream stream(out);
+        stream.write(openvdb::GridCPtrVec{vdb});
+    });
+}
+
+}  // namespace oclvox::detail
