@@ -9,6 +9,7 @@ packages=(
   libtinyobjloader-dev libassimp-dev nlohmann-json3-dev libcli11-dev
   libopenvdb-dev libboost-iostreams-dev
   libgtest-dev libgmock-dev
+  python3-dev python3-venv python3-numpy python3-pytest pybind11-dev
 )
 
 missing=()
