@@ -10,6 +10,7 @@ packages=(
   libopenvdb-dev libboost-iostreams-dev
   python3-openvdb python3-numpy
   libgtest-dev libgmock-dev
+  python3-dev python3-venv python3-numpy python3-pytest pybind11-dev
 )
 
 missing=()

@@ -1,0 +1,208 @@
+"""oclvox: conservative mesh voxelization, signed distance fields, CSG and meshing on OpenCL.
+
+Meshes are given as ``(vertices, faces)`` arrays, as a file path, or as any object with
+``.vertices`` and ``.faces`` (a trimesh.Trimesh, an oclvox.Mesh). Volumes come back as numpy arrays
+shaped ``(nx, ny, nz)`` with axes x, y, z: ``arr[i, j, k]`` is voxel (i, j, k), whose box is
+``origin + (i, j, k) * voxel_size`` to ``origin + (i + 1, j + 1, k + 1) * voxel_size``.
+
+Work runs on an OpenCL device (``device=``: "P:D" indices from ``devices()`` or part of a
+device/platform name; default ``$OCLVOX_DEVICE``, else the first GPU, else the first device), or
+on the bit-identical CPU reference with ``reference=True``. Devices are opened once and kept. The
+GIL is released while work runs. Errors are ``oclvox.Error`` subclasses.
+"""
+
+import numbers
+import os
+
+from ._oclvox import (
+    Cancelled,
+    DeviceError,
+    Error,
+    Field,
+    GridError,
+    InputError,
+    KernelBuildError,
+    Mesh,
+    OutputError,
+    VoxelGrid,
+)
+from . import _oclvox
+
+__all__ = [
+    "load_mesh", "save_mesh", "voxelize", "sdf", "csg", "mesh", "devices", "load_field",
+    "Mesh", "VoxelGrid", "Field", "Error", "InputError",
+    "GridError", "DeviceError", "KernelBuildError", "OutputError", "Cancelled",
+]
+
+
+def _as_mesh(mesh):
+    """An oclvox.Mesh from a path, a mesh object or a (vertices, faces) pair."""
+    if isinstance(mesh, Mesh):
+        return mesh
+    if isinstance(mesh, (str, os.PathLike)):
+        return _oclvox.load_mesh(mesh)
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        return Mesh(mesh.vertices, mesh.faces)
+    if isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        return Mesh(mesh[0], mesh[1])
+    raise TypeError("a mesh is (vertices, faces) arrays, a file path, or an object with "
+                    f".vertices and .faces; got {type(mesh).__name__}")
+
+
+def _mesh_and_resolution(vertices, faces, resolution):
+    """The mesh from the first two positional arguments, and the resolution.
+
+    voxelize(vertices, faces, 128) and voxelize(mesh, 128) both work: after a mesh given as one
+    object (path, mesh object, pair), an integer in the second place is the resolution.
+    """
+    if faces is None:
+        return _as_mesh(vertices), resolution
+    if isinstance(faces, numbers.Integral) and _is_mesh(vertices):
+        if resolution != 256:
+            raise TypeError("resolution given twice")
+        return _as_mesh(vertices), int(faces)
+    if isinstance(vertices, (str, os.PathLike, Mesh)) or hasattr(vertices, "faces"):
+        raise TypeError("faces given twice: the first argument is already a mesh")
+    return Mesh(vertices, faces), resolution
+
+
+def _is_mesh(value):
+    """Whether `value` is a whole mesh in one object (not a vertex array)."""
+    return (isinstance(value, (str, os.PathLike, Mesh))
+            or (isinstance(value, (tuple, list)) and len(value) == 2)
+            or (hasattr(value, "vertices") and hasattr(value, "faces")))
+
+
+def _fit(resolution, voxel_size, origin, dims, pad, cubic):
+    return _oclvox.GridFit(resolution=resolution, voxel_size=voxel_size, origin=origin, dims=dims,
+                           pad=pad, cubic=cubic)
+
+
+def _selector(device):
+    if device is not None and not isinstance(device, str):
+        raise TypeError("device must be a selector string such as '0:0' or 'pocl', or None")
+    return device
+
+
+def load_mesh(path):
+    """Reads OBJ, STL, PLY or OFF: returns (vertices float64 (N, 3), faces int64 (M, 3))."""
+    loaded = _oclvox.load_mesh(path)
+    return loaded.vertices, loaded.faces
+
+
+def save_mesh(path, vertices, faces=None):
+    """Writes a triangle mesh by extension: .obj, .ply or .stl."""
+    _mesh_and_resolution(vertices, faces, 256)[0].save(path)
+
+
+def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat", inside="auto",
+             boundary="closed", voxel_size=None, origin=None, dims=None, pad=0, cubic=False,
+             brick_size=64, device_memory=None, host_memory=None, device=None, reference=False,
+             progress=None):
+    """Voxelizes a mesh; returns a VoxelGrid.
+
+    mode: "surface" (conservative: every voxel whose closed box touches a triangle), "thin"
+    (6-separating), "solid" (voxels whose centre is inside) or "filled" (solid and surface).
+    test: "sat" or "pef". inside (solid modes): "auto", "parity" or "winding".
+    boundary: "closed" or "half-open".
+    Grid: `resolution` voxels along the longest axis of the mesh box, or `voxel_size`; `origin`
+    (x, y, z) and `dims` (nx, ny, nz) fix the grid instead of fitting it; `pad` adds empty voxels
+    on every side; `cubic` makes a resolution^3 grid with the mesh centred (binvox convention).
+    brick_size: voxels per brick edge (multiple of 4); device_memory / host_memory: MiB budgets.
+    progress: called as progress(bricks_done, bricks_total) after each batch; returning False
+    cancels the run, which raises oclvox.Cancelled (an exception it raises is passed on).
+    """
+    options = dict(mode=mode, test=test, inside=inside, boundary=boundary, brick_size=brick_size,
+                   device_memory=device_memory, host_memory=host_memory)
+    mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
+    return _oclvox.voxelize(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), **options,
+                            device=_selector(device), reference=reference, progress=progress)
+
+
+def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, inside="auto",
+        voxel_size=None, origin=None, dims=None, pad=0, cubic=False, brick_size=64, device=None,
+        reference=False):
+    """Signed distance field (negative inside) at voxel centres; returns a Field.
+
+    Exact within `band` voxels of the surface, clamped to +-band * voxel_size beyond it, or
+    propagated to every voxel with full_grid=True. Grid options as for voxelize.
+    """
+    mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
+    return _oclvox.sdf(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), band=band,
+                       full_grid=full_grid, inside=inside, brick_size=brick_size,
+                       device=_selector(device), reference=reference)
+
+
+def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", voxel_size=None,
+        origin=None, dims=None, pad=0, cubic=False, brick_size=64, device=None, reference=False):
+    """Combines two shapes; op is "union", "intersection" or "difference" (a minus b).
+
+    - two meshes: their signed distance fields on one grid fitted around both (grid and SDF
+      options as for sdf), combined by min / max / max(a, -b); returns a Field;
+    - two Fields on the same grid: returns a Field;
+    - two VoxelGrids on the same grid: a | b, a & b, a & ~b; returns a VoxelGrid.
+    """
+    if isinstance(a, Field) and isinstance(b, Field):
+        _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic)
+        return _oclvox.csg_fields(a, op, b)
+    if isinstance(a, VoxelGrid) and isinstance(b, VoxelGrid):
+        _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic)
+        return _oclvox.csg_voxels(a, op, b)
+    if _is_mesh(a) and _is_mesh(b):
+        return _oclvox.csg_meshes(_as_mesh(a), op, _as_mesh(b),
+                                  _fit(resolution, voxel_size, origin, dims, pad, cubic),
+                                  band=band, full_grid=full_grid, inside=inside,
+                                  brick_size=brick_size, device=_selector(device),
+                                  reference=reference)
+    raise TypeError("csg takes two meshes, two Fields or two VoxelGrids; got "
+                    f"{type(a).__name__} and {type(b).__name__}")
+
+
+def _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic):
+    if (resolution != 256 or voxel_size is not None or origin is not None or dims is not None
+            or pad != 0 or cubic):
+        raise ValueError("grid options apply to mesh inputs only (fields and voxel grids "
+                         "keep their own grid)")
+
+
+def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, reference=False):
+    """Triangulates a field's iso-surface; returns (vertices float64 (N, 3), faces int64 (M, 3)).
+
+    field: a Field, a .npy field file, or a VoxelGrid (turned into a field with `smoothing`
+    box-filter passes). method: "marching-cubes" or "surface-nets". Samples < iso are inside;
+    triangles are wound counter-clockwise seen from outside.
+    """
+    if isinstance(field, VoxelGrid):
+        field = field.to_field(smoothing=smoothing)
+    elif isinstance(field, (str, os.PathLike)):
+        field = load_field(field)
+    elif not isinstance(field, Field):
+        raise TypeError(f"mesh takes a Field, a VoxelGrid or a .npy path; got "
+                        f"{type(field).__name__}")
+    surface = _oclvox.mesh(field, iso=iso, method=method, device=_selector(device),
+                           reference=reference)
+    return surface.vertices, surface.faces
+
+
+def _field_mesh(self, method="marching-cubes", iso=0.0, *, device=None, reference=False):
+    """This field's iso-surface: (vertices, faces), as oclvox.mesh."""
+    return mesh(self, iso=iso, method=method, device=device, reference=reference)
+
+
+def _grid_mesh(self, method="marching-cubes", *, smoothing=1, device=None, reference=False):
+    """The surface of these voxels (through a smoothed field): (vertices, faces), as oclvox.mesh."""
+    return mesh(self, method=method, smoothing=smoothing, device=device, reference=reference)
+
+
+Field.mesh = _field_mesh
+VoxelGrid.mesh = _grid_mesh
+
+
+def load_field(path):
+    """Reads a .npy field (with its JSON sidecar) as written by Field.save or the CLI."""
+    return _oclvox.load_field(path)
+
+
+def devices():
+    """Every OpenCL device: a list of dicts (id, platform, name, vendor, version, type, ...)."""
+    return _oclvox.devices()

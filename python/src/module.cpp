@@ -1,0 +1,443 @@
+// The `oclvox._oclvox` extension module: the library's value types and functions, typed and
+// strict. The `oclvox` package (python/oclvox/__init__.py) builds the friendly API on it: meshes
+// given as arrays, paths or trimesh-like objects, keyword options, docstrings.
+//
+// Every call that does real work (device or CPU reference) releases the GIL while it runs, so other
+// Python threads go on; device calls take the device's lock so that one device serves one call at a
+// time.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <oclvox/field.hpp>
+#include <oclvox/oclvox.hpp>
+#include <oclvox/sdf.hpp>
+#include <optional>
+#include <string>
+
+#include "arrays.hpp"
+#include "devices.hpp"
+#include "errors.hpp"
+#include "progress.hpp"
+
+namespace py = pybind11;
+using namespace py::literals;
+
+namespace oclvox_python {
+namespace {
+
+// ---- result objects -----------------------------------------------------------------------------
+
+// A voxelization result: the sparse voxels with the run's counts and timings.
+struct VoxelGrid {
+    oclvox::SparseVoxels voxels;
+    oclvox::VoxelizeStats stats;
+    std::string device;  // the device's name, or "reference"
+};
+
+// A scalar field (SDF or CSG result, or made from an array), with the band its file writers use.
+struct Field {
+    oclvox::ScalarField field;
+    double band_voxels = 0;  // 0: taken from the values when written (see oclvox::write_field)
+    oclvox::VoxelizeStats stats;
+    std::string device;
+};
+
+py::tuple origin_tuple(const oclvox::Grid& grid) {
+    return py::make_tuple(grid.origin[0], grid.origin[1], grid.origin[2]);
+}
+py::tuple dims_tuple(const oclvox::Grid& grid) {
+    return py::make_tuple(grid.dims[0], grid.dims[1], grid.dims[2]);
+}
+
+py::dict stats_dict(const oclvox::VoxelizeStats& s) {
+    py::dict d("seconds_binning"_a = s.seconds_binning, "seconds_upload"_a = s.seconds_upload,
+               "seconds_kernels"_a = s.seconds_kernels, "seconds_download"_a = s.seconds_download,
+               "triangles_in"_a = s.triangles_in, "triangles_used"_a = s.triangles_used,
+               "brick_pairs"_a = s.brick_pairs, "work_items"_a = s.work_items,
+               "bricks_total"_a = s.bricks_total, "bricks_active"_a = s.bricks_active,
+               "batches"_a = s.batches, "voxels_set"_a = s.voxels_set);
+    if (!s.inside_test.empty()) {
+        d["inside_test"] = s.inside_test;
+        d["inside_test_reason"] = s.inside_test_reason;
+    }
+    return d;
+}
+
+// ---- arguments ----------------------------------------------------------------------------------
+
+oclvox::GridFit make_fit(int64_t resolution, std::optional<double> voxel_size,
+                         std::optional<std::array<double, 3>> origin,
+                         std::optional<std::array<int64_t, 3>> dims, int64_t pad, bool cubic) {
+    oclvox::GridFit fit;
+    fit.resolution = resolution;
+    fit.cubic = cubic;
+    fit.pad = pad;
+    if (voxel_size) {
+        // The library reads voxel_size <= 0 as "not given"; a caller who gave one means it.
+        if (!(*voxel_size > 0) || !std::isfinite(*voxel_size))
+            throw oclvox::GridError("voxel_size must be a positive finite number, got " +
+                                    std::to_string(*voxel_size));
+        fit.voxel_size = *voxel_size;
+    }
+    if (origin) {
+        fit.has_origin = true;
+        fit.origin = *origin;
+    }
+    if (dims) {
+        fit.has_dims = true;
+        fit.dims = *dims;
+    }
+    return fit;
+}
+
+oclvox::Grid grid_base(const std::array<double, 3>& origin, double voxel_size) {
+    oclvox::Grid grid;
+    grid.origin = origin;
+    grid.voxel_size = voxel_size;
+    return grid;
+}
+
+// The device a call runs on: none for the CPU reference, else `device` (a selector string) or,
+// when None, $OCLVOX_DEVICE or the default device, as the CLI picks it.
+std::shared_ptr<SharedDevice> pick_device(const py::object& device, bool reference) {
+    if (reference) {
+        if (!device.is_none())
+            throw py::value_error("device and reference=True exclude each other");
+        return nullptr;
+    }
+    std::string selector;
+    if (!device.is_none())
+        selector = device.cast<std::string>();
+    else if (const char* env = std::getenv("OCLVOX_DEVICE"))
+        selector = env;
+    return shared_device(selector);
+}
+
+std::string device_name(const std::shared_ptr<SharedDevice>& device) {
+    return device ? device->device.info().name : "reference";
+}
+
+oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::string& test,
+                                         const std::string& inside, const std::string& boundary,
+                                         int brick_size, std::optional<uint64_t> device_mib,
+                                         std::optional<uint64_t> host_mib) {
+    oclvox::VoxelizeOptions options;
+    options.mode = oclvox::voxelize_mode_from_string(mode);
+    options.test = oclvox::overlap_test_from_string(test);
+    options.inside = oclvox::inside_test_from_string(inside);
+    options.boundary = oclvox::boundary_from_string(boundary);
+    options.brick_size = brick_size;
+    if (device_mib) options.device_budget_bytes = *device_mib << 20;
+    if (host_mib) options.host_budget_bytes = *host_mib << 20;
+    return options;
+}
+
+oclvox::SdfOptions sdf_options(double band, bool full_grid, const std::string& inside,
+                               int brick_size) {
+    oclvox::SdfOptions options;
+    options.band_voxels = band;
+    options.full_grid = full_grid;
+    options.inside = oclvox::inside_test_from_string(inside);
+    options.brick_size = brick_size;
+    return options;
+}
+
+// ---- work ---------------------------------------------------------------------------------------
+
+VoxelGrid voxelize(const oclvox::Mesh& mesh, const oclvox::GridFit& fit,
+                   oclvox::VoxelizeOptions options, const py::object& device_selector,
+                   bool reference, py::object progress) {
+    ProgressBridge bridge(std::move(progress));
+    options.progress = bridge.callback();
+    const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
+    VoxelGrid result;
+    result.device = device_name(device);
+    try {
+        py::gil_scoped_release release;
+        const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
+        if (device) {
+            std::lock_guard<std::mutex> lock(device->in_use);
+            result.voxels = device->device.voxelize(mesh, grid, options, &result.stats);
+        } else {
+            result.voxels = oclvox::voxelize_reference(mesh, grid, options, &result.stats);
+        }
+    } catch (const oclvox::Cancelled&) {
+        bridge.rethrow_python_error();
+        throw;
+    }
+    return result;
+}
+
+oclvox::ScalarField signed_distance(const std::shared_ptr<SharedDevice>& device,
+                                    const oclvox::Mesh& mesh, const oclvox::Grid& grid,
+                                    const oclvox::SdfOptions& options,
+                                    oclvox::VoxelizeStats* stats) {
+    if (!device) return oclvox::signed_distance_reference(mesh, grid, options, stats);
+    std::lock_guard<std::mutex> lock(device->in_use);
+    return oclvox::signed_distance(device->device, mesh, grid, options, stats);
+}
+
+Field sdf(const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const oclvox::SdfOptions& options,
+          const py::object& device_selector, bool reference) {
+    const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
+    Field result;
+    result.device = device_name(device);
+    result.band_voxels = options.full_grid ? 0 : options.band_voxels;
+    py::gil_scoped_release release;
+    const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
+    result.field = signed_distance(device, mesh, grid, options, &result.stats);
+    return result;
+}
+
+Field csg_meshes(const oclvox::Mesh& a, const std::string& op_name, const oclvox::Mesh& b,
+                 const oclvox::GridFit& fit, const oclvox::SdfOptions& options,
+                 const py::object& device_selector, bool reference) {
+    const oclvox::CsgOp op = oclvox::csg_op_from_string(op_name);
+    const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
+    Field result;
+    result.device = device_name(device);
+    result.band_voxels = options.full_grid ? 0 : options.band_voxels;
+    py::gil_scoped_release release;
+    // Both fields on one grid around both meshes, as the CLI's csg does.
+    const oclvox::Grid grid = oclvox::fit_grid(a, b, fit);
+    oclvox::VoxelizeStats stats_b;
+    const oclvox::ScalarField field_a = signed_distance(device, a, grid, options, &result.stats);
+    const oclvox::ScalarField field_b = signed_distance(device, b, grid, options, &stats_b);
+    result.field = oclvox::csg(field_a, field_b, op);
+    result.stats.triangles_in += stats_b.triangles_in;
+    result.stats.triangles_used += stats_b.triangles_used;
+    result.stats.work_items += stats_b.work_items;
+    return result;
+}
+
+Field csg_fields(const Field& a, const std::string& op_name, const Field& b) {
+    const oclvox::CsgOp op = oclvox::csg_op_from_string(op_name);
+    Field result;
+    py::gil_scoped_release release;
+    result.field = oclvox::csg(a.field, b.field, op);
+    return result;
+}
+
+VoxelGrid csg_voxels(const VoxelGrid& a, const std::string& op_name, const VoxelGrid& b) {
+    const oclvox::CsgOp op = oclvox::csg_op_from_string(op_name);
+    VoxelGrid result;
+    py::gil_scoped_release release;
+    result.voxels = oclvox::csg(a.voxels, b.voxels, op);
+    result.stats.voxels_set = result.voxels.count();
+    return result;
+}
+
+oclvox::Mesh extract_surface(const Field& field, float iso, const std::string& method,
+                             const py::object& device_selector, bool reference) {
+    const bool marching_cubes = method == "marching-cubes";
+    if (!marching_cubes && method != "surface-nets")
+        throw oclvox::GridError("unknown meshing method '" + method +
+                                "' (expected marching-cubes or surface-nets)");
+    const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
+    py::gil_scoped_release release;
+    if (!device)
+        return marching_cubes ? oclvox::marching_cubes(field.field, iso)
+                              : oclvox::surface_nets(field.field, iso);
+    std::lock_guard<std::mutex> lock(device->in_use);
+    return marching_cubes ? oclvox::marching_cubes(device->device, field.field, iso)
+                          : oclvox::surface_nets(device->device, field.field, iso);
+}
+
+py::list devices() {
+    std::vector<oclvox::DeviceInfo> infos;
+    {
+        py::gil_scoped_release release;
+        infos = oclvox::list_devices();
+    }
+    py::list list;
+    for (const oclvox::DeviceInfo& i : infos)
+        list.append(py::dict("id"_a = i.id, "platform"_a = i.platform, "name"_a = i.name,
+                             "vendor"_a = i.vendor, "version"_a = i.version,
+                             "driver_version"_a = i.driver_version, "type"_a = i.type,
+                             "global_memory"_a = i.global_memory, "max_alloc"_a = i.max_alloc));
+    return list;
+}
+
+}  // namespace
+}  // namespace oclvox_python
+
+PYBIND11_MODULE(_oclvox, m) {
+    using namespace oclvox_python;
+    m.doc() = "oclvox extension module; use the oclvox package's functions instead.";
+    register_errors(m);
+
+    py::class_<oclvox::Mesh>(m, "Mesh")
+        .def(py::init(&mesh_from_arrays), "vertices"_a, "faces"_a)
+        .def_property_readonly(
+            "vertices",
+            [](py::object self) { return vertices_view(self.cast<oclvox::Mesh&>(), self); },
+            "float64 (N, 3) view of the mesh's own vertices")
+        .def_property_readonly("faces", &faces_array, "int64 (M, 3) copy of the triangles")
+        .def(
+            "save",
+            [](const oclvox::Mesh& mesh, const std::filesystem::path& path) {
+                py::gil_scoped_release release;
+                oclvox::write_mesh(path.string(), mesh);
+            },
+            "path"_a)
+        .def("__repr__", [](const oclvox::Mesh& mesh) {
+            return "<oclvox.Mesh " + std::to_string(mesh.positions.size()) + " vertices, " +
+                   std::to_string(mesh.triangles.size()) + " triangles>";
+        });
+
+    py::class_<oclvox::GridFit>(m, "GridFit")
+        .def(py::init(&make_fit), "resolution"_a, "voxel_size"_a, "origin"_a, "dims"_a, "pad"_a,
+             "cubic"_a);
+
+    py::class_<VoxelGrid>(m, "VoxelGrid")
+        .def_property_readonly("origin",
+                               [](const VoxelGrid& g) { return origin_tuple(g.voxels.grid()); })
+        .def_property_readonly("voxel_size",
+                               [](const VoxelGrid& g) { return g.voxels.grid().voxel_size; })
+        .def_property_readonly("dims",
+                               [](const VoxelGrid& g) { return dims_tuple(g.voxels.grid()); })
+        .def_property_readonly("count", [](const VoxelGrid& g) { return g.voxels.count(); })
+        .def_property_readonly("brick_size",
+                               [](const VoxelGrid& g) { return g.voxels.brick_size(); })
+        .def_property_readonly("brick_count",
+                               [](const VoxelGrid& g) { return g.voxels.brick_count(); })
+        .def_property_readonly("stats", [](const VoxelGrid& g) { return stats_dict(g.stats); })
+        .def_property_readonly("device", [](const VoxelGrid& g) { return g.device; })
+        .def("to_numpy", [](const VoxelGrid& g) { return occupancy_array(g.voxels); })
+        .def("__repr__",
+             [](const VoxelGrid& g) {
+                 const oclvox::Grid& grid = g.voxels.grid();
+                 return "<oclvox.VoxelGrid " + std::to_string(grid.dims[0]) + "x" +
+                        std::to_string(grid.dims[1]) + "x" + std::to_string(grid.dims[2]) + ", " +
+                        std::to_string(g.voxels.count()) + " voxels set>";
+             })
+        .def(
+            "to_field",
+            [](const VoxelGrid& g, int smoothing) {
+                Field result;
+                py::gil_scoped_release release;
+                result.field = oclvox::occupancy_to_field(g.voxels, smoothing);
+                return result;
+            },
+            "smoothing"_a)
+        .def(
+            "save",
+            [](const VoxelGrid& g, const std::filesystem::path& path) {
+                py::gil_scoped_release release;
+                oclvox::write_voxels(path.string(), g.voxels);
+            },
+            "path"_a)
+        .def_static(
+            "from_numpy",
+            [](py::handle occupancy, std::array<double, 3> origin, double voxel_size,
+               int brick_size) {
+                VoxelGrid result;
+                result.voxels =
+                    voxels_from_array(occupancy, grid_base(origin, voxel_size), brick_size);
+                result.stats.voxels_set = result.voxels.count();
+                return result;
+            },
+            "occupancy"_a, "origin"_a = std::array<double, 3>{0, 0, 0}, "voxel_size"_a = 1.0,
+            "brick_size"_a = 64,
+            "A VoxelGrid from a (nx, ny, nz) array: every non-zero element is a set voxel.");
+
+    py::class_<Field>(m, "Field")
+        .def(py::init([](py::handle values, std::array<double, 3> origin, double voxel_size,
+                         double band) {
+                 Field result;
+                 result.field = field_from_array(values, grid_base(origin, voxel_size));
+                 result.band_voxels = band;
+                 return result;
+             }),
+             "values"_a, "origin"_a = std::array<double, 3>{0, 0, 0}, "voxel_size"_a = 1.0,
+             "band"_a = 0.0,
+             "A field from a (nx, ny, nz) array of samples at voxel centres (copied as float32). "
+             "band: the narrow band in voxels for .vdb output (0: the largest |value|).")
+        .def_property_readonly("origin", [](const Field& f) { return origin_tuple(f.field.grid); })
+        .def_property_readonly("voxel_size", [](const Field& f) { return f.field.grid.voxel_size; })
+        .def_property_readonly("dims", [](const Field& f) { return dims_tuple(f.field.grid); })
+        .def_property_readonly("band", [](const Field& f) { return f.band_voxels; })
+        .def_property_readonly("stats", [](const Field& f) { return stats_dict(f.stats); })
+        .def_property_readonly("device", [](const Field& f) { return f.device; })
+        .def("to_numpy",
+             [](py::object self) { return field_view(self.cast<const Field&>().field, self); })
+        .def("__repr__",
+             [](const Field& f) {
+                 const oclvox::Grid& grid = f.field.grid;
+                 return "<oclvox.Field " + std::to_string(grid.dims[0]) + "x" +
+                        std::to_string(grid.dims[1]) + "x" + std::to_string(grid.dims[2]) + ">";
+             })
+        .def(
+            "save",
+            [](const Field& f, const std::filesystem::path& path) {
+                py::gil_scoped_release release;
+                oclvox::write_field(path.string(), f.field, f.band_voxels);
+            },
+            "path"_a);
+
+    m.def(
+        "load_mesh",
+        [](const std::filesystem::path& path) {
+            py::gil_scoped_release release;
+            return oclvox::load_mesh(path.string());
+        },
+        "path"_a);
+    m.def(
+        "load_field",
+        [](const std::filesystem::path& path) {
+            Field result;
+            py::gil_scoped_release release;
+            result.field = oclvox::read_field(path.string());
+            return result;
+        },
+        "path"_a);
+    m.def(
+        "voxelize",
+        [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const std::string& mode,
+           const std::string& test, const std::string& inside, const std::string& boundary,
+           int brick_size, std::optional<uint64_t> device_memory,
+           std::optional<uint64_t> host_memory, py::object device, bool reference,
+           py::object progress) {
+            return voxelize(mesh, fit,
+                            voxelize_options(mode, test, inside, boundary, brick_size,
+                                             device_memory, host_memory),
+                            device, reference, std::move(progress));
+        },
+        "mesh"_a, "fit"_a, "mode"_a, "test"_a, "inside"_a, "boundary"_a, "brick_size"_a,
+        "device_memory"_a, "host_memory"_a, "device"_a, "reference"_a, "progress"_a);
+    m.def(
+        "sdf",
+        [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, double band, bool full_grid,
+           const std::string& inside, int brick_size, py::object device, bool reference) {
+            return sdf(mesh, fit, sdf_options(band, full_grid, inside, brick_size), device,
+                       reference);
+        },
+        "mesh"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a, "device"_a,
+        "reference"_a);
+    m.def(
+        "csg_meshes",
+        [](const oclvox::Mesh& a, const std::string& op, const oclvox::Mesh& b,
+           const oclvox::GridFit& fit, double band, bool full_grid, const std::string& inside,
+           int brick_size, py::object device, bool reference) {
+            return csg_meshes(a, op, b, fit, sdf_options(band, full_grid, inside, brick_size),
+                              device, reference);
+        },
+        "a"_a, "op"_a, "b"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a,
+        "device"_a, "reference"_a);
+    m.def("csg_fields", &csg_fields, "a"_a, "op"_a, "b"_a);
+    m.def("csg_voxels", &csg_voxels, "a"_a, "op"_a, "b"_a);
+    m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a);
+    m.def("devices", &devices);
+    // The classes are documented and used as oclvox.Mesh, oclvox.VoxelGrid, oclvox.Field.
+    for (const char* name : {"Mesh", "GridFit", "VoxelGrid", "Field"})
+        m.attr(name).attr("__module__") = "oclvox";
+
+    // Devices are released before the interpreter tears down the module.
+    py::module_::import("atexit").attr("register")(py::cpp_function(&forget_devices));
+}

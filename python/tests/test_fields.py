@@ -1,0 +1,128 @@
+"""sdf(), csg() and mesh() against closed forms: box distances, a sphere's surface and volume."""
+
+import numpy as np
+import pytest
+
+import oclvox
+from conftest import box_mesh, voxel_centres
+
+GRID = dict(origin=(-1.0, -1.0, -1.0), voxel_size=0.125, dims=(40, 36, 32))
+BAND = 3.0
+
+
+def box_sdf(points, lo, hi):
+    """Exact signed distance to the surface of the box [lo, hi]: negative inside."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    outside = np.maximum(np.maximum(lo - points, points - hi), 0.0)
+    inside = np.minimum(points - lo, hi - points).min(axis=-1)
+    return np.where(inside > 0, -inside, np.linalg.norm(outside, axis=-1))
+
+
+def clamp_to_band(values, voxel_size):
+    return np.clip(values, -BAND * voxel_size, BAND * voxel_size)
+
+
+BOX_A = ((0.1, 0.2, 0.3), (2.6, 2.4, 2.2))
+BOX_B = ((1.3, -0.6, 0.9), (3.4, 1.5, 2.7))
+
+
+@pytest.mark.parametrize("reference", [False, True])
+def test_sdf_of_a_box_is_its_distance(reference):
+    field = oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, reference=reference)
+    values = field.to_numpy()
+    assert values.dtype == np.float32 and values.shape == GRID["dims"]
+    assert field.dims == GRID["dims"] and field.origin == GRID["origin"]
+    assert field.voxel_size == GRID["voxel_size"]
+    expected = clamp_to_band(box_sdf(voxel_centres(**GRID), *BOX_A), GRID["voxel_size"])
+    # Float32 distances of a few-voxel-sized box: well within 1e-5 voxels of the double value.
+    assert np.abs(values - expected).max() < 1e-5 * GRID["voxel_size"]
+    # The samples are the field's own, shared read-only.
+    assert not values.flags["OWNDATA"] and not values.flags["WRITEABLE"]
+
+
+def test_sdf_device_equals_reference(spot):
+    device = oclvox.sdf(*spot, 40).to_numpy()
+    reference = oclvox.sdf(*spot, 40, reference=True).to_numpy()
+    assert np.array_equal(device, reference)
+
+
+def test_csg_of_meshes_combines_distances():
+    a, b = box_mesh(*BOX_A), box_mesh(*BOX_B)
+    centres = voxel_centres(**GRID)
+    da, db = box_sdf(centres, *BOX_A), box_sdf(centres, *BOX_B)
+    h = GRID["voxel_size"]
+    for op, expected in (("union", np.minimum(da, db)), ("intersection", np.maximum(da, db)),
+                         ("difference", np.maximum(da, -db))):
+        field = oclvox.csg(a, op, b, **GRID, band=BAND)
+        assert isinstance(field, oclvox.Field)
+        # Clamping to the band commutes with min and max, so this is exact up to float rounding.
+        assert np.abs(field.to_numpy() - clamp_to_band(expected, h)).max() < 1e-5 * h, op
+
+
+def test_csg_of_fields_is_min_max():
+    rng = np.random.default_rng(3)
+    a = oclvox.Field(rng.normal(size=(5, 6, 7)), origin=(1, 2, 3), voxel_size=0.5)
+    b = oclvox.Field(rng.normal(size=(5, 6, 7)), origin=(1, 2, 3), voxel_size=0.5)
+    na, nb = a.to_numpy(), b.to_numpy()
+    assert np.array_equal(oclvox.csg(a, "union", b).to_numpy(), np.minimum(na, nb))
+    assert np.array_equal(oclvox.csg(a, "intersection", b).to_numpy(), np.maximum(na, nb))
+    assert np.array_equal(oclvox.csg(a, "difference", b).to_numpy(), np.maximum(na, -nb))
+
+
+def sphere_field(radius_voxels=9.3, n=26):
+    h = 0.5
+    origin = np.array([-n / 2 * h] * 3)
+    centres = voxel_centres(origin, h, (n, n, n))
+    centre = np.array([0.11, -0.07, 0.05])
+    values = np.linalg.norm(centres - centre, axis=-1) - radius_voxels * h
+    return oclvox.Field(values, origin=tuple(origin), voxel_size=h), centre, radius_voxels * h, h
+
+
+def check_closed_oriented(vertices, faces):
+    """Every directed edge once and its reverse once: closed, manifold along edges, oriented."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    as_set = {tuple(e) for e in directed}
+    assert len(as_set) == len(directed)
+    assert all((b, a) in as_set for a, b in as_set)
+    assert faces.min() >= 0 and faces.max() < len(vertices)
+
+
+@pytest.mark.parametrize("method,tolerance", [("marching-cubes", 0.02), ("surface-nets", 0.1)])
+def test_mesh_of_a_sphere(method, tolerance):
+    field, centre, radius, h = sphere_field()
+    vertices, faces = oclvox.mesh(field, method=method)
+    assert vertices.dtype == np.float64 and faces.dtype == np.int64
+    # Vertices on the sphere: exact crossings (marching cubes) to within the linear
+    # interpolation's error, or their mean (surface nets), a fraction of a voxel.
+    distance = np.abs(np.linalg.norm(vertices - centre, axis=1) - radius)
+    assert distance.max() < tolerance * radius
+    check_closed_oriented(vertices, faces)
+    # Wound counter-clockwise from outside: a positive volume close to the sphere's.
+    a, b, c = (vertices[faces[:, n]] for n in range(3))
+    volume = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6
+    assert volume == pytest.approx(4 / 3 * np.pi * radius ** 3, rel=0.03)
+    # The device and the host reference give the same mesh, bit for bit.
+    reference = oclvox.mesh(field, method=method, reference=True)
+    assert np.array_equal(vertices, reference[0]) and np.array_equal(faces, reference[1])
+    # Field.mesh is the same call.
+    assert np.array_equal(field.mesh(method=method)[1], faces)
+
+
+def test_mesh_of_voxels_and_of_a_field_file(tmp_path):
+    # A solid box of voxels meshes to a closed surface around it.
+    occupancy = np.zeros((10, 12, 9), np.uint8)
+    occupancy[2:7, 3:10, 1:6] = 1
+    grid = oclvox.VoxelGrid.from_numpy(occupancy, origin=(0, 0, 0), voxel_size=1.0)
+    vertices, faces = oclvox.mesh(grid, smoothing=0)
+    check_closed_oriented(vertices, faces)
+    # Without smoothing the surface runs through the faces between set and unset voxels.
+    assert np.allclose(vertices.min(axis=0), [2, 3, 1]) and np.allclose(vertices.max(axis=0),
+                                                                        [7, 10, 6])
+    # A saved field reads back equal, with its grid, and meshes the same.
+    field, _, _, _ = sphere_field()
+    field.save(tmp_path / "sphere.npy")
+    loaded = oclvox.load_field(tmp_path / "sphere.npy")
+    assert np.array_equal(np.load(tmp_path / "sphere.npy"), field.to_numpy())
+    assert loaded.dims == field.dims and loaded.voxel_size == field.voxel_size
+    assert np.allclose(loaded.origin, field.origin)
+    assert np.array_equal(oclvox.mesh(tmp_path / "sphere.npy")[1], oclvox.mesh(field)[1])

@@ -1,0 +1,91 @@
+"""Progress callbacks, cancelling, and other Python threads running while the device works."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import oclvox
+
+# Many batches: 64^3 bricks (32 KiB of bits each) under a 1 MiB device budget.
+BATCHED = dict(brick_size=64, device_memory=1)
+
+
+def test_progress_reports_every_batch(spot):
+    calls = []
+    grid = oclvox.voxelize(*spot, 512, **BATCHED, progress=lambda done, total: calls.append(
+        (done, total)))
+    assert len(calls) == grid.stats["batches"] > 1
+    totals = {total for _, total in calls}
+    assert len(totals) == 1 and calls[-1][0] == totals.pop()
+    assert all(a[0] < b[0] for a, b in zip(calls, calls[1:]))
+    # Reporting changes nothing.
+    assert grid.count == oclvox.voxelize(*spot, 512, **BATCHED).count
+
+
+@pytest.mark.parametrize("mode", ["surface", "solid"])
+def test_returning_false_cancels(spot, mode):
+    calls = []
+
+    def stop_after_two(done, total):
+        calls.append(done)
+        return len(calls) < 2
+
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.voxelize(*spot, 512, mode=mode, **BATCHED, progress=stop_after_two)
+    assert len(calls) == 2  # stopped at the first report that said so
+
+
+def test_exception_in_callback_is_raised(spot):
+    def fail(done, total):
+        raise ZeroDivisionError("from the callback")
+
+    with pytest.raises(ZeroDivisionError, match="from the callback"):
+        oclvox.voxelize(*spot, 512, **BATCHED, progress=fail)
+    with pytest.raises(TypeError):  # a callback of the wrong signature is an exception too
+        oclvox.voxelize(*spot, 512, **BATCHED, progress=lambda: True)
+    with pytest.raises(TypeError, match="callable"):
+        oclvox.voxelize(*spot, 64, progress=42)
+
+
+def test_another_thread_runs_during_device_work(spot):
+    # A voxelization of about a second on PoCL. While it runs, the main thread keeps ticking: if
+    # the GIL were held by the call, no tick could happen between its start and its end.
+    span = {}
+
+    def work():
+        span["start"] = time.perf_counter()
+        span["count"] = oclvox.voxelize(*spot, 768, **BATCHED).count
+        span["end"] = time.perf_counter()
+
+    worker = threading.Thread(target=work)
+    ticks = []
+    worker.start()
+    while worker.is_alive():
+        ticks.append(time.perf_counter())
+        time.sleep(0.001)
+    worker.join()
+    assert span["count"] > 0
+    duration = span["end"] - span["start"]
+    inside = np.array([t for t in ticks if span["start"] < t < span["end"]])
+    assert duration > 0.2, "the run is too short to tell"
+    # Ticks all through the run: no gap longer than a third of it.
+    gaps = np.diff(np.concatenate([[span["start"]], inside, [span["end"]]]))
+    assert gaps.max() < duration / 3, (gaps.max(), duration)
+
+
+def test_threads_share_a_device(spot):
+    # Two threads voxelizing at once on the one cached device both get the right answer.
+    expected = oclvox.voxelize(*spot, 200).to_numpy()
+    results = [None, None]
+
+    def work(slot):
+        results[slot] = oclvox.voxelize(*spot, 200).to_numpy()
+
+    threads = [threading.Thread(target=work, args=(slot,)) for slot in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert all(np.array_equal(r, expected) for r in results)
