@@ -4,6 +4,10 @@
 // and is named after the target plus the process id and a per-process counter, so concurrent
 // writers in one process or across processes never share a temporary file. There is no fsync:
 // this protects against interrupted runs, not against power loss.
+//
+// A program that must stop at once (the CLI on SIGINT or SIGTERM) calls abandon_pending_writes
+// from another thread: the temporary files of writes in progress are registered, so it can
+// remove them, and from then on no temporary file is created or renamed into place.
 #include "atomic_file.hpp"
 
 #include <unistd.h>
@@ -12,6 +16,8 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <mutex>
+#include <set>
 
 #include "oclvox/oclvox.hpp"
 
@@ -29,11 +35,50 @@ std::string last_system_error() {
     return errno != 0 ? std::strerror(errno) : "unknown I/O error";
 }
 
-// Removes the temporary file unless the rename into place succeeded.
+// The temporary files of this process's writes in progress, and whether writing was abandoned.
+// The lock is held while a temporary file is created and while it is renamed, so an abandoning
+// thread removes every file that exists and no file appears afterwards.
+struct PendingWrites {
+    std::mutex lock;
+    std::set<std::string> names;
+    bool abandoned = false;
+};
+// Never destroyed: a signal may arrive while static objects are being destroyed at exit.
+PendingWrites& pending_writes() {
+    static PendingWrites* const pending = new PendingWrites;
+    return *pending;
+}
+
+[[noreturn]] void throw_abandoned(const std::string& path) {
+    throw Cancelled("cannot write " + path + ": writing was abandoned (the run is stopping)");
+}
+
+// Creates the temporary file on construction and removes it unless the rename into place
+// succeeded.
 struct TemporaryFile {
     std::string name;
     bool renamed = false;
+
+    TemporaryFile(const std::string& path, std::ofstream& stream) : name(temporary_name_for(path)) {
+        PendingWrites& pending = pending_writes();
+        const std::lock_guard<std::mutex> hold(pending.lock);
+        if (pending.abandoned) throw_abandoned(path);
+        pending.names.insert(name);
+        stream.open(name, std::ios::binary | std::ios::trunc);
+    }
+    void rename_to(const std::string& path) {
+        PendingWrites& pending = pending_writes();
+        const std::lock_guard<std::mutex> hold(pending.lock);
+        if (pending.abandoned) throw_abandoned(path);
+        if (std::rename(name.c_str(), path.c_str()) != 0)
+            throw OutputError("cannot write " + path + ": cannot rename " + name +
+                              " into place: " + std::strerror(errno));
+        renamed = true;
+    }
     ~TemporaryFile() {
+        PendingWrites& pending = pending_writes();
+        const std::lock_guard<std::mutex> hold(pending.lock);
+        pending.names.erase(name);
         if (!renamed) std::remove(name.c_str());
     }
 };
@@ -42,11 +87,10 @@ struct TemporaryFile {
 
 void write_file_atomically(const std::string& path,
                            const std::function<void(std::ostream&)>& write) {
-    TemporaryFile temporary{temporary_name_for(path)};
-
     // Phase 1: create the temporary file. A missing or read-only folder fails here.
     errno = 0;
-    std::ofstream stream(temporary.name, std::ios::binary | std::ios::trunc);
+    std::ofstream stream;
+    TemporaryFile temporary(path, stream);
     if (!stream.is_open())
         throw OutputError("cannot write " + path + ": cannot create " + temporary.name + ": " +
                           last_system_error());
@@ -70,10 +114,18 @@ void write_file_atomically(const std::string& path,
         throw OutputError("cannot write " + path + ": " + last_system_error());
 
     // Phase 4: replace the target in one step.
-    if (std::rename(temporary.name.c_str(), path.c_str()) != 0)
-        throw OutputError("cannot write " + path + ": cannot rename " + temporary.name +
-                          " into place: " + std::strerror(errno));
-    temporary.renamed = true;
+    temporary.rename_to(path);
 }
 
 }  // namespace oclvox::detail
+
+namespace oclvox {
+
+void abandon_pending_writes() {
+    detail::PendingWrites& pending = detail::pending_writes();
+    const std::lock_guard<std::mutex> hold(pending.lock);
+    pending.abandoned = true;
+    for (const std::string& name : pending.names) std::remove(name.c_str());
+}
+
+}  // namespace oclvox
