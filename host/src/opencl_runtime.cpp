@@ -117,6 +117,13 @@ using detail::throw_device_error;
 // -cl-mad-enable, and the kernels themselves say FP_CONTRACT OFF.
 const char* kBuildOptions = "-cl-std=CL1.2";
 
+// Fault injection for tests/fault_test.sh: OCLVOX_FAULT_BUILD_OPTIONS is appended to the build
+// options (bypassing the binary cache), so a test can make the kernel build fail.
+const char* injected_build_options() {
+    static const char* const options = std::getenv("OCLVOX_FAULT_BUILD_OPTIONS");
+    return options;
+}
+
 std::string lower(std::string s) {
     std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
     return s;
@@ -312,7 +319,10 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
     auto it = programs.find(source.sha256);
     if (it != programs.end()) return it->second;
 
-    const std::string path = cache_path(info, source);
+    const char* injected = injected_build_options();
+    const std::string path = injected ? std::string() : cache_path(info, source);
+    const std::string options =
+        injected ? kBuildOptions + std::string(" ") + injected : kBuildOptions;
     cl::Program program;
     if (path.empty() || !load_cached(*this, path, program)) {
         try {
@@ -321,7 +331,7 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
             throw_device_error(e, std::string("creating program ") + source.name);
         }
         try {
-            program.build({device}, kBuildOptions);
+            program.build({device}, options.c_str());
         } catch (const cl::Error& e) {
             throw KernelBuildError("building kernels/" + std::string(source.name) + ".cl for " +
                                        info.name + " failed: " + detail::cl_status_name(e.err()),
