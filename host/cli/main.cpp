@@ -1132,7 +1132,7 @@ int main(int argc, char** argv) {
         std::cerr << "oclvox: error: " << e.what() << "\nRun with --help for more information.\n";
         return kExitUsage;
     } catch (const oclvox::Cancelled&) {
-        std::cerr << "oclvox: stopped by " << (g_stop_signal == SIGTERM ? "SIGTERM" : "SIGINT")
+        std::cerr << "oclvox: cancelled by " << (g_stop_signal == SIGTERM ? "SIGTERM" : "SIGINT")
                   << "\n";
         return stopped_exit_code();
     } catch (const std::bad_alloc&) {
