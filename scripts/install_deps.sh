@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages oclvox needs to build, test and run on PoCL's CPU device.
 # Installs only what is missing, so a prepared machine costs nothing.
+# `--fuzz` adds what scripts/fuzz.sh needs (clang, its libFuzzer/sanitizer runtimes, the symbolizer).
 set -euo pipefail
 
 packages=(
@@ -12,6 +13,8 @@ packages=(
   libgtest-dev libgmock-dev
   python3-dev python3-venv python3-numpy python3-pytest pybind11-dev
 )
+fuzz_packages=(clang libclang-rt-14-dev llvm)
+[ "${1:-}" = "--fuzz" ] && packages+=("${fuzz_packages[@]}")
 
 missing=()
 for p in "${packages[@]}"; do

@@ -4,7 +4,7 @@
 // and checks the command line, times the phases and reports; all the work is the library's.
 //
 // Exit codes: 0 success, 1 error (the message names the problem), 2 command-line usage error,
-// 130 cancelled by Ctrl-C.
+// 130 stopped by SIGINT (Ctrl-C), 143 stopped by SIGTERM.
 #include <signal.h>
 #include <unistd.h>
 
@@ -44,33 +44,49 @@ namespace fs = std::filesystem;
 
 constexpr int kExitError = 1;
 constexpr int kExitUsage = 2;
-constexpr int kExitCancelled = 130;  // the shell convention for "ended by SIGINT"
 
 // ---------------------------------------------------------------------------------------------
-// Ctrl-C
+// SIGINT (Ctrl-C) and SIGTERM
 // ---------------------------------------------------------------------------------------------
-// Set on Ctrl-C; the progress callback turns it into a clean cancellation, so the library stops
-// between batches and no half-written output is left behind.
+// A stop leaves no output and ends the process within 2 s with 128 + the signal's number (130 for
+// SIGINT, 143 for SIGTERM, the shell convention).
+constexpr auto kStopGrace = std::chrono::milliseconds(1500);
+
+// Set on SIGINT or SIGTERM; the progress callback turns it into a clean cancellation, so the
+// library stops between batches.
 std::atomic<bool> g_interrupted{false};
+std::atomic<int> g_stop_signal{SIGINT};
 
-// Ctrl-C is taken by a watcher thread with sigwait rather than by a signal handler. SIGINT stays
-// blocked everywhere else, and a blocked signal is inherited by the processes the OpenCL runtime
-// spawns: PoCL runs a linker while it compiles a kernel, and a terminal's Ctrl-C (sent to the
-// whole process group) would otherwise kill that linker and make the runtime abort.
+int stopped_exit_code() {
+    return 128 + g_stop_signal;
+}
+
+// The signals are taken by a watcher thread with sigwait rather than by a signal handler. They
+// stay blocked everywhere else, and a blocked signal is inherited by the processes the OpenCL
+// runtime spawns: PoCL runs a linker while it compiles a kernel, and a terminal's Ctrl-C (sent to
+// the whole process group) would otherwise kill that linker and make the runtime abort.
 // Call before any other thread exists, so that every thread inherits the block.
 void start_interrupt_watcher() {
-    sigset_t interrupt;
-    sigemptyset(&interrupt);
-    sigaddset(&interrupt, SIGINT);
-    pthread_sigmask(SIG_BLOCK, &interrupt, nullptr);
-    std::thread([interrupt] {
+    sigset_t stop;
+    sigemptyset(&stop);
+    sigaddset(&stop, SIGINT);
+    sigaddset(&stop, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &stop, nullptr);
+    std::thread([stop] {
         int signal = 0;
-        sigwait(&interrupt, &signal);
+        sigwait(&stop, &signal);
+        g_stop_signal = signal;
         g_interrupted = true;
-        // A second Ctrl-C ends the process at once, for phases that report no progress (such as
-        // loading a huge mesh).
-        sigwait(&interrupt, &signal);
-        std::_Exit(kExitCancelled);
+        // From here on no output appears: writes in progress lose their temporary file, later
+        // ones fail with Cancelled.
+        oclvox::abandon_pending_writes();
+        // The run has kStopGrace to stop by itself and return its exit code. Phases that report
+        // no progress (loading a huge mesh, one long batch) are ended here, as is everything on a
+        // second signal; nothing is left to clean up.
+        const auto grace = std::chrono::duration_cast<std::chrono::nanoseconds>(kStopGrace);
+        const timespec wait{time_t(grace.count() / 1000000000), long(grace.count() % 1000000000)};
+        sigtimedwait(&stop, nullptr, &wait);
+        std::_Exit(stopped_exit_code());
     }).detach();
 }
 
@@ -258,6 +274,9 @@ void print_summary(const RunReport& r) {
         std::printf("device   %s (%s)\n", r.device->name.c_str(), r.device->platform.c_str());
     else
         std::printf("device   CPU reference\n");
+    if (r.stats.allocation_retries)
+        std::printf("memory   device allocations failed; %llu batches retried with fewer bricks\n",
+                    (unsigned long long)r.stats.allocation_retries);
     std::printf("voxels   %llu set\n", (unsigned long long)r.stats.voxels_set);
     std::printf("output   %s\n", r.args.output.c_str());
     std::printf("time     %.3f s\n", r.timings.total);
@@ -336,6 +355,7 @@ nlohmann::ordered_json stats_json(const RunReport& r) {
     j["bricks_total"] = s.bricks_total;
     j["bricks_active"] = s.bricks_active;
     j["batches"] = s.batches;
+    j["allocation_retries"] = s.allocation_retries;
     j["brick_pairs"] = s.brick_pairs;
     j["work_items"] = s.work_items;
     j["voxels_set"] = s.voxels_set;
@@ -1105,11 +1125,12 @@ int main(int argc, char** argv) {
     VoxelizeArgs args;
     CLI::App* voxelize = app.add_subcommand("voxelize", "voxelize a mesh file into a voxel file");
     voxelize->footer(
-        "Exit codes: 0 success, 1 error, 2 usage error, 130 cancelled (Ctrl-C).\n"
+        "Exit codes: 0 success, 1 error, 2 usage error, 130 SIGINT (Ctrl-C), 143 SIGTERM.\n"
         "Example: oclvox voxelize bunny.obj -r 512 -o bunny.binvox --stats");
     add_voxelize_options(*voxelize, args);
 
-    const char* exits = "Exit codes: 0 success, 1 error, 2 usage error, 130 cancelled (Ctrl-C).\n";
+    const char* exits =
+        "Exit codes: 0 success, 1 error, 2 usage error, 130 SIGINT (Ctrl-C), 143 SIGTERM.\n";
     FieldArgs sdf_args, csg_args, mesh_args;
     CLI::App* sdf = app.add_subcommand(
         "sdf", "signed distance field of a mesh (negative inside), as .npy or .vdb");
@@ -1150,8 +1171,9 @@ int main(int argc, char** argv) {
         std::cerr << "oclvox: error: " << e.what() << "\nRun with --help for more information.\n";
         return kExitUsage;
     } catch (const oclvox::Cancelled&) {
-        std::cerr << "oclvox: cancelled\n";
-        return kExitCancelled;
+        std::cerr << "oclvox: cancelled by " << (g_stop_signal == SIGTERM ? "SIGTERM" : "SIGINT")
+                  << "\n";
+        return stopped_exit_code();
     } catch (const std::bad_alloc&) {
         std::cerr << "oclvox: error: out of memory (try a lower --resolution)\n";
         return kExitError;

@@ -4,9 +4,11 @@
 // constants on the device once; then process the active bricks in batches that fit the device
 // budget: per batch, upload the (triangle, brick) pairs and their work-item offsets, clear the
 // batch's brick bits, run the voxel kernel over all work items, and merge the bits that come
-// back into the sparse result.
+// back into the sparse result. A batch the device cannot allocate memory for is retried with half
+// as many bricks, down to one.
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cstring>
 
 #include "binning.hpp"
@@ -32,6 +34,21 @@ constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
 
 std::string mib(uint64_t bytes) {
     return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB";
+}
+
+// Out-of-memory statuses, after which a smaller batch may succeed.
+bool is_allocation_failure(cl_int status) {
+    return status == CL_MEM_OBJECT_ALLOCATION_FAILURE || status == CL_OUT_OF_RESOURCES ||
+           status == CL_OUT_OF_HOST_MEMORY;
+}
+
+// Fault injection for tests/fault_test.sh: OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=N makes every brick
+// bit buffer larger than N MiB fail as the device would when out of memory.
+cl::Buffer bits_buffer(const cl::Context& context, size_t bytes) {
+    static const char* const limit_mib = std::getenv("OCLVOX_FAULT_DEVICE_ALLOCATION_MIB");
+    if (limit_mib && bytes > (std::strtoull(limit_mib, nullptr, 10) << 20))
+        throw cl::Error(CL_MEM_OBJECT_ALLOCATION_FAILURE, "clCreateBuffer (injected fault)");
+    return cl::Buffer(context, CL_MEM_READ_WRITE, bytes);
 }
 
 struct Batch {
@@ -164,71 +181,89 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             cl::Kernel voxelize(program, kernels.voxelize);
             const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
-            cl::Buffer bits(
-                cl.context, CL_MEM_READ_WRITE,
-                std::min(max_slots, binning.bricks.size()) * words_per_brick * sizeof(cl_uint));
             std::vector<cl_uint> host_bits;
             std::vector<uint64_t> blocks(result.blocks_per_brick());
+            size_t slots = std::min(max_slots, binning.bricks.size());
+            cl::Buffer bits;
 
-            // Phase 4: batches of bricks.
+            // Phase 4: batches of bricks. On a device allocation failure the same bricks are
+            // retried in batches of half the size; nothing of a failed batch has been merged.
             for (size_t done = 0; done < binning.bricks.size();) {
-                t = Clock::now();
-                Batch batch = make_batch(binning, prepared, grid, brick_size, done, max_slots);
-                const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
-                batch.pair_first_item.push_back(cl_uint(batch.items));
-                const size_t bit_words = batch.brick_count * words_per_brick;
-                const cl::Buffer pair_triangle =
-                    detail::upload(cl.context, cl.queue, batch.pair_triangle);
-                const cl::Buffer pair_slot = detail::upload(cl.context, cl.queue, batch.pair_slot);
-                const cl::Buffer pair_first =
-                    detail::upload(cl.context, cl.queue, batch.pair_first_item);
-                const cl::Buffer slot_brick =
-                    detail::upload(cl.context, cl.queue, batch.slot_brick);
-                cl.queue.enqueueFillBuffer(bits, cl_uint(0), 0, bit_words * sizeof(cl_uint));
-                cl.queue.finish();
-                stats.seconds_upload += seconds_since(t);
+                try {
+                    t = Clock::now();
+                    if (!bits())
+                        bits = bits_buffer(cl.context, slots * words_per_brick * sizeof(cl_uint));
+                    Batch batch = make_batch(binning, prepared, grid, brick_size, done, slots);
+                    const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
+                    batch.pair_first_item.push_back(cl_uint(batch.items));
+                    const size_t bit_words = batch.brick_count * words_per_brick;
+                    const cl::Buffer pair_triangle =
+                        detail::upload(cl.context, cl.queue, batch.pair_triangle);
+                    const cl::Buffer pair_slot =
+                        detail::upload(cl.context, cl.queue, batch.pair_slot);
+                    const cl::Buffer pair_first =
+                        detail::upload(cl.context, cl.queue, batch.pair_first_item);
+                    const cl::Buffer slot_brick =
+                        detail::upload(cl.context, cl.queue, batch.slot_brick);
+                    cl.queue.enqueueFillBuffer(bits, cl_uint(0), 0, bit_words * sizeof(cl_uint));
+                    cl.queue.finish();
+                    stats.seconds_upload += seconds_since(t);
 
-                t = Clock::now();
-                voxelize.setArg(0, setups);
-                voxelize.setArg(1, ranges);
-                voxelize.setArg(2, pair_triangle);
-                voxelize.setArg(3, pair_slot);
-                voxelize.setArg(4, pair_first);
-                voxelize.setArg(5, pair_count);
-                voxelize.setArg(6, slot_brick);
-                voxelize.setArg(8, cl_uint(batch.items));
-                voxelize.setArg(9, cl_int(brick_size));
-                voxelize.setArg(10, cl_int(grid.dims[0]));
-                voxelize.setArg(11, cl_int(grid.dims[1]));
-                voxelize.setArg(12, cl_int(grid.dims[2]));
-                voxelize.setArg(13, bits);
-                for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
-                    voxelize.setArg(7, cl_uint(base));
-                    const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
-                    detail::launch(cl.queue, voxelize, n, voxelize_group);
+                    t = Clock::now();
+                    voxelize.setArg(0, setups);
+                    voxelize.setArg(1, ranges);
+                    voxelize.setArg(2, pair_triangle);
+                    voxelize.setArg(3, pair_slot);
+                    voxelize.setArg(4, pair_first);
+                    voxelize.setArg(5, pair_count);
+                    voxelize.setArg(6, slot_brick);
+                    voxelize.setArg(8, cl_uint(batch.items));
+                    voxelize.setArg(9, cl_int(brick_size));
+                    voxelize.setArg(10, cl_int(grid.dims[0]));
+                    voxelize.setArg(11, cl_int(grid.dims[1]));
+                    voxelize.setArg(12, cl_int(grid.dims[2]));
+                    voxelize.setArg(13, bits);
+                    for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
+                        voxelize.setArg(7, cl_uint(base));
+                        const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
+                        detail::launch(cl.queue, voxelize, n, voxelize_group);
+                    }
+                    cl.queue.finish();
+                    stats.seconds_kernels += seconds_since(t);
+                    stats.work_items += batch.items;
+
+                    // Two 32-bit words per block, low word first.
+                    t = Clock::now();
+                    host_bits.resize(bit_words);
+                    cl.queue.enqueueReadBuffer(bits, CL_TRUE, 0, bit_words * sizeof(cl_uint),
+                                               host_bits.data());
+                    for (size_t slot = 0; slot < batch.brick_count; ++slot) {
+                        const cl_uint* words = host_bits.data() + slot * words_per_brick;
+                        for (size_t b = 0; b < blocks.size(); ++b)
+                            blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1]) << 32;
+                        result.merge_brick(binning.bricks[batch.first_brick + slot], blocks.data());
+                    }
+                    stats.seconds_download += seconds_since(t);
+                    ++stats.batches;
+
+                    done += batch.brick_count;
+                    if (options.progress && !options.progress(done, binning.bricks.size()))
+                        throw Cancelled("voxelization cancelled after " + std::to_string(done) +
+                                        " of " + std::to_string(binning.bricks.size()) + " bricks");
+                } catch (const cl::Error& e) {
+                    if (!is_allocation_failure(e.err())) throw;
+                    if (slots == 1)
+                        throw DeviceError("OpenCL error while voxelizing on " + cl.info.name +
+                                          ": " + (e.what() ? e.what() : "?") + " returned " +
+                                          detail::cl_status_name(e.err()) +
+                                          " even for a batch of one brick, after " +
+                                          std::to_string(stats.allocation_retries) +
+                                          " retries with smaller batches");
+                    slots /= 2;
+                    ++stats.allocation_retries;
+                    bits = cl::Buffer();
+                    cl.queue.finish();
                 }
-                cl.queue.finish();
-                stats.seconds_kernels += seconds_since(t);
-                stats.work_items += batch.items;
-
-                // Two 32-bit words per block, low word first.
-                t = Clock::now();
-                host_bits.resize(bit_words);
-                cl.queue.enqueueReadBuffer(bits, CL_TRUE, 0, bit_words * sizeof(cl_uint),
-                                           host_bits.data());
-                for (size_t slot = 0; slot < batch.brick_count; ++slot) {
-                    const cl_uint* words = host_bits.data() + slot * words_per_brick;
-                    for (size_t b = 0; b < blocks.size(); ++b)
-                        blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1]) << 32;
-                    result.merge_brick(binning.bricks[batch.first_brick + slot], blocks.data());
-                }
-                stats.seconds_download += seconds_since(t);
-                ++stats.batches;
-
-                done += batch.brick_count;
-                if (options.progress && !options.progress(done, binning.bricks.size()))
-                    throw Cancelled("voxelization cancelled after " + std::to_string(done) +
-                                    " of " + std::to_string(binning.bricks.size()) + " bricks");
             }
         } catch (const cl::Error& e) {
             detail::throw_device_error(e, "voxelizing on " + cl.info.name);

@@ -121,6 +121,13 @@ namespace {
 
 using detail::throw_device_error;
 
+// Fault injection for tests/fault_test.sh: OCLVOX_FAULT_BUILD_OPTIONS is appended to the build
+// options (bypassing the binary cache), so a test can make the kernel build fail.
+const char* injected_build_options() {
+    static const char* const options = std::getenv("OCLVOX_FAULT_BUILD_OPTIONS");
+    return options;
+}
+
 std::string type_name(cl_device_type type) {
     if (type & CL_DEVICE_TYPE_GPU) return "GPU";
     if (type & CL_DEVICE_TYPE_CPU) return "CPU";
@@ -315,7 +322,9 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
     auto it = programs.find(source.sha256);
     if (it != programs.end()) return it->second;
 
-    const std::string path = cache_path(*this, source);
+    const char* injected = injected_build_options();
+    const std::string path = injected ? std::string() : cache_path(*this, source);
+    const std::string options = injected ? build_options + " " + injected : build_options;
     cl::Program program;
     if (path.empty() || !load_cached(*this, path, program)) {
         try {
@@ -324,7 +333,7 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
             throw_device_error(e, std::string("creating program ") + source.name);
         }
         try {
-            program.build({device}, build_options.c_str());
+            program.build({device}, options.c_str());
         } catch (const cl::Error& e) {
             throw KernelBuildError("building kernels/" + std::string(source.name) + ".cl for " +
                                        info.name + " failed: " + detail::cl_status_name(e.err()),

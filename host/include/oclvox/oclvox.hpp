@@ -223,13 +223,14 @@ struct VoxelizeOptions {
 // Timing breakdown and counts of one run (seconds).
 struct VoxelizeStats {
     double seconds_binning = 0, seconds_upload = 0, seconds_kernels = 0, seconds_download = 0;
-    uint64_t triangles_in = 0;    // triangles in the mesh
-    uint64_t triangles_used = 0;  // after dropping those outside the grid (after clipping)
-    uint64_t brick_pairs = 0;     // (triangle, brick) pairs after binning
-    uint64_t work_items = 0;      // (triangle, 4^3 block) work items launched
-    uint64_t bricks_total = 0;    // bricks in the grid
-    uint64_t bricks_active = 0;   // bricks with at least one triangle
-    uint64_t batches = 0;         // device batches
+    uint64_t triangles_in = 0;        // triangles in the mesh
+    uint64_t triangles_used = 0;      // after dropping those outside the grid (after clipping)
+    uint64_t brick_pairs = 0;         // (triangle, brick) pairs after binning
+    uint64_t work_items = 0;          // (triangle, 4^3 block) work items launched
+    uint64_t bricks_total = 0;        // bricks in the grid
+    uint64_t bricks_active = 0;       // bricks with at least one triangle
+    uint64_t batches = 0;             // device batches
+    uint64_t allocation_retries = 0;  // batches retried smaller after a device allocation failure
     uint64_t voxels_set = 0;
     std::string inside_test;         // Solid/Filled: "parity" or "winding"
     std::string inside_test_reason;  // why (e.g. "forced by options", "mesh is closed")
@@ -290,5 +291,11 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
 // Writes `text` to `path` the way every output is written (temporary file, renamed into place).
 // Throws OutputError naming `path`.
 void write_text_file(const std::string& path, const std::string& text);
+
+// For a program that must stop at once (the CLI on SIGINT or SIGTERM); callable from any thread.
+// Removes the temporary files of this process's writes in progress, and makes every write that
+// has not been renamed into place yet, or starts later, fail with Cancelled: from this call on,
+// no output file of this process appears or is replaced. It cannot be undone.
+void abandon_pending_writes();
 
 }  // namespace oclvox

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# The whole test suite built with AddressSanitizer and UndefinedBehaviorSanitizer, in build-asan/.
+# Any memory error, leak or undefined behaviour in library, CLI or test code fails the test that
+# hit it. Extra arguments go to ctest, e.g. `bash scripts/sanitize.sh -R 'test_mesh_io'`.
+#
+# install_consumer is left out: it links a separate, uninstrumented project against the
+# instrumented library, which the sanitizer runtime refuses to load.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install_deps.sh
+
+flags="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer"
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
+  -DCMAKE_CXX_FLAGS="$flags" -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" \
+  -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=address,undefined" \
+  -DOCLVOX_BUILD_TESTS=ON -DOCLVOX_BUILD_BENCH=OFF "${launcher[@]}" >/dev/null
+cmake --build build-asan -j"$(nproc)"
+
+# The OpenCL runtime (PoCL and the LLVM it loads) is not instrumented and keeps some allocations
+# for the life of the process; scripts/lsan.supp names those libraries, and only those.
+export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=1"
+export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+cd build-asan
+ctest --output-on-failure -j"$(nproc)" --timeout 1800 -E '^install_consumer$' "$@"
