@@ -130,6 +130,42 @@ void write_file_atomically(const std::string& path,
 
 namespace oclvox {
 
+void check_output_path(const std::string& path, const std::vector<std::string>& inputs) {
+    auto refuse = [&](const std::string& why) {
+        throw OutputError("cannot write '" + path + "': " + why);
+    };
+    if (path.empty()) refuse("the output path is empty");
+
+    // Phase 1: the target itself is a file or nothing; never a directory, never an input. Identity
+    // is the file system's (device and inode), so "./a.obj", "a.obj" and links all compare equal.
+    struct stat target {};
+    if (::stat(path.c_str(), &target) == 0) {
+        if (S_ISDIR(target.st_mode)) refuse("it is a directory");
+        for (const std::string& input : inputs) {
+            struct stat source {};
+            if (::stat(input.c_str(), &source) == 0 && source.st_dev == target.st_dev &&
+                source.st_ino == target.st_ino)
+                refuse("it is the input file '" + input + "'");
+        }
+    }
+
+    // Phase 2: the folder exists and a file can be created in it (what write_file_atomically
+    // does first), so a run never computes for minutes and then fails to save.
+    const std::string folder = detail::folder_of(path);
+    struct stat folder_stat {};
+    if (::stat(folder.c_str(), &folder_stat) != 0 || !S_ISDIR(folder_stat.st_mode))
+        refuse("folder '" + folder + "' does not exist");
+    const std::string probe = detail::temporary_name_for(path);
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+    if (fd < 0) refuse("folder '" + folder + "' cannot be written: " + std::strerror(errno));
+    ::close(fd);
+    ::unlink(probe.c_str());
+}
+
+void write_text_file(const std::string& path, const std::string& text) {
+    detail::write_file_atomically(path, [&](std::ostream& out) { out << text; });
+}
+
 void abandon_pending_writes() {
     detail::PendingWrites& pending = detail::pending_writes();
     const std::lock_guard<std::mutex> hold(pending.lock);
