@@ -17,6 +17,40 @@ TEST(FitGrid, DefaultFitsBoundingBoxWithResolutionOnLongestAxis) {
     EXPECT_EQ(g.origin, (std::array<double, 3>{-1, 0, 2}));
 }
 
+TEST(FitGrid, LongestAxisGetsExactlyTheResolutionAndOtherAxesTheFewestThatCover) {
+    // extent / (extent / N) rounds to just above N for many N (spot at 50 gave 51 voxels).
+    const Mesh spot = load_mesh(std::string(OCLVOX_SAMPLE_DIR) + "/spot.obj");
+    std::array<double, 3> lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    for (const auto& p : spot.positions)
+        for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], p[k]), hi[k] = std::max(hi[k], p[k]);
+    int longest = 0;
+    for (int k = 1; k < 3; ++k)
+        if (hi[k] - lo[k] > hi[longest] - lo[longest]) longest = k;
+    const Mesh box = long_box();
+    for (const Mesh* mesh : {&spot, &box})
+        for (int64_t resolution = 1; resolution <= 700; ++resolution) {
+            GridFit fit;
+            fit.resolution = resolution;
+            const Grid g = fit_grid(*mesh, fit);
+            if (mesh == &spot) {
+                ASSERT_EQ(g.dims[longest], resolution);
+                for (int k = 0; k < 3; ++k) {
+                    if (k == longest) continue;
+                    // Covers the mesh, and one voxel fewer would not.
+                    EXPECT_GE(g.origin[k] + double(g.dims[k]) * g.voxel_size, hi[k]) << resolution;
+                    if (g.dims[k] > 1)
+                        EXPECT_LT(g.origin[k] + double(g.dims[k] - 1) * g.voxel_size, hi[k])
+                            << resolution;
+                }
+            } else {
+                ASSERT_EQ(g.dims[0], resolution);
+            }
+        }
+    GridFit fit;
+    fit.resolution = 50;
+    EXPECT_EQ(fit_grid(spot, fit).dims[longest], 50);
+}
+
 TEST(FitGrid, CubicIsResolutionCubedWithMeshCentred) {
     GridFit fit;
     fit.resolution = 8;

@@ -64,16 +64,26 @@ Grid fit_grid(const Mesh& mesh, const GridFit& fit) {
     if (!std::isfinite(grid.voxel_size) || !(grid.voxel_size > 0))
         throw GridError("voxel size must be a positive finite number");
 
-    // Phase 2: dimensions. Fitted axes get as many voxels as the mesh needs (at least one); a
-    // cubic grid is resolution^3.
+    // Phase 2: dimensions. Fitted axes get as many voxels as the mesh needs (at least one); the
+    // longest axis of a resolution fit gets exactly `resolution`; a cubic grid is resolution^3.
+    const bool by_resolution = fit.voxel_size <= 0;
     for (int k = 0; k < 3; ++k) {
-        const double cells = std::ceil((hi[k] - lo[k]) / grid.voxel_size);
+        double cells = std::ceil((hi[k] - lo[k]) / grid.voxel_size);
         if (!(cells < double(kMaxGridAxis)))
             throw GridError("the mesh spans " + std::to_string(hi[k] - lo[k]) +
                             " units, more than the maximum " + std::to_string(kMaxGridAxis) +
                             " voxels of size " + std::to_string(grid.voxel_size));
+        // extent / (extent / N) can round to just above N (or a shorter axis's quotient to just
+        // above a whole number), and ceil would then add a voxel the mesh does not reach.
+        // So the count is the smallest that covers the mesh as the voxelizer computes positions.
+        if (by_resolution && hi[k] - lo[k] == extent) {
+            cells = double(fit.resolution);
+        } else {
+            while (cells > 1 && lo[k] + (cells - 1) * grid.voxel_size >= hi[k]) cells -= 1;
+            while (lo[k] + cells * grid.voxel_size < hi[k]) cells += 1;
+        }
         grid.dims[k] = std::max<int64_t>(1, int64_t(cells));
-        if (fit.cubic && fit.voxel_size <= 0) grid.dims[k] = fit.resolution;
+        if (fit.cubic && by_resolution) grid.dims[k] = fit.resolution;
         if (fit.has_dims) grid.dims[k] = fit.dims[k];
     }
 
