@@ -53,7 +53,6 @@ typedef struct {
     int anchor[3];
     float normal[3];
     float normal_lo, normal_hi;
-    float block_lo, block_hi;
     float axis[9][2];
     float axis_lo[9], axis_hi[9];
 } OvSatTriangle;
@@ -65,7 +64,6 @@ typedef struct {
     int anchor[3];
     float normal[3];
     float d1, d2;
-    float block_lo, block_hi;
     float edge_normal[3][3][2];
     float edge_offset[3][3];
     // Half-open boxes: bit 3k+j set means edge function (k, j) must be > 0 rather than >= 0 (its
@@ -105,24 +103,6 @@ OV_FN void ov_normal(OvTriangle t, float n[3]) {
         int a2 = a1 == 2 ? 0 : a1 + 1;
         n[k] = ov_edge(t, 0, a1) * ov_edge(t, 1, a2) - ov_edge(t, 0, a2) * ov_edge(t, 1, a1);
     }
-}
-
-// Block cull: a 4x4x4 block whose minimum corner is q0 is skipped iff dot(n, q0) < *lo or > *hi,
-// i.e. the whole block [q0, q0 + 4] lies on one side of the triangle's plane. The cull only saves
-// work: it is widened by a margin far above float rounding so it never drops a voxel the per-voxel
-// test would set (device == reference tests hold it to that).
-OV_FN void ov_block_cull(OvTriangle t, const float n[3], float* lo, float* hi) {
-    float p0 = n[0] * t.u[0] + n[1] * t.u[1] + n[2] * t.u[2];
-    float p1 = n[0] * t.u[3] + n[1] * t.u[4] + n[2] * t.u[5];
-    float p2 = n[0] * t.u[6] + n[1] * t.u[7] + n[2] * t.u[8];
-    float box_lo = 4.0f * (fmin(n[0], 0.0f) + fmin(n[1], 0.0f) + fmin(n[2], 0.0f));
-    float box_hi = 4.0f * (fmax(n[0], 0.0f) + fmax(n[1], 0.0f) + fmax(n[2], 0.0f));
-    float reach = 8.0f;
-    for (int i = 0; i < 9; ++i) reach = fmax(reach, fabs(t.u[i]) + 8.0f);
-    float tmin = ov_min3(p0, p1, p2), tmax = ov_max3(p0, p1, p2);
-    float margin = 1e-5f * ((box_hi - box_lo) * reach + fabs(tmin) + fabs(tmax));
-    *lo = tmin - box_hi - margin;
-    *hi = tmax - box_lo + margin;
 }
 
 // Half-open boxes [q, q+1): on an axis a the box projects to an interval whose upper end is open
@@ -165,7 +145,6 @@ OV_FN OvSatTriangle ov_setup_sat(OvTriangle t, int half_open) {
     // segment (or point) to the edge axes and the range, as a segment/box SAT needs.
     float n[3];
     ov_normal(t, n);
-    ov_block_cull(t, n, &s.block_lo, &s.block_hi);
     float p0 = n[0] * t.u[0] + n[1] * t.u[1] + n[2] * t.u[2];
     float p1 = n[0] * t.u[3] + n[1] * t.u[4] + n[2] * t.u[5];
     float p2 = n[0] * t.u[6] + n[1] * t.u[7] + n[2] * t.u[8];
@@ -276,7 +255,6 @@ OV_FN OvPefTriangle ov_setup_pef(OvTriangle t, int half_open) {
     float n[3];
     ov_normal(t, n);
     for (int k = 0; k < 3; ++k) s.normal[k] = n[k];
-    ov_block_cull(t, n, &s.block_lo, &s.block_hi);
     // Critical corner c of the unit box: the corner furthest along n. The box meets the plane iff
     // n.q + d1 and n.q + d2 do not have the same strict sign.
     float c[3];
@@ -344,7 +322,6 @@ typedef struct {
     int anchor[3];
     float normal[3];
     float plane_offset, plane_half;  // n.q + plane_offset is the plane function at the centre
-    float block_lo, block_hi;
     float edge_normal[3][3][2];
     float edge_offset[3][3];
     // Half-open voxels: bit 3k+j makes edge function (k, j) strict (> 0); bits 9 and 10 make the
@@ -362,7 +339,6 @@ OV_FN OvThinTriangle ov_setup_thin(OvTriangle t, int half_open) {
     float n[3];
     ov_normal(t, n);
     for (int k = 0; k < 3; ++k) s.normal[k] = n[k];
-    ov_block_cull(t, n, &s.block_lo, &s.block_hi);
     s.plane_offset = n[0] * (0.5f - t.u[0]) + n[1] * (0.5f - t.u[1]) + n[2] * (0.5f - t.u[2]);
     s.plane_half = 0.5f * ov_max3(fabs(n[0]), fabs(n[1]), fabs(n[2]));
     int dominant = fabs(n[0]) >= fabs(n[1]) && fabs(n[0]) >= fabs(n[2]) ? 0
@@ -409,15 +385,134 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
     return 1;
 }
 
+// Row spans. Along a voxel row (qy, qz fixed) each inequality of the three predicates compares a
+// value g(qx) = fl(...fl(a * qx)... + c) with a bound, and each step is a product or sum followed
+// by a rounding: all monotone, so g is monotone in qx and each inequality holds on an interval of
+// qx, as does the whole predicate (their intersection). The span functions bound that interval
+// from the real line a * qx + c, widened far beyond every rounding of g and of their own
+// evaluation; the kernel then finds the exact ends by testing the predicate itself inward from
+// the bound's ends. The bound only saves work, the predicate decides every voxel.
+typedef struct {
+    float lo, hi;  // qx range that holds every accepted qx
+    float reach;   // max |qx| over the row
+    // Set where a magnitude is not finite: g may then produce NaN and the accepted set need not
+    // be an interval, so the row must be tested voxel by voxel.
+    int unsafe;
+} OvSpan;
+
+// Row x_lo..x_hi (anchor-relative). Beyond 2^20 the float quotients below could round by more
+// than half a voxel, so such rows are tested voxel by voxel.
+OV_FN OvSpan ov_span_start(int x_lo, int x_hi) {
+    OvSpan r;
+    r.lo = (float)x_lo;
+    r.hi = (float)x_hi;
+    r.reach = fmax(fabs(r.lo), fabs(r.hi));
+    r.unsafe = !(r.reach <= 1048576.0f);
+    return r;
+}
+
+// Narrows r to the qx with a * qx + c >= 0 up to rounding, where c sums terms whose magnitudes
+// add up to c_abs. The rounding of g (at most a few 2^-24 of the magnitudes involved) and of this
+// evaluation (the same order) is covered by err, 1e-5 of those magnitudes.
+OV_FN void ov_span_at_least(OvSpan* r, float a, float c, float c_abs) {
+    float magnitude = fabs(a) * r->reach + c_abs;
+    if (!(magnitude <= 1e37f)) {
+        r->unsafe = 1;
+        return;
+    }
+    float err = 1e-5f * magnitude + 1e-30f;
+    if (a > 0.0f)
+        r->lo = fmax(r->lo, (-c - err) / a);
+    else if (a < 0.0f)
+        r->hi = fmin(r->hi, (-c - err) / a);
+    else if (c < -err)
+        r->lo = INFINITY;
+}
+
+// Narrows r to the qx with lo <= a * qx + c <= hi up to rounding.
+OV_FN void ov_span_between(OvSpan* r, float a, float c, float c_abs, float lo, float hi) {
+    ov_span_at_least(r, a, c - lo, c_abs + fabs(lo));
+    ov_span_at_least(r, -a, hi - c, c_abs + fabs(hi));
+}
+
+// The integer qx range [*lo, *hi] within [x_lo, x_hi] that holds every accepted qx (empty if
+// *lo > *hi). The quotients are within half a voxel of their real values (|value| < 2^23, or
+// clamped to the row anyway), which the extra voxel on each side covers.
+OV_FN void ov_span_range(OvSpan r, int x_lo, int x_hi, int* lo, int* hi) {
+    float l = fmin(fmax(r.lo, (float)x_lo), (float)x_hi + 2.0f);
+    float h = fmax(fmin(r.hi, (float)x_hi), (float)x_lo - 2.0f);
+    int l_int = (int)OV_CEIL(l) - 1, h_int = (int)OV_FLOOR(h) + 1;
+    *lo = l_int > x_lo ? l_int : x_lo;
+    *hi = h_int < x_hi ? h_int : x_hi;
+}
+
+// The edge-function terms of projection k (axes a1, a2) split into the qx coefficient and the
+// rest, for q = (qx, qy, qz): q0 is q with qx = 0.
+OV_FN void ov_span_split(float c0, float c1, int a1, int a2, const float q0[3], float* a, float* c,
+                         float* c_abs) {
+    float t0 = c0 * q0[a1], t1 = c1 * q0[a2];
+    *a = (a1 == 0 ? c0 : 0.0f) + (a2 == 0 ? c1 : 0.0f);
+    *c = t0 + t1;
+    *c_abs = fabs(t0) + fabs(t1);
+}
+
+OV_FN void ov_sat_span(const OvSatTriangle* s, float qy, float qz, OvSpan* r) {
+    float q0[3] = {0.0f, qy, qz};
+    float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
+    ov_span_between(r, s->normal[0], ny + nz, fabs(ny) + fabs(nz), s->normal_lo, s->normal_hi);
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            int i = 3 * k + j;
+            float a, c, c_abs;
+            ov_span_split(s->axis[i][0], s->axis[i][1], a1, a2, q0, &a, &c, &c_abs);
+            ov_span_between(r, a, c, c_abs, s->axis_lo[i], s->axis_hi[i]);
+        }
+    }
+}
+
+// The nine projected edge functions of PEF and thin: n . q' + offset >= 0.
+OV_FN void ov_edge_span(const float edge_normal[3][3][2], const float edge_offset[3][3], float qy,
+                        float qz, OvSpan* r) {
+    float q0[3] = {0.0f, qy, qz};
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float a, c, c_abs;
+            ov_span_split(edge_normal[k][j][0], edge_normal[k][j][1], a1, a2, q0, &a, &c, &c_abs);
+            ov_span_at_least(r, a, c + edge_offset[k][j], c_abs + fabs(edge_offset[k][j]));
+        }
+    }
+}
+
+OV_FN void ov_pef_span(const OvPefTriangle* s, float qy, float qz, OvSpan* r) {
+    float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
+    float c = ny + nz, c_abs = fabs(ny) + fabs(nz);
+    // e1 = n.q + d1 >= 0 and e2 = n.q + d2 <= 0.
+    ov_span_at_least(r, s->normal[0], c + s->d1, c_abs + fabs(s->d1));
+    ov_span_at_least(r, -s->normal[0], -(c + s->d2), c_abs + fabs(s->d2));
+    ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
+}
+
+OV_FN void ov_thin_span(const OvThinTriangle* s, float qy, float qz, OvSpan* r) {
+    float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
+    ov_span_between(r, s->normal[0], ny + nz + s->plane_offset,
+                    fabs(ny) + fabs(nz) + fabs(s->plane_offset), -s->plane_half, s->plane_half);
+    ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
+}
+
 // Bit of voxel (x, y, z) (local to its 4x4x4 block) in the block's 64-bit mask.
 OV_FN int ov_block_bit(int x, int y, int z) {
     return x + 4 * (y + 4 * z);
 }
 
 // The work of one (triangle, brick) pair: the voxels of the triangle's range inside both the
-// brick and the grid, covered by 4x4x4 blocks (aligned to the global grid) that become one work
-// item each. Returns the number of blocks (0 if the range misses the brick or the grid); sets the
-// clipped voxel range and the first block. Host and kernel count work items with this function.
+// brick and the grid, covered by 4x4x4 blocks (aligned to the global grid). Each column of blocks
+// along x (4x4 voxel rows) is one work item. Returns the number of columns (0 if the range misses
+// the brick or the grid); sets the clipped voxel range and the first block. Host and kernel count
+// work items with this function.
 typedef struct {
     int voxel_lo[3], voxel_hi[3];
     int block_lo[3], block_count[3];
@@ -440,7 +535,7 @@ OV_FN int ov_pair_work(OvRange r, int bx, int by, int bz, int brick_size, int nx
         w->voxel_hi[k] = hi;
         w->block_lo[k] = lo / 4;
         w->block_count[k] = hi / 4 - lo / 4 + 1;
-        total *= w->block_count[k];
+        if (k > 0) total *= w->block_count[k];
     }
     return total;
 }

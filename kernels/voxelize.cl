@@ -1,11 +1,13 @@
-// Conservative (26-separating) surface voxelization, OpenCL C 1.2.
+// Conservative (26-separating) and thin surface voxelization, OpenCL C 1.2.
 //
 // Two phases. setup_*: one work item per triangle computes the per-triangle constants of the
-// overlap test once. voxelize_*: one work item per (triangle, 4x4x4 block) tests the block's
-// voxels, gathers a 64-bit mask privately and ORs it into the brick's bits with at most two
-// 32-bit atomics. Work items are numbered pair by pair; an item finds its (triangle, brick) pair
-// by binary search in the pairs' first-item offsets, so a huge triangle spreads over many items
-// instead of serialising on one.
+// overlap test once. voxelize_*: one work item per (triangle, column of 4x4x4 blocks along x)
+// finds, for each of the column's 4x4 voxel rows, the exact run of voxels the triangle overlaps
+// (a row meets it in one interval; see the row spans in voxel_math.h), turns the runs into each
+// block's 64-bit mask with shifts and ORs it into the brick's bits with at most two 32-bit atomics.
+// Work items are numbered pair by pair; an item finds its (triangle, brick) pair by binary search
+// in the pairs' first-item offsets, so a huge triangle spreads over many items instead of
+// serialising on one.
 #include "voxel_math.h"
 #include "work_items.h"
 
@@ -30,7 +32,7 @@ __kernel void setup_thin(__global const OvTriangle* triangles, uint count, int h
 typedef struct {
     uint triangle, slot;
     int brick[3];
-    int block[3];  // global block coordinates
+    int block_y, block_z;  // global block coordinates of the column
     OvPairWork work;
 } Item;
 
@@ -49,64 +51,103 @@ static int decode_item(__global const uint* pair_triangle, __global const uint* 
     OvRange r = ranges[it->triangle];
     ov_pair_work(r, it->brick[0], it->brick[1], it->brick[2], brick_size, nx, ny, nz, &it->work);
     uint index_in_pair = item - pair_first_item[p];
-    uint cx = (uint)it->work.block_count[0], cy = (uint)it->work.block_count[1];
-    it->block[0] = it->work.block_lo[0] + (int)(index_in_pair % cx);
-    it->block[1] = it->work.block_lo[1] + (int)((index_in_pair / cx) % cy);
-    it->block[2] = it->work.block_lo[2] + (int)(index_in_pair / (cx * cy));
+    uint cy = (uint)it->work.block_count[1];
+    it->block_y = it->work.block_lo[1] + (int)(index_in_pair % cy);
+    it->block_z = it->work.block_lo[2] + (int)(index_in_pair / cy);
     return 1;
 }
 
-static void store_block(__global uint* bits, const Item* it, int brick_size, uint mask_lo,
-                        uint mask_hi) {
+static void store_block(__global uint* bits, const Item* it, int block_x, int brick_size,
+                        uint mask_lo, uint mask_hi) {
     int nb = brick_size / 4;
-    int bx = it->block[0] - it->brick[0] * nb;
-    int by = it->block[1] - it->brick[1] * nb;
-    int bz = it->block[2] - it->brick[2] * nb;
+    int bx = block_x - it->brick[0] * nb;
+    int by = it->block_y - it->brick[1] * nb;
+    int bz = it->block_z - it->brick[2] * nb;
     size_t words_per_brick = 2 * (size_t)nb * nb * nb;
     size_t word = it->slot * words_per_brick + 2 * (size_t)(bx + nb * (by + nb * bz));
     if (mask_lo) atomic_or(&bits[word], mask_lo);
     if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
 }
 
+// The four x bits of row r (bit r * 4 of a block mask: ov_block_bit(x, y, z) = x + 4 * (y + 4z))
+// for the voxels first..last clipped to the block starting at x0.
+static uint row_bits(int first, int last, int x0) {
+    int a = max(first, x0) - x0, b = min(last, x0 + 3) - x0;
+    return a <= b ? (0xFu << a) & (0xFu >> (3 - b)) : 0u;
+}
+
 // One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS its
-// per-voxel test.
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS)                                           \
-    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,        \
-                       __global const uint* pair_triangle, __global const uint* pair_slot,  \
-                       __global const uint* pair_first_item, uint pair_count,               \
-                       __global const int* slot_brick, uint item_base, uint item_end,       \
-                       int brick_size, int nx, int ny, int nz, __global uint* bits) {       \
-        Item it;                                                                            \
-        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, \
-                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))         \
-            return;                                                                         \
-        SETUP s = setups[it.triangle];                                                      \
-        /* Skip the block if it lies entirely on one side of the triangle's plane. */       \
-        float block_dn = s.normal[0] * (float)(it.block[0] * 4 - s.anchor[0]) +             \
-                         s.normal[1] * (float)(it.block[1] * 4 - s.anchor[1]) +             \
-                         s.normal[2] * (float)(it.block[2] * 4 - s.anchor[2]);              \
-        if (block_dn < s.block_lo || block_dn > s.block_hi) return;                         \
-        uint mask_lo = 0, mask_hi = 0;                                                      \
-        int lo[3], hi[3];                                                                   \
-        for (int k = 0; k < 3; ++k) {                                                       \
-            lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                              \
-            hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                          \
-        }                                                                                   \
-        for (int z = lo[2]; z <= hi[2]; ++z)                                                \
-            for (int y = lo[1]; y <= hi[1]; ++y)                                            \
-                for (int x = lo[0]; x <= hi[0]; ++x) {                                      \
-                    if (!OVERLAPS(&s, (float)(x - s.anchor[0]), (float)(y - s.anchor[1]),   \
-                                  (float)(z - s.anchor[2])))                                \
-                        continue;                                                           \
-                    int bit = ov_block_bit(x & 3, y & 3, z & 3);                            \
-                    if (bit < 32)                                                           \
-                        mask_lo |= 1u << bit;                                               \
-                    else                                                                    \
-                        mask_hi |= 1u << (bit - 32);                                        \
-                }                                                                           \
-        store_block(bits, &it, brick_size, mask_lo, mask_hi);                               \
+// per-voxel test, SPAN its row bound.
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS, SPAN)                                           \
+    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,              \
+                       __global const uint* pair_triangle, __global const uint* pair_slot,        \
+                       __global const uint* pair_first_item, uint pair_count,                     \
+                       __global const int* slot_brick, uint item_base, uint item_end,             \
+                       int brick_size, int nx, int ny, int nz, __global uint* bits) {             \
+        Item it;                                                                                  \
+        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick,       \
+                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))               \
+            return;                                                                               \
+        SETUP s = setups[it.triangle];                                                            \
+        /* Rows of the column, anchor-relative: qx over the pair's range, qy and qz in the */     \
+        /* column's blocks. Row r = (y & 3) + 4 * (z & 3) keeps its run in first[r]..last[r] */   \
+        /* (global x; empty if first > last). */                                                  \
+        int x_lo = it.work.voxel_lo[0] - s.anchor[0], x_hi = it.work.voxel_hi[0] - s.anchor[0];   \
+        int y_lo = max(it.work.voxel_lo[1], it.block_y * 4);                                      \
+        int y_hi = min(it.work.voxel_hi[1], it.block_y * 4 + 3);                                  \
+        int z_lo = max(it.work.voxel_lo[2], it.block_z * 4);                                      \
+        int z_hi = min(it.work.voxel_hi[2], it.block_z * 4 + 3);                                  \
+        int first[16], last[16];                                                                  \
+        int unsafe = 0;                                                                           \
+        for (int r = 0; r < 16; ++r) {                                                            \
+            first[r] = 1;                                                                         \
+            last[r] = 0;                                                                          \
+        }                                                                                         \
+        for (int z = z_lo; z <= z_hi; ++z)                                                        \
+            for (int y = y_lo; y <= y_hi; ++y) {                                                  \
+                float qy = (float)(y - s.anchor[1]), qz = (float)(z - s.anchor[2]);               \
+                OvSpan span = ov_span_start(x_lo, x_hi);                                          \
+                SPAN(&s, qy, qz, &span);                                                          \
+                unsafe |= span.unsafe;                                                            \
+                int lo, hi;                                                                       \
+                ov_span_range(span, x_lo, x_hi, &lo, &hi);                                        \
+                /* The accepted qx form one interval inside [lo, hi]: its ends are the first */   \
+                /* voxel that passes from either side. */                                         \
+                while (lo <= hi && !OVERLAPS(&s, (float)lo, qy, qz)) ++lo;                        \
+                while (hi > lo && !OVERLAPS(&s, (float)hi, qy, qz)) --hi;                         \
+                int r = (y & 3) + 4 * (z & 3);                                                    \
+                first[r] = lo + s.anchor[0];                                                      \
+                last[r] = hi + s.anchor[0];                                                       \
+            }                                                                                     \
+        for (int bx = it.work.block_lo[0]; bx < it.work.block_lo[0] + it.work.block_count[0];     \
+             ++bx) {                                                                              \
+            uint mask_lo = 0, mask_hi = 0;                                                        \
+            if (!unsafe) {                                                                        \
+                for (int r = 0; r < 8; ++r) {                                                     \
+                    mask_lo |= row_bits(first[r], last[r], bx * 4) << (4 * r);                    \
+                    mask_hi |= row_bits(first[r + 8], last[r + 8], bx * 4) << (4 * r);            \
+                }                                                                                 \
+            } else {                                                                              \
+                /* Non-finite magnitudes: the runs may have gaps, test every voxel. */            \
+                int xb_lo = max(it.work.voxel_lo[0], bx * 4);                                     \
+                int xb_hi = min(it.work.voxel_hi[0], bx * 4 + 3);                                 \
+                for (int z = z_lo; z <= z_hi; ++z)                                                \
+                    for (int y = y_lo; y <= y_hi; ++y)                                            \
+                        for (int x = xb_lo; x <= xb_hi; ++x) {                                    \
+                            if (!OVERLAPS(&s, (float)(x - s.anchor[0]), (float)(y - s.anchor[1]), \
+                                          (float)(z - s.anchor[2])))                              \
+                                continue;                                                         \
+                            int bit = ov_block_bit(x & 3, y & 3, z & 3);                          \
+                            if (bit < 32)                                                         \
+                                mask_lo |= 1u << bit;                                             \
+                            else                                                                  \
+                                mask_hi |= 1u << (bit - 32);                                      \
+                        }                                                                         \
+            }                                                                                     \
+            store_block(bits, &it, bx, brick_size, mask_lo, mask_hi);                             \
+        }                                                                                         \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps)
-OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps, ov_sat_span)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps, ov_pef_span)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps, ov_thin_span)
