@@ -395,19 +395,37 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
 typedef struct {
     float lo, hi;  // qx range that holds every accepted qx
     float reach;   // max |qx| over the row
-    // Set where a magnitude is not finite: g may then produce NaN and the accepted set need not
-    // be an interval, so the row must be tested voxel by voxel.
-    int unsafe;
 } OvSpan;
 
-// Row x_lo..x_hi (anchor-relative). Beyond 2^20 the float quotients below could round by more
-// than half a voxel, so such rows are tested voxel by voxel.
+// Preconditions of the span bound and of the interval property: every per-triangle constant at
+// most 1e30 in magnitude (so no product or sum of up to four terms overflows to infinity or NaN,
+// which would break monotonicity), and |qx|, |qy|, |qz| at most 2^20 (checked by the caller).
+OV_FN int ov_moderate(const float* v, int n) {
+    for (int i = 0; i < n; ++i)
+        if (!(fabs(v[i]) <= 1e30f)) return 0;
+    return 1;
+}
+OV_FN int ov_sat_moderate(const OvSatTriangle* s) {
+    return ov_moderate(s->normal, 3) && ov_moderate(&s->normal_lo, 1) &&
+           ov_moderate(&s->normal_hi, 1) && ov_moderate(&s->axis[0][0], 18) &&
+           ov_moderate(s->axis_lo, 9) && ov_moderate(s->axis_hi, 9);
+}
+OV_FN int ov_pef_moderate(const OvPefTriangle* s) {
+    return ov_moderate(s->normal, 3) && ov_moderate(&s->d1, 1) && ov_moderate(&s->d2, 1) &&
+           ov_moderate(&s->edge_normal[0][0][0], 18) && ov_moderate(&s->edge_offset[0][0], 9);
+}
+OV_FN int ov_thin_moderate(const OvThinTriangle* s) {
+    return ov_moderate(s->normal, 3) && ov_moderate(&s->plane_offset, 1) &&
+           ov_moderate(&s->plane_half, 1) && ov_moderate(&s->edge_normal[0][0][0], 18) &&
+           ov_moderate(&s->edge_offset[0][0], 9);
+}
+
+// Row x_lo..x_hi (anchor-relative, |x| <= 2^20).
 OV_FN OvSpan ov_span_start(int x_lo, int x_hi) {
     OvSpan r;
     r.lo = (float)x_lo;
     r.hi = (float)x_hi;
     r.reach = fmax(fabs(r.lo), fabs(r.hi));
-    r.unsafe = !(r.reach <= 1048576.0f);
     return r;
 }
 
@@ -415,12 +433,7 @@ OV_FN OvSpan ov_span_start(int x_lo, int x_hi) {
 // add up to c_abs. The rounding of g (at most a few 2^-24 of the magnitudes involved) and of this
 // evaluation (the same order) is covered by err, 1e-5 of those magnitudes.
 OV_FN void ov_span_at_least(OvSpan* r, float a, float c, float c_abs) {
-    float magnitude = fabs(a) * r->reach + c_abs;
-    if (!(magnitude <= 1e37f)) {
-        r->unsafe = 1;
-        return;
-    }
-    float err = 1e-5f * magnitude + 1e-30f;
+    float err = 1e-5f * (fabs(a) * r->reach + c_abs) + 1e-30f;
     if (a > 0.0f)
         r->lo = fmax(r->lo, (-c - err) / a);
     else if (a < 0.0f)
@@ -456,11 +469,12 @@ OV_FN void ov_span_split(float c0, float c1, int a1, int a2, const float q0[3], 
     *c_abs = fabs(t0) + fabs(t1);
 }
 
+// Projection 0 is left out as above.
 OV_FN void ov_sat_span(const OvSatTriangle* s, float qy, float qz, OvSpan* r) {
     float q0[3] = {0.0f, qy, qz};
     float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
     ov_span_between(r, s->normal[0], ny + nz, fabs(ny) + fabs(nz), s->normal_lo, s->normal_hi);
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 1; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
         for (int j = 0; j < 3; ++j) {
@@ -472,11 +486,12 @@ OV_FN void ov_sat_span(const OvSatTriangle* s, float qy, float qz, OvSpan* r) {
     }
 }
 
-// The nine projected edge functions of PEF and thin: n . q' + offset >= 0.
+// The projected edge functions of PEF and thin, n . q' + offset >= 0, of projections 1 and 2 (those
+// of projection 0 do not depend on qx and are tested exactly per row).
 OV_FN void ov_edge_span(const float edge_normal[3][3][2], const float edge_offset[3][3], float qy,
                         float qz, OvSpan* r) {
     float q0[3] = {0.0f, qy, qz};
-    for (int k = 0; k < 3; ++k) {
+    for (int k = 1; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
         for (int j = 0; j < 3; ++j) {
@@ -501,6 +516,30 @@ OV_FN void ov_thin_span(const OvThinTriangle* s, float qy, float qz, OvSpan* r) 
     ov_span_between(r, s->normal[0], ny + nz + s->plane_offset,
                     fabs(ny) + fabs(nz) + fabs(s->plane_offset), -s->plane_half, s->plane_half);
     ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
+}
+
+// The tests of projection k = 0 (axes y, z) do not depend on qx. Evaluated exactly as the
+// per-voxel tests evaluate them, they reject a whole row at once.
+OV_FN int ov_sat_row_possible(const OvSatTriangle* s, float qy, float qz) {
+    for (int j = 0; j < 3; ++j) {
+        float d = s->axis[j][0] * qy + s->axis[j][1] * qz;
+        if (d < s->axis_lo[j] || d > s->axis_hi[j]) return 0;
+    }
+    return 1;
+}
+OV_FN int ov_edge_row_possible(const float edge_normal[3][3][2], const float edge_offset[3][3],
+                               int strict, float qy, float qz) {
+    for (int j = 0; j < 3; ++j) {
+        float e = edge_normal[0][j][0] * qy + edge_normal[0][j][1] * qz + edge_offset[0][j];
+        if (e < 0.0f || (e == 0.0f && (strict >> j & 1))) return 0;
+    }
+    return 1;
+}
+OV_FN int ov_pef_row_possible(const OvPefTriangle* s, float qy, float qz) {
+    return ov_edge_row_possible(s->edge_normal, s->edge_offset, s->strict, qy, qz);
+}
+OV_FN int ov_thin_row_possible(const OvThinTriangle* s, float qy, float qz) {
+    return ov_edge_row_possible(s->edge_normal, s->edge_offset, s->strict, qy, qz);
 }
 
 // Bit of voxel (x, y, z) (local to its 4x4x4 block) in the block's 64-bit mask.

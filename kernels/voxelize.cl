@@ -76,9 +76,13 @@ static uint row_bits(int first, int last, int x0) {
     return a <= b ? (0xFu << a) & (0xFu >> (3 - b)) : 0u;
 }
 
+// Rows shorter than this many voxels (plus one) skip the span bound.
+#define OV_SPAN_MIN_ROW 8
+
 // One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS its
-// per-voxel test, SPAN its row bound.
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS, SPAN)                                           \
+// per-voxel test, ROW_POSSIBLE its exact whole-row rejection, SPAN its row bound and MODERATE the
+// bound's precondition.
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS, ROW_POSSIBLE, SPAN, MODERATE)                   \
     __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,              \
                        __global const uint* pair_triangle, __global const uint* pair_slot,        \
                        __global const uint* pair_first_item, uint pair_count,                     \
@@ -98,19 +102,26 @@ static uint row_bits(int first, int last, int x0) {
         int z_lo = max(it.work.voxel_lo[2], it.block_z * 4);                                      \
         int z_hi = min(it.work.voxel_hi[2], it.block_z * 4 + 3);                                  \
         int first[16], last[16];                                                                  \
-        int unsafe = 0;                                                                           \
+        /* Beyond the span preconditions the runs may have gaps: test every voxel. */             \
+        int reach = max(max(abs(x_lo), abs(x_hi)),                                                \
+                        max(max(abs(y_lo - s.anchor[1]), abs(y_hi - s.anchor[1])),                \
+                            max(abs(z_lo - s.anchor[2]), abs(z_hi - s.anchor[2]))));              \
+        int unsafe = reach > (1 << 20) || !MODERATE(&s);                                          \
         for (int r = 0; r < 16; ++r) {                                                            \
             first[r] = 1;                                                                         \
             last[r] = 0;                                                                          \
         }                                                                                         \
-        for (int z = z_lo; z <= z_hi; ++z)                                                        \
+        for (int z = z_lo; z <= z_hi && !unsafe; ++z)                                             \
             for (int y = y_lo; y <= y_hi; ++y) {                                                  \
                 float qy = (float)(y - s.anchor[1]), qz = (float)(z - s.anchor[2]);               \
-                OvSpan span = ov_span_start(x_lo, x_hi);                                          \
-                SPAN(&s, qy, qz, &span);                                                          \
-                unsafe |= span.unsafe;                                                            \
-                int lo, hi;                                                                       \
-                ov_span_range(span, x_lo, x_hi, &lo, &hi);                                        \
+                if (!ROW_POSSIBLE(&s, qy, qz)) continue;                                          \
+                int lo = x_lo, hi = x_hi;                                                         \
+                /* Short rows: the walks below are cheaper than the bound. */                     \
+                if (x_hi - x_lo >= OV_SPAN_MIN_ROW) {                                             \
+                    OvSpan span = ov_span_start(x_lo, x_hi);                                      \
+                    SPAN(&s, qy, qz, &span);                                                      \
+                    ov_span_range(span, x_lo, x_hi, &lo, &hi);                                    \
+                }                                                                                 \
                 /* The accepted qx form one interval inside [lo, hi]: its ends are the first */   \
                 /* voxel that passes from either side. */                                         \
                 while (lo <= hi && !OVERLAPS(&s, (float)lo, qy, qz)) ++lo;                        \
@@ -148,6 +159,9 @@ static uint row_bits(int first, int last, int x0) {
         }                                                                                         \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps, ov_sat_span)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps, ov_pef_span)
-OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps, ov_thin_span)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps, ov_sat_row_possible, ov_sat_span,
+                   ov_sat_moderate)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps, ov_pef_row_possible, ov_pef_span,
+                   ov_pef_moderate)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps, ov_thin_row_possible,
+                   ov_thin_span, ov_thin_moderate)
