@@ -470,13 +470,10 @@ OV_FN void ov_span_split(float c0, float c1, int a1, int a2, const float q0[3], 
 }
 
 // Projection 0 is left out as above.
-// The plane test always; the edge tests only if `edges` (they cost more than they save on short
-// rows).
-OV_FN void ov_sat_span(const OvSatTriangle* s, float qy, float qz, int edges, OvSpan* r) {
+OV_FN void ov_sat_span(const OvSatTriangle* s, float qy, float qz, OvSpan* r) {
     float q0[3] = {0.0f, qy, qz};
     float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
     ov_span_between(r, s->normal[0], ny + nz, fabs(ny) + fabs(nz), s->normal_lo, s->normal_hi);
-    if (!edges) return;
     for (int k = 1; k < 3; ++k) {
         int a1 = k == 2 ? 0 : k + 1;
         int a2 = a1 == 2 ? 0 : a1 + 1;
@@ -505,20 +502,20 @@ OV_FN void ov_edge_span(const float edge_normal[3][3][2], const float edge_offse
     }
 }
 
-OV_FN void ov_pef_span(const OvPefTriangle* s, float qy, float qz, int edges, OvSpan* r) {
+OV_FN void ov_pef_span(const OvPefTriangle* s, float qy, float qz, OvSpan* r) {
     float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
     float c = ny + nz, c_abs = fabs(ny) + fabs(nz);
     // e1 = n.q + d1 >= 0 and e2 = n.q + d2 <= 0.
     ov_span_at_least(r, s->normal[0], c + s->d1, c_abs + fabs(s->d1));
     ov_span_at_least(r, -s->normal[0], -(c + s->d2), c_abs + fabs(s->d2));
-    if (edges) ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
+    ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
 }
 
-OV_FN void ov_thin_span(const OvThinTriangle* s, float qy, float qz, int edges, OvSpan* r) {
+OV_FN void ov_thin_span(const OvThinTriangle* s, float qy, float qz, OvSpan* r) {
     float ny = s->normal[1] * qy, nz = s->normal[2] * qz;
     ov_span_between(r, s->normal[0], ny + nz + s->plane_offset,
                     fabs(ny) + fabs(nz) + fabs(s->plane_offset), -s->plane_half, s->plane_half);
-    if (edges) ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
+    ov_edge_span(s->edge_normal, s->edge_offset, qy, qz, r);
 }
 
 // The tests of projection k = 0 (axes y, z) do not depend on qx. Evaluated exactly as the

@@ -76,9 +76,8 @@ static uint row_bits(int first, int last, int x0) {
     return a <= b ? (0xFu << a) & (0xFu >> (3 - b)) : 0u;
 }
 
-// Rows of more than OV_PLANE_MIN_ROW voxels are bounded by the plane test, rows of more than
-// OV_SPAN_MIN_ROW by every test (measured with callgrind on PoCL).
-#define OV_PLANE_MIN_ROW 2
+// Rows of more than this many voxels are bounded before the walks. (Bounding shorter rows, even by
+// the plane test alone, cost more instructions than it saved: callgrind, bunny 512^3, PoCL.)
 #define OV_SPAN_MIN_ROW 8
 
 // One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS its
@@ -118,11 +117,10 @@ static uint row_bits(int first, int last, int x0) {
                 float qy = (float)(y - s.anchor[1]), qz = (float)(z - s.anchor[2]);               \
                 if (!ROW_POSSIBLE(&s, qy, qz)) continue;                                          \
                 int lo = x_lo, hi = x_hi;                                                         \
-                /* Bound the row by the plane alone, or on long rows by every test: on */         \
-                /* shorter rows the walks below cost less than the bound. */                      \
-                if (x_hi - x_lo >= OV_PLANE_MIN_ROW) {                                            \
+                /* Short rows: the walks below cost less than the bound. */                       \
+                if (x_hi - x_lo >= OV_SPAN_MIN_ROW) {                                             \
                     OvSpan span = ov_span_start(x_lo, x_hi);                                      \
-                    SPAN(&s, qy, qz, x_hi - x_lo >= OV_SPAN_MIN_ROW, &span);                      \
+                    SPAN(&s, qy, qz, &span);                                                      \
                     ov_span_range(span, x_lo, x_hi, &lo, &hi);                                    \
                 }                                                                                 \
                 /* The accepted qx form one interval inside [lo, hi]: its ends are the first */   \
