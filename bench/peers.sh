@@ -32,7 +32,7 @@ device=()
 
 find_tool() {  # find_tool ENV_VALUE NAME: prints the path, or nothing
     if [ -n "$1" ]; then
-        [ -x "$1" ] && echo "$1"
+        if [ -x "$1" ]; then echo "$1"; else echo "peers.sh: $1 is not executable" >&2; fi
     else
         command -v "$2" || true
     fi
