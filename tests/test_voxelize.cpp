@@ -104,6 +104,43 @@ TEST(DeviceMatchesReferenceForModes, ThinAndHalfOpen) {
     }
 }
 
+// The kernels find each voxel row's run from a bound and walk to its exact ends; the bound is
+// widest where a test's x coefficient is tiny. Large triangles nearly parallel to the rows (normals
+// almost perpendicular to x, tilted by 1e-7 to 1e-2), on and just off voxel planes, with every
+// predicate and boundary rule, give long rows on which any bound that is too tight drops voxels.
+TEST(DeviceMatchesReferenceForModes, LongRowsNearlyParallelToX) {
+    const Grid g = unit_grid(90, 37, 41);
+    Mesh m;
+    uint32_t state = 7;
+    const auto next = [&state] {
+        state = state * 1664525u + 1013904223u;
+        return double(state >> 8) / double(1u << 24);
+    };
+    for (double tilt : {0.0, 1e-7, 3e-5, 1e-2}) {
+        for (double offset : {10.0, 10.5, 10.0 + 1e-6}) {
+            // Plane y = offset + tilt * x (+ a little z), and the same with y and z swapped.
+            const double a = -2 + 4 * next(), b = 92 * next(), z0 = 40 * next();
+            add_triangle(m, {a, offset + tilt * a, z0}, {b, offset + tilt * b, 40 - z0},
+                         {0.5 * (a + b), offset + tilt * (0.5 * (a + b)) + 1e-3, 20 * next()});
+            add_triangle(m, {a, z0 * 0.9, offset - tilt * a}, {b, 36 - z0 * 0.9, offset - tilt * b},
+                         {0.5 * (a + b), 18 * next(), offset + 2 * tilt});
+        }
+    }
+    for (int brick : {16, 64}) {
+        for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
+            VoxelizeOptions thin = options(OverlapTest::PEF, brick);
+            thin.mode = VoxelizeMode::Thin;
+            thin.boundary = boundary;
+            expect_same(device().voxelize(m, g, thin), voxelize_reference(m, g, thin));
+            for (OverlapTest test : kTests) {
+                VoxelizeOptions o = options(test, brick);
+                o.boundary = boundary;
+                expect_same(device().voxelize(m, g, o), voxelize_reference(m, g, o));
+            }
+        }
+    }
+}
+
 // A grid whose dense bit array is 64x the device budget still works, in many batches, and the
 // bunny's surface is exact up to rounding against the double-precision test.
 TEST(Tiling, GridLargerThanDeviceBudget) {

@@ -288,7 +288,7 @@ void print_stats(const RunReport& r) {
     std::printf("timing (seconds)\n");
     std::printf("  load          %9.4f\n", t.load);
     std::printf("  fit           %9.4f\n", t.fit);
-    std::printf("  device open   %9.4f  (OpenCL context, queue and programs)\n", t.device);
+    std::printf("  device open   %9.4f  (OpenCL platform, context and queue)\n", t.device);
     std::printf("  voxelize      %9.4f\n", t.voxelize);
     std::printf("    binning     %9.4f\n", s.seconds_binning);
     std::printf("    upload      %9.4f\n", s.seconds_upload);
@@ -381,12 +381,25 @@ int run_devices() {
     return 0;
 }
 
-// The device, unless the CPU reference was asked for; opening it builds (or loads cached) kernels,
-// so it is timed apart from the run.
+// The device, unless the CPU reference was asked for. Kernels are built (or loaded from the disk
+// cache) when first used; a build, which only the first run on a device pays, is announced on
+// stderr because it can take tens of seconds.
 std::optional<oclvox::Device> open_device(bool reference, const std::string& selector,
                                           double& seconds) {
     std::optional<oclvox::Device> device;
-    if (!reference) device.emplace(timed(seconds, [&] { return oclvox::Device::open(selector); }));
+    if (!reference) {
+        device.emplace(timed(seconds, [&] { return oclvox::Device::open(selector); }));
+        device->on_kernel_compile([](const oclvox::Device::KernelCompile& c) {
+            if (!c.finished)
+                std::fprintf(stderr,
+                             "compiling kernels '%s' for this device (first run; cached for later "
+                             "runs)...\n",
+                             c.program.c_str());
+            else
+                std::fprintf(stderr, "compiled kernels '%s' in %.1f s\n", c.program.c_str(),
+                             c.seconds);
+        });
+    }
     stop_if_interrupted();
     return device;
 }
@@ -739,7 +752,7 @@ void print_field_stats(const FieldReport& r) {
     std::printf("timing (seconds)\n");
     std::printf("  load          %9.4f\n", t.load);
     std::printf("  fit           %9.4f\n", t.fit);
-    std::printf("  device open   %9.4f  (OpenCL context, queue and programs)\n", t.device);
+    std::printf("  device open   %9.4f  (OpenCL platform, context and queue)\n", t.device);
     std::printf("  field         %9.4f\n", t.compute);
     std::printf("  mesh          %9.4f\n", t.mesh);
     std::printf("  write         %9.4f\n", t.write);

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -301,6 +302,9 @@ Device& Device::operator=(Device&&) noexcept = default;
 const DeviceInfo& Device::info() const {
     return impl_->info;
 }
+void Device::on_kernel_compile(std::function<void(const KernelCompile&)> callback) {
+    impl_->on_compile = std::move(callback);
+}
 
 Device Device::open(const std::string& selector) {
     const std::vector<Found> found = all_devices();
@@ -327,6 +331,8 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
     const std::string options = injected ? build_options + " " + injected : build_options;
     cl::Program program;
     if (path.empty() || !load_cached(*this, path, program)) {
+        const auto start = std::chrono::steady_clock::now();
+        if (on_compile) on_compile({source.name, false, 0.0});
         try {
             program = cl::Program(context, std::string(source.text));
         } catch (const cl::Error& e) {
@@ -340,6 +346,10 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
                                    build_log(program, device));
         }
         if (!path.empty()) store_cached(program, path);
+        if (on_compile)
+            on_compile(
+                {source.name, true,
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
     }
     return programs.emplace(source.sha256, program).first->second;
 }

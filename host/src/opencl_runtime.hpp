@@ -59,6 +59,7 @@ struct Device::Impl {
     cl::CommandQueue queue;
     std::string build_options;                    // detail::build_options for this device
     std::map<std::string, cl::Program> programs;  // by source hash: built once per context
+    std::function<void(const Device::KernelCompile&)> on_compile;  // may be empty
 
     // The built program for `source`: from this context's cache, else the disk cache, else
     // compiled (and then stored on disk). Throws KernelBuildError with the build log.

@@ -259,6 +259,17 @@ class Device {
 
     const DeviceInfo& info() const;
 
+    // Kernels are compiled for a device the first time they are needed and cached on disk
+    // (OCLVOX_CACHE_DIR, else $XDG_CACHE_HOME/oclvox or ~/.cache/oclvox); a compile can take tens
+    // of seconds on a CPU device. The callback hears of each compile when it starts (finished =
+    // false) and when it ends (finished = true, seconds it took); cached loads are not reported.
+    struct KernelCompile {
+        std::string program;
+        bool finished = false;
+        double seconds = 0;
+    };
+    void on_kernel_compile(std::function<void(const KernelCompile&)> callback);
+
     SparseVoxels voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                           VoxelizeStats* stats = nullptr);
 

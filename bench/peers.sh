@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# Side-by-side surface voxelization timings: oclvox against the tools users would otherwise pick,
+# same meshes and resolutions, in one run. Each figure is the voxelization call alone (no loading,
+# no writing), in seconds, the minimum of REPEAT runs.
+#
+#   bash bench/peers.sh [RES...]              (default: 256 1024)
+#
+# Peers are optional; the script says which it found:
+#   NAIVE_TRIBOX    path of naive_tribox (plain OpenMP 13-axis SAT over each triangle's bbox;
+#                   build: g++ -O3 -march=native -fopenmp -o naive_tribox naive_tribox.cpp),
+#                   else `naive_tribox` on PATH
+#   CUDA_VOXELIZER  path of cuda_voxelizer, else `cuda_voxelizer` on PATH; run with -cpu unless
+#                   CUDA_VOXELIZER_GPU=1
+# Other settings: OCLVOX (default build/oclvox), OCLVOX_DEVICE (device selector), MESHES (mesh
+# files, default bunny, buildings and motorBike from ../shared/data/meshes), REPEAT (default 3),
+# THREADS (naive_tribox threads, default: all cores).
+#
+# Grids: oclvox and naive_tribox fit RES voxels to the longest side of the mesh's bounding box;
+# cuda_voxelizer pads the box to a cube first. So the grids agree in voxel size, not in origin.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+resolutions=("$@")
+[ ${#resolutions[@]} -gt 0 ] || resolutions=(256 1024)
+mesh_dir=${OCLVOX_MESH_DIR:-../shared/data/meshes}
+read -r -a meshes <<< "${MESHES:-$mesh_dir/stanford-bunny.obj $mesh_dir/buildings.obj $mesh_dir/motorBike.obj}"
+repeat=${REPEAT:-3}
+threads=${THREADS:-$(nproc)}
+oclvox=${OCLVOX:-build/oclvox}
+device=()
+[ -z "${OCLVOX_DEVICE:-}" ] || device=(--device "$OCLVOX_DEVICE")
+
+find_tool() {  # find_tool ENV_VALUE NAME: prints the path, or nothing
+    if [ -n "$1" ]; then
+        if [ -x "$1" ]; then echo "$1"; else echo "peers.sh: $1 is not executable" >&2; fi
+    else
+        command -v "$2" || true
+    fi
+}
+naive=$(find_tool "${NAIVE_TRIBOX:-}" naive_tribox)
+cuda=$(find_tool "${CUDA_VOXELIZER:-}" cuda_voxelizer)
+cuda_flag=-cpu
+[ "${CUDA_VOXELIZER_GPU:-0}" = 1 ] && cuda_flag=
+
+[ -x "$oclvox" ] || { echo "peers.sh: $oclvox not found; build first (scripts/build.sh)" >&2; exit 1; }
+echo "oclvox:         $oclvox (${OCLVOX_DEVICE:-default device})"
+echo "naive_tribox:   ${naive:-not found (set NAIVE_TRIBOX)}${naive:+ ($threads threads)}"
+echo "cuda_voxelizer: ${cuda:-not found (set CUDA_VOXELIZER)}${cuda:+ (${cuda_flag:-GPU})}"
+echo "machine: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores;" \
+    "commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown); min of $repeat runs"
+echo
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+min_of() { sort -g | head -n1; }
+
+oclvox_seconds() {  # mesh res: the "voxelize" phase of --stats
+    for _ in $(seq "$repeat"); do
+        "$oclvox" voxelize "${device[@]}" "$1" -r "$2" -o "$work/out.binvox" --stats 2>&1 |
+            awk '$1 == "voxelize" { print $2 }'
+    done | min_of
+}
+
+naive_seconds() {
+    "$naive" "$1" "$2" --threads "$threads" --repeat "$repeat" | sed -n 's/.* t_vox=\([^ ]*\).*/\1/p'
+}
+
+cuda_seconds() {  # cuda_voxelizer writes beside its input: work on a copy
+    local copy="$work/$(basename "$1")"
+    cp "$1" "$copy"
+    for _ in $(seq "$repeat"); do
+        # shellcheck disable=SC2086
+        "$cuda" -f "$copy" -s "$2" -o binvox $cuda_flag 2>&1 |
+            sed -n 's/.*voxelization time: *\([0-9.]*\) *ms.*/\1/p' | awk '{ print $1 / 1000 }'
+    done | min_of
+    rm -f "$copy"*
+}
+
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { if (a > 0 && b > 0) printf "%.2f", b / a; else print "-" }'; }
+
+echo "| mesh | res | oclvox s | naive_tribox s | cuda_voxelizer s | naive / oclvox |"
+echo "|---|---:|---:|---:|---:|---:|"
+for mesh in "${meshes[@]}"; do
+    for res in "${resolutions[@]}"; do
+        ours=$(oclvox_seconds "$mesh" "$res")
+        n=-
+        c=-
+        [ -z "$naive" ] || n=$(naive_seconds "$mesh" "$res")
+        [ -z "$cuda" ] || c=$(cuda_seconds "$mesh" "$res")
+        echo "| $(basename "$mesh") | $res | $ours | ${n:--} | ${c:--} | $(ratio "$ours" "${n:-0}") |"
+    done
+done
