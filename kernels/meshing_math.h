@@ -16,6 +16,10 @@
 // writes them. So vertices come out ordered by owner, and a triangle finds the index of a vertex
 // owned by a neighbour from that neighbour's offset.
 //
+// Counts and offsets are stored only for the samples of the active bricks (those that can hold
+// surface, see OmTiling): the storage follows the surface, not the grid, while the prefix sums
+// still run in global sample order, so the mesh does not depend on the tiling.
+//
 // Vertices are written as their owner sample plus a float position relative to it in voxel units
 // (a cell-local position in [0,1]^3), so precision does not depend on the grid size; the host
 // converts them to world coordinates in double.
@@ -35,6 +39,7 @@
 #define OM_UCHAR uchar
 #define OM_LONG long
 #else
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
@@ -46,6 +51,7 @@
 namespace oclvox::detail {
 using std::fabs;
 using std::frexp;
+using std::min;
 using std::nextafter;
 #endif
 
@@ -66,12 +72,37 @@ typedef struct {
     float iso;  // inside: value < iso
 } OmField;
 
+// The tiling of the grid into cubic bricks of `size` samples (count[k] of them along axis k,
+// the last ones clipped by the grid). A brick is active when it may own surface. Each active
+// brick's samples have consecutive slots in the count and offset arrays, x fastest over the
+// brick's clipped extent, from the brick's base slot; brick_base[brick] is OM_NO_BRICK for an
+// inactive brick. Every sample that owns a vertex or triangle lies in an active brick (its
+// brick's samples with their one-sample halo change sign), so lookups never meet OM_NO_BRICK.
+#define OM_NO_BRICK 0xffffffffu
+typedef struct {
+    int size;
+    int count[3];
+} OmTiling;
+
 OM_FN int om_next_axis(int a) {
     return a == 2 ? 0 : a + 1;
 }
 
 OM_FN OM_UINT om_index(OmField f, int x, int y, int z) {
     return (OM_UINT)x + (OM_UINT)f.n[0] * ((OM_UINT)y + (OM_UINT)f.n[1] * (OM_UINT)z);
+}
+
+// The slot of sample (x, y, z), which must lie in an active brick.
+OM_FN OM_UINT om_slot(OmField f, OmTiling t, OM_GLOBAL const OM_UINT* brick_base, int x, int y,
+                      int z) {
+    int b[3] = {x / t.size, y / t.size, z / t.size};
+    OM_UINT base =
+        brick_base[(OM_UINT)b[0] +
+                   (OM_UINT)t.count[0] * ((OM_UINT)b[1] + (OM_UINT)t.count[1] * (OM_UINT)b[2])];
+    int ex = min(t.size, f.n[0] - b[0] * t.size), ey = min(t.size, f.n[1] - b[1] * t.size);
+    return base + (OM_UINT)(x - b[0] * t.size) +
+           (OM_UINT)ex *
+               ((OM_UINT)(y - b[1] * t.size) + (OM_UINT)ey * (OM_UINT)(z - b[2] * t.size));
 }
 
 OM_FN int om_inside(float value, float iso) {
@@ -267,10 +298,11 @@ OM_FN void om_sn_count(OM_GLOBAL const float* values, OmField f, int x, int y, i
 }
 
 OM_FN void om_sn_emit(OM_GLOBAL const float* values, OmField f, int x, int y, int z,
+                      OmTiling tiling, OM_GLOBAL const OM_UINT* brick_base,
                       OM_GLOBAL const OM_UINT* vertex_offset,
                       OM_GLOBAL const OM_UINT* triangle_offset, OM_GLOBAL OM_UINT* vertex_sample,
                       OM_GLOBAL float* vertex_local, OM_GLOBAL OM_UINT* triangles) {
-    OM_UINT s = om_index(f, x, y, z);
+    OM_UINT s = om_index(f, x, y, z), slot = om_slot(f, tiling, brick_base, x, y, z);
     if (om_cell_exists(f, x, y, z)) {
         float v[8];
         om_cell_values(values, f, x, y, z, v);
@@ -278,12 +310,12 @@ OM_FN void om_sn_emit(OM_GLOBAL const float* values, OmField f, int x, int y, in
         if (mask != 0 && mask != 255) {
             float p[3];
             om_mean_crossing(v, f.iso, om_changing_edges(v, f.iso), p);
-            OM_UINT o = vertex_offset[s];
+            OM_UINT o = vertex_offset[slot];
             vertex_sample[o] = s;
             for (int k = 0; k < 3; ++k) vertex_local[3 * o + k] = p[k];
         }
     }
-    OM_UINT t = triangle_offset[s];
+    OM_UINT t = triangle_offset[slot];
     for (int a = 0; a < 3; ++a) {
         if (!om_sn_has_quad(values, f, x, y, z, a)) continue;
         // The four cells around the edge, counter-clockwise in the (b, c) plane, so the quad
@@ -299,7 +331,8 @@ OM_FN void om_sn_emit(OM_GLOBAL const float* values, OmField f, int x, int y, in
         }
         OM_UINT q[4];
         for (int i = 0; i < 4; ++i)
-            q[i] = vertex_offset[om_index(f, cell[i][0], cell[i][1], cell[i][2])];
+            q[i] =
+                vertex_offset[om_slot(f, tiling, brick_base, cell[i][0], cell[i][1], cell[i][2])];
         if (!om_inside(values[s], f.iso)) {
             OM_UINT swap = q[1];
             q[1] = q[3];
@@ -370,11 +403,12 @@ OM_FN void om_mc_count(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* 
 // Vertices of sample s: crossings on its edges (s, 0..2) in axis order, then the centres of its
 // cell; then the cell's triangles.
 OM_FN void om_mc_emit(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* table, OmField f,
-                      int x, int y, int z, OM_GLOBAL const OM_UINT* vertex_offset,
+                      int x, int y, int z, OmTiling tiling, OM_GLOBAL const OM_UINT* brick_base,
+                      OM_GLOBAL const OM_UINT* vertex_offset,
                       OM_GLOBAL const OM_UINT* triangle_offset, OM_GLOBAL OM_UINT* vertex_sample,
                       OM_GLOBAL float* vertex_local, OM_GLOBAL OM_UINT* triangles) {
-    OM_UINT s = om_index(f, x, y, z);
-    OM_UINT o = vertex_offset[s];
+    OM_UINT s = om_index(f, x, y, z), slot = om_slot(f, tiling, brick_base, x, y, z);
+    OM_UINT o = vertex_offset[slot];
     for (int a = 0; a < 3; ++a) {
         if (!om_edge_changes(values, f, x, y, z, a)) continue;
         int u[3] = {x, y, z};
@@ -396,7 +430,7 @@ OM_FN void om_mc_emit(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* t
         for (int k = 0; k < 3; ++k) vertex_local[3 * o + k] = p[k];
         ++o;
     }
-    OM_UINT t = triangle_offset[s];
+    OM_UINT t = triangle_offset[slot];
     for (int i = 0; i < 3 * (int)entry[0]; ++i) {
         int code = entry[OM_MC_TRIANGLES_AT + i];
         if (code >= OM_MC_CENTRE_BASE) {
@@ -406,8 +440,8 @@ OM_FN void om_mc_emit(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* t
         int lo = om_edge_corner(code, 0);
         int ox = x + om_corner_bit(lo, 0), oy = y + om_corner_bit(lo, 1),
             oz = z + om_corner_bit(lo, 2);
-        triangles[3 * t + i] =
-            vertex_offset[om_index(f, ox, oy, oz)] + om_mc_rank(values, f, ox, oy, oz, code >> 2);
+        triangles[3 * t + i] = vertex_offset[om_slot(f, tiling, brick_base, ox, oy, oz)] +
+                               om_mc_rank(values, f, ox, oy, oz, code >> 2);
     }
 }
 

@@ -56,6 +56,7 @@ __kernel void band_distance(__global const OvSdfTriangle* triangles,
     for (int k = max(block[2], t.lo[2]); k <= min(block[2] + 3, t.hi[2]); ++k)
         for (int j = max(block[1], t.lo[1]); j <= min(block[1] + 3, t.hi[1]); ++j)
             for (int i = max(block[0], t.lo[0]); i <= min(block[0] + 3, t.hi[0]); ++i) {
+                if (!ov_voxel_near(&t, i, j, k, band)) continue;
                 float d2 = ov_voxel_distance2(&t, i, j, k);
                 if (d2 < band2)
                     atomic_min(&distance2[(size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * k)],
@@ -75,6 +76,7 @@ __kernel void band_nearest(__global const OvSdfTriangle* triangles,
     for (int k = max(block[2], t.lo[2]); k <= min(block[2] + 3, t.hi[2]); ++k)
         for (int j = max(block[1], t.lo[1]); j <= min(block[1] + 3, t.hi[1]); ++j)
             for (int i = max(block[0], t.lo[0]); i <= min(block[0] + 3, t.hi[0]); ++i) {
+                if (!ov_voxel_near(&t, i, j, k, band)) continue;
                 float d2 = ov_voxel_distance2(&t, i, j, k);
                 size_t v = (size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * k);
                 if (d2 < band2 && as_uint(d2) == distance2[v]) atomic_min(&nearest[v], index);

@@ -28,6 +28,8 @@ namespace oclvox::detail {
 //   normal       unit normal; has_face is 0 when the triangle is too thin to have one, and then
 //                only its edges count, which is the right distance for a segment or a point
 //   side[j]      edge[j] x normal: points away from the triangle across edge j
+//   centre       anchor-relative centre of a sphere holding the triangle, radius its radius
+//                (rounded up): cheap lower bounds on the distance, for culling only
 //   lo, hi       voxels (global indices, clipped to the grid) whose centres can be in the band
 typedef struct {
     int anchor[3];
@@ -36,6 +38,8 @@ typedef struct {
     float inv_len2[3];
     float normal[3];
     float side[3][3];
+    float centre[3];
+    float radius;
     int has_face;
     int lo[3], hi[3];
 } OvSdfTriangle;
@@ -88,19 +92,45 @@ OV_SDF_FN float ov_voxel_distance2(const OvSdfTriangle* t, int i, int j, int k) 
     return ov_triangle_distance2(t, p);
 }
 
+// Whether a point c (anchor-relative, minus vertex[0] for the plane and minus centre for the
+// sphere) may lie within `reach_limit` of the triangle: false only when it is farther than that
+// from the triangle's plane or from its bounding sphere. Culling only saves work, so the margin is
+// generous: it must never reject a point whose exactly evaluated distance is below the limit.
+OV_SDF_FN int ov_may_reach(const OvSdfTriangle* t, const float from_vertex[3],
+                           const float from_centre[3], float reach_limit) {
+    float size = fabs(from_vertex[0]) + fabs(from_vertex[1]) + fabs(from_vertex[2]);
+    float limit = reach_limit + 0.01f + 1e-5f * size;
+    if (t->has_face && fabs(ov_dot3(from_vertex, t->normal)) > limit) return 0;
+    float sphere = t->radius + limit;
+    return ov_dot3(from_centre, from_centre) <= sphere * sphere;
+}
+
+// Whether voxel (i,j,k)'s centre may be within `band` of the triangle (the band pass evaluates
+// the exact distance only where this holds; the rest would fail d2 < band2 anyway).
+OV_SDF_FN int ov_voxel_near(const OvSdfTriangle* t, int i, int j, int k, float band) {
+    float p[3], from_vertex[3], from_centre[3];
+    p[0] = (float)(i - t->anchor[0]) + 0.5f;
+    p[1] = (float)(j - t->anchor[1]) + 0.5f;
+    p[2] = (float)(k - t->anchor[2]) + 0.5f;
+    for (int a = 0; a < 3; ++a) {
+        from_vertex[a] = p[a] - t->vertex[0][a];
+        from_centre[a] = p[a] - t->centre[a];
+    }
+    return ov_may_reach(t, from_vertex, from_centre, band);
+}
+
 // Whether the 4x4x4 block with minimum voxel (i,j,k) may hold a centre within `band` of the
-// triangle: false only when every centre is farther than band from the triangle's plane. It
-// only saves work, so its margin is generous: it must never skip a centre the exact test keeps.
+// triangle. Centres are at most 1.5 * sqrt(3) < 2.6 from the block centre.
 OV_SDF_FN int ov_block_near(const OvSdfTriangle* t, int i, int j, int k, float band) {
-    if (!t->has_face) return 1;
-    float c[3];
-    c[0] = (float)(i - t->anchor[0]) + 2.0f - t->vertex[0][0];
-    c[1] = (float)(j - t->anchor[1]) + 2.0f - t->vertex[0][1];
-    c[2] = (float)(k - t->anchor[2]) + 2.0f - t->vertex[0][2];
-    float h = fabs(ov_dot3(c, t->normal));
-    float reach = fabs(c[0]) + fabs(c[1]) + fabs(c[2]);
-    // Centres are at most 1.5 * sqrt(3) < 2.6 from the block centre.
-    return h <= band + 2.6f + 0.01f + 1e-5f * reach;
+    float c[3], from_vertex[3], from_centre[3];
+    c[0] = (float)(i - t->anchor[0]) + 2.0f;
+    c[1] = (float)(j - t->anchor[1]) + 2.0f;
+    c[2] = (float)(k - t->anchor[2]) + 2.0f;
+    for (int a = 0; a < 3; ++a) {
+        from_vertex[a] = c[a] - t->vertex[0][a];
+        from_centre[a] = c[a] - t->centre[a];
+    }
+    return ov_may_reach(t, from_vertex, from_centre, band + 2.6f);
 }
 
 #ifndef __OPENCL_VERSION__

@@ -318,6 +318,43 @@ TEST(Meshing, OutputIsIdenticalForEveryBrickSize) {
         }
 }
 
+// Counts and offsets exist only for the active bricks, so the mesher's memory and work follow the
+// surface: a small sphere in a large grid gets slots for a thin shell of bricks around it. A
+// brick of b^3 samples is active only if its samples with their one-sample halo change sign, so
+// every active brick lies within b + 1 samples (per axis) of the sphere's surface.
+TEST(Meshing, SlotsCoverOnlyBricksNearTheSurface) {
+    const Vec3 centre{60.3, 61.7, 59.2};
+    const double radius = 9.4;
+    const ScalarField field = sample_field(
+        128, 128, 128, [&](const Vec3& p) { return sphere_distance(p, centre, radius); });
+    for (int brick : {4, 8}) {
+        const detail::BrickLayout layout = detail::active_bricks(field, 0.0f, brick);
+        ASSERT_FALSE(layout.origins.empty());
+        uint64_t samples = 0;
+        for (const auto& o : layout.origins) {
+            // The brick's box, grown by its reach, meets the sphere's surface.
+            double near2 = 0, far2 = 0;
+            for (int k = 0; k < 3; ++k) {
+                const double lo = o[k] + 0.5 - 1e-9, hi = o[k] + brick + 0.5 + 1e-9;
+                const double c = std::clamp(centre[k], lo, hi);
+                near2 += (c - centre[k]) * (c - centre[k]);
+                far2 += std::max((lo - centre[k]) * (lo - centre[k]),
+                                 (hi - centre[k]) * (hi - centre[k]));
+            }
+            EXPECT_LE(std::sqrt(near2), radius + 1e-6) << o[0] << " " << o[1] << " " << o[2];
+            EXPECT_GE(std::sqrt(far2), radius - 1e-6) << o[0] << " " << o[1] << " " << o[2];
+            samples += uint64_t(brick) * brick * brick;
+        }
+        EXPECT_EQ(layout.slots, samples);  // no brick is clipped by this grid
+        // A shell of thickness 2 (brick + 1) around the sphere bounds the active volume.
+        const double shell = 4.0 / 3.0 * M_PI *
+                             (std::pow(radius + 2 * (brick + 1), 3) -
+                              std::pow(std::max(0.0, radius - 2 * (brick + 1)), 3));
+        EXPECT_LE(double(samples), shell) << "brick " << brick;
+        EXPECT_LT(samples, field.values.size() / 8) << "brick " << brick;
+    }
+}
+
 TEST(Meshing, DeviceEqualsHostReferenceBitForBit) {
     for (const ScalarField& field : {sphere_field(), torus_field(), noise_field(13, 3)})
         for (const float iso : {0.0f, 0.25f}) {

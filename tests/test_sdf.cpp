@@ -13,8 +13,10 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <random>
 
 #include "oclvox/sdf.hpp"
+#include "sdf_internal.hpp"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -182,6 +184,49 @@ TEST(Sdf, RealMeshMatchesDoubleBruteForceAndDeviceMatchesReference) {
     }
     EXPECT_EQ(in_band, 150u);
     EXPECT_EQ(clamped, 50u);
+}
+
+// The band pass skips voxels (and blocks) that the plane and bounding-sphere tests put beyond the
+// band. Those tests only save work: checked against the double-precision distance on random
+// triangles of every size, slivers and collinear ones included, they must keep every voxel within
+// the band, and must actually reject some.
+TEST(Sdf, CullingNeverRejectsAVoxelWithinTheBand) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    Grid grid;
+    grid.voxel_size = 1.0;
+    grid.dims = {48, 48, 48};
+    grid.origin = {-3.71, 2.13, 0.59};
+    const double band = 3.0;
+    uint64_t kept = 0, rejected = 0;
+    for (int n = 0; n < 300; ++n) {
+        const double size = std::pow(10.0, -1.5 + 3.0 * unit(rng));  // 0.03 to 30 voxels
+        Vec3d a, b, c;
+        for (int k = 0; k < 3; ++k) {
+            a[k] = grid.origin[k] + 24.0 + 10.0 * (unit(rng) - 0.5);
+            b[k] = a[k] + size * (unit(rng) - 0.5);
+            c[k] = n % 5 == 0 ? a[k] + 0.5 * (b[k] - a[k]) : a[k] + size * (unit(rng) - 0.5);
+        }
+        Mesh mesh;
+        add_triangle(mesh, a, b, c);
+        const detail::SdfTriangles prepared = detail::prepare_sdf_triangles(mesh, grid, band);
+        ASSERT_EQ(prepared.triangles.size(), 1u);
+        const detail::OvSdfTriangle& t = prepared.triangles[0];
+        for (int k = t.lo[2]; k <= t.hi[2]; ++k)
+            for (int j = t.lo[1]; j <= t.hi[1]; ++j)
+                for (int i = t.lo[0]; i <= t.hi[0]; ++i) {
+                    const double d = norm(sub(centre_of(grid, i, j, k),
+                                              closest_point(centre_of(grid, i, j, k), a, b, c)));
+                    const bool near =
+                        detail::ov_voxel_near(&t, i, j, k, prepared.band) &&
+                        detail::ov_block_near(&t, i / 4 * 4, j / 4 * 4, k / 4 * 4, prepared.band);
+                    if (d < band + 1e-3)
+                        ASSERT_TRUE(near) << "triangle " << n << " voxel " << i << " " << j << " "
+                                          << k << " at distance " << d;
+                    (near ? kept : rejected) += 1;
+                }
+    }
+    EXPECT_GT(rejected, kept / 10);
 }
 
 TEST(Sdf, NarrowBandIsClampedToExactlyTheBand) {

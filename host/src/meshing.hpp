@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "kernel_sources.hpp"
+#include "meshing_math.h"
 #include "oclvox/field.hpp"
 
 namespace oclvox::detail {
@@ -21,19 +22,27 @@ void validate_field(const ScalarField& field, float iso, const char* who);
 // The Marching Cubes case table (OM_MC_ENTRIES entries of OM_MC_ENTRY_BYTES), derived once.
 const std::vector<uint8_t>& marching_cubes_table();
 
-// The lowest sample of every cubic brick of `brick_size` samples that can hold surface: one
-// whose samples, with the one-sample halo its cells and edges reach into, are not all on the same
-// side of iso. Bricks in x-fastest order.
-std::vector<std::array<int, 3>> active_bricks(const ScalarField& field, float iso, int brick_size);
+// The cubic bricks of `brick_size` samples that can hold surface (those whose samples, with the
+// one-sample halo their cells and edges reach into, are not all on one side of iso), and the
+// slots of their samples in the count and offset arrays (see OmTiling in meshing_math.h).
+struct BrickLayout {
+    OmTiling tiling{};
+    std::vector<std::array<int, 3>> origins;  // lowest sample of each active brick, x-fastest
+    std::vector<uint32_t> base;               // per brick: first slot, or OM_NO_BRICK
+    uint32_t slots = 0;                       // samples of the active bricks
+};
+BrickLayout active_bricks(const ScalarField& field, float iso, int brick_size);
 
 // The host reference, processing the grid in cubic bricks of `brick_size` samples; the result
 // does not depend on brick_size (>= 1).
 Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod method,
                           int brick_size);
 
-// Replaces counts by their exclusive prefix sum and returns the total; throws GridError naming
-// `what` when the total does not fit the 32-bit indices (3 per triangle) of the meshing code.
-uint32_t exclusive_scan(std::vector<uint32_t>& counts, const char* what);
+// Replaces the per-slot counts by their exclusive prefix sum in global sample order (x fastest
+// over the whole grid, whatever the tiling) and returns the total; throws GridError naming `what`
+// when the total does not fit the 32-bit indices (3 per triangle) of the meshing code.
+uint32_t exclusive_scan(const ScalarField& field, const BrickLayout& layout,
+                        std::vector<uint32_t>& counts, const char* what);
 
 // World-space mesh from vertex records (owner sample + position relative to it in voxel units)
 // and triangles.

@@ -1,18 +1,18 @@
 // The host reference for both meshing methods, tiled in bricks: it runs the same per-sample
 // functions as the kernels (kernels/meshing_math.h), so the device must match it exactly.
 //
-// Phases: count each sample's vertices and triangles brick by brick, skipping bricks whose
-// samples (with the one-sample halo their cells and edges reach into) all lie on one side;
-// prefix-sum the counts over the whole grid in sample order; emit brick by brick into the slots
-// the sums assign. Because every vertex and triangle has one owner sample and slots follow the
-// global sample order, the mesh does not depend on the brick size or the brick order, and brick
-// borders need no stitching: a triangle reaching into the next brick finds its vertex through
-// that sample's global offset.
+// Phases: find the bricks whose samples (with the one-sample halo their cells and edges reach
+// into) do not all lie on one side; count each of their samples' vertices and triangles into
+// slots that exist only for those bricks; prefix-sum the counts in global sample order; emit
+// brick by brick into the places the sums assign. Work and memory after the first pass follow
+// the surface, not the grid. Because every vertex and triangle has one owner sample and slots
+// follow the global sample order, the mesh does not depend on the brick size or the brick order,
+// and brick borders need no stitching: a triangle reaching into the next brick finds its vertex
+// through that sample's global offset.
 #include <algorithm>
 #include <limits>
 
 #include "meshing.hpp"
-#include "meshing_math.h"
 
 namespace oclvox::detail {
 
@@ -40,34 +40,79 @@ void for_each_sample(const Brick& b, F f) {
 
 }  // namespace
 
-std::vector<std::array<int, 3>> active_bricks(const ScalarField& field, float iso, int brick_size) {
+BrickLayout active_bricks(const ScalarField& field, float iso, int brick_size) {
     const OmField f{{int(field.grid.dims[0]), int(field.grid.dims[1]), int(field.grid.dims[2])},
                     iso};
-    std::vector<std::array<int, 3>> active;
+    BrickLayout layout;
+    layout.tiling.size = brick_size;
+    for (int k = 0; k < 3; ++k) layout.tiling.count[k] = (f.n[k] - 1) / brick_size + 1;
+    layout.base.assign(size_t(layout.tiling.count[0]) * size_t(layout.tiling.count[1]) *
+                           size_t(layout.tiling.count[2]),
+                       OM_NO_BRICK);
+    uint64_t slots = 0;
+    size_t brick = 0;
     for (int bz = 0; bz < f.n[2]; bz += brick_size)
         for (int by = 0; by < f.n[1]; by += brick_size)
-            for (int bx = 0; bx < f.n[0]; bx += brick_size) {
+            for (int bx = 0; bx < f.n[0]; bx += brick_size, ++brick) {
                 const bool first = om_inside(field.values[om_index(f, bx, by, bz)], iso);
                 const int end[3] = {std::min(bx + brick_size + 1, f.n[0]),
                                     std::min(by + brick_size + 1, f.n[1]),
                                     std::min(bz + brick_size + 1, f.n[2])};
                 bool uniform = true;
                 for (int z = bz; z < end[2] && uniform; ++z)
-                    for (int y = by; y < end[1] && uniform; ++y)
+                    for (int y = by; y < end[1] && uniform; ++y) {
+                        const float* row = field.values.data() + om_index(f, 0, y, z);
                         for (int x = bx; x < end[0] && uniform; ++x)
-                            uniform =
-                                bool(om_inside(field.values[om_index(f, x, y, z)], iso)) == first;
-                if (!uniform) active.push_back({bx, by, bz});
+                            uniform = bool(om_inside(row[x], iso)) == first;
+                    }
+                if (uniform) continue;
+                layout.origins.push_back({bx, by, bz});
+                layout.base[brick] = uint32_t(slots);
+                slots += uint64_t(std::min(brick_size, f.n[0] - bx)) *
+                         uint64_t(std::min(brick_size, f.n[1] - by)) *
+                         uint64_t(std::min(brick_size, f.n[2] - bz));
             }
-    return active;
+    layout.slots = uint32_t(slots);  // at most the grid's samples, which validate_field bounds
+    return layout;
 }
 
-uint32_t exclusive_scan(std::vector<uint32_t>& counts, const char* what) {
+uint32_t exclusive_scan(const ScalarField& field, const BrickLayout& layout,
+                        std::vector<uint32_t>& counts, const char* what) {
+    const int n[3] = {int(field.grid.dims[0]), int(field.grid.dims[1]), int(field.grid.dims[2])};
+    const int size = layout.tiling.size;
+    const std::vector<std::array<int, 3>>& origins = layout.origins;
+    auto extent = [&](const std::array<int, 3>& o, int k) { return std::min(size, n[k] - o[k]); };
+    auto base = [&](const std::array<int, 3>& o) {
+        return layout
+            .base[size_t(o[0] / size) +
+                  size_t(layout.tiling.count[0]) *
+                      (size_t(o[1] / size) + size_t(layout.tiling.count[1]) * (o[2] / size))];
+    };
+    // Global sample order is z, then y, then x: walk each slab of bricks (same z origin) plane by
+    // plane, each plane row of bricks (same y origin) row by row, and each row across its bricks.
     uint64_t total = 0;
-    for (uint32_t& c : counts) {
-        const uint32_t n = c;
-        c = uint32_t(total);
-        total += n;
+    for (size_t slab = 0; slab < origins.size();) {
+        size_t slab_end = slab;
+        while (slab_end < origins.size() && origins[slab_end][2] == origins[slab][2]) ++slab_end;
+        for (int lz = 0; lz < extent(origins[slab], 2); ++lz)
+            for (size_t row = slab; row < slab_end;) {
+                size_t row_end = row;
+                while (row_end < slab_end && origins[row_end][1] == origins[row][1]) ++row_end;
+                const int ey = extent(origins[row], 1);
+                for (int ly = 0; ly < ey; ++ly)
+                    for (size_t b = row; b < row_end; ++b) {
+                        const int ex = extent(origins[b], 0);
+                        uint32_t* c = counts.data() + base(origins[b]) +
+                                      size_t(ex) * (size_t(ly) + size_t(ey) * size_t(lz));
+                        for (int lx = 0; lx < ex; ++lx) {
+                            const uint32_t count = c[lx];
+                            c[lx] = uint32_t(total);
+                            total += count;
+                        }
+                    }
+                row = row_end;
+            }
+        slab = slab_end;
     }
     if (3 * total > std::numeric_limits<uint32_t>::max())
         throw GridError("the surface has " + std::to_string(total) + " " + what +
@@ -112,14 +157,15 @@ Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod met
     const float* values = field.values.data();
     const uint8_t* table = nets ? nullptr : marching_cubes_table().data();
 
-    // Phase 1: per-sample counts in the bricks that can hold surface.
-    std::vector<uint32_t> vertex_offset(field.values.size(), 0);
-    std::vector<uint32_t> triangle_offset(field.values.size(), 0);
+    // Phase 1: per-sample counts in the bricks that can hold surface, into their slots.
+    const BrickLayout layout = active_bricks(field, iso, brick_size);
+    std::vector<uint32_t> vertex_offset(layout.slots, 0), triangle_offset(layout.slots, 0);
+    const uint32_t* base = layout.base.data();
     std::vector<Brick> active;
-    for (const auto& origin : active_bricks(field, iso, brick_size)) {
+    for (const auto& origin : layout.origins) {
         active.push_back(brick_at(f, origin, brick_size));
         for_each_sample(active.back(), [&](int x, int y, int z) {
-            const uint32_t s = om_index(f, x, y, z);
+            const uint32_t s = om_slot(f, layout.tiling, base, x, y, z);
             if (nets)
                 om_sn_count(values, f, x, y, z, &vertex_offset[s], &triangle_offset[s]);
             else
@@ -128,8 +174,8 @@ Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod met
     }
 
     // Phase 2: global slots.
-    const uint32_t vertex_count = exclusive_scan(vertex_offset, "vertices");
-    const uint32_t triangle_count = exclusive_scan(triangle_offset, "triangles");
+    const uint32_t vertex_count = exclusive_scan(field, layout, vertex_offset, "vertices");
+    const uint32_t triangle_count = exclusive_scan(field, layout, triangle_offset, "triangles");
 
     // Phase 3: emit.
     std::vector<uint32_t> vertex_sample(vertex_count), triangles(3 * size_t(triangle_count));
@@ -137,11 +183,13 @@ Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod met
     for (const Brick& b : active)
         for_each_sample(b, [&](int x, int y, int z) {
             if (nets)
-                om_sn_emit(values, f, x, y, z, vertex_offset.data(), triangle_offset.data(),
-                           vertex_sample.data(), vertex_local.data(), triangles.data());
+                om_sn_emit(values, f, x, y, z, layout.tiling, base, vertex_offset.data(),
+                           triangle_offset.data(), vertex_sample.data(), vertex_local.data(),
+                           triangles.data());
             else
-                om_mc_emit(values, table, f, x, y, z, vertex_offset.data(), triangle_offset.data(),
-                           vertex_sample.data(), vertex_local.data(), triangles.data());
+                om_mc_emit(values, table, f, x, y, z, layout.tiling, base, vertex_offset.data(),
+                           triangle_offset.data(), vertex_sample.data(), vertex_local.data(),
+                           triangles.data());
         });
     return records_to_mesh(field, vertex_sample, vertex_local, triangles);
 }

@@ -39,6 +39,7 @@ void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float
                         for (int j = std::max(by, t.lo[1]); j <= std::min(by + 3, t.hi[1]); ++j)
                             for (int i = std::max(bx, t.lo[0]); i <= std::min(bx + 3, t.hi[0]);
                                  ++i) {
+                                if (!ov_voxel_near(&t, i, j, k, prepared.band)) continue;
                                 const float d2 = ov_voxel_distance2(&t, i, j, k);
                                 if (!(d2 < prepared.band2)) continue;
                                 const size_t v = voxel_index(grid, i, j, k);
@@ -126,9 +127,30 @@ ScalarField distance_field(const Grid& grid, const SdfOptions& options,
 }
 
 void apply_sign(ScalarField& field, const SparseVoxels& inside) {
-    const std::vector<uint8_t> dense = inside.to_dense();
-    for (size_t v = 0; v < dense.size(); ++v)
-        if (dense[v]) field.values[v] = -field.values[v];
+    // Straight from the bricks' 4x4x4 block masks: no dense copy of the solid, and the work
+    // follows the inside voxels, not the grid.
+    const auto nbricks = inside.brick_dims();
+    const int64_t size = inside.brick_size(), nb = inside.blocks_per_brick_axis();
+    const int64_t nx = field.grid.dims[0], ny = field.grid.dims[1];
+    float* values = field.values.data();
+    for (const auto& [index, blocks] : inside.bricks()) {
+        const int64_t bx = int64_t(index % uint64_t(nbricks[0]));
+        const int64_t by = int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1]));
+        const int64_t bz = int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1])));
+        for (size_t w = 0; w < blocks.size(); ++w) {
+            const uint64_t mask = blocks[w];
+            if (!mask) continue;
+            const int64_t ox = bx * size + int64_t(w % nb) * 4;
+            const int64_t oy = by * size + int64_t(w / nb % nb) * 4;
+            const int64_t oz = bz * size + int64_t(w / (nb * nb)) * 4;
+            for (int bit = 0; bit < 64; ++bit)
+                if (mask >> bit & 1) {
+                    float& v =
+                        values[(ox + bit % 4) + nx * ((oy + bit / 4 % 4) + ny * (oz + bit / 16))];
+                    v = -v;
+                }
+        }
+    }
 }
 
 }  // namespace detail

@@ -52,6 +52,15 @@ void set_constants(OvSdfTriangle& t) {
         const Vec3 side = cross(e[j], unit);
         for (int k = 0; k < 3; ++k) t.side[j][k] = float(side[k]);
     }
+    // The bounding sphere about the vertices' mean; the radius is measured from the float centre
+    // and rounded up, so the sphere holds the float triangle.
+    for (int k = 0; k < 3; ++k) t.centre[k] = float((v[0][k] + v[1][k] + v[2][k]) / 3.0);
+    double radius = 0;
+    for (int j = 0; j < 3; ++j) {
+        const Vec3 r = sub(v[j], {double(t.centre[0]), double(t.centre[1]), double(t.centre[2])});
+        radius = std::max(radius, std::sqrt(dot(r, r)));
+    }
+    t.radius = std::nextafter(float(radius), INFINITY);
 }
 
 }  // namespace
