@@ -662,113 +662,209 @@ bool may_cross(const std::array<double, 9>& t, const Vec3d& p, int axis) {
     return h >= -1e-9 && h <= 1 + 1e-9;
 }
 
-// The mesh's boundary as electric currents (after welding): each edge carries the net number of
-// triangles running it one way minus the other. Off the surface, the gradient of the winding
-// number is the Biot-Savart field of these currents (the curl terms of interior edges cancel), so
-// |grad w(q)| <= sum over edges of |current| * length / (4 pi dist(q, edge)^2). A closed,
-// consistently oriented mesh (or any union of such, duplicated shells included) has none: there
-// w is constant off the surface.
-struct BoundaryCurrents {
-    struct Edge {
-        Vec3d a, b;
-        double weight;  // |current| * length
-    };
+// Signed solid angle of triangle (a, b, c) seen from p, in double (Van Oosterom & Strackee, as
+// in the kernel): positive when p lies behind the triangle.
+double solid_angle_double(const double* a_, const double* b_, const double* c_, const double* p) {
+    double a[3], b[3], c[3];
+    for (int k = 0; k < 3; ++k) {
+        a[k] = a_[k] - p[k];
+        b[k] = b_[k] - p[k];
+        c[k] = c_[k] - p[k];
+    }
+    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
+                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+    const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    const double lb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    const double lc = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    const double den = la * lb * lc + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
+                       (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la +
+                       (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]) * lb;
+    return 2 * std::atan2(det, den);
+}
+
+// Fans that close the mesh's holes. The boundary of the mesh (after welding: each edge carrying
+// the number of triangles running it one way minus the other) splits into connected cycles; a
+// fan of triangles (apex, a, b) from the mean vertex of each cycle has exactly that boundary. So
+// the mesh minus the fans is a closed cycle, and w = n + w_fans where n, the winding number of
+// that cycle, is an integer that changes only across the mesh or a fan. A closed, consistently
+// oriented mesh (or a union of such, duplicated shells included) has no fans.
+struct BoundaryFans {
+    std::vector<std::array<double, 9>> triangles;  // grid coordinates (voxel units)
+    std::vector<double> weight;                    // how many times each counts
     struct Chunk {
         Vec3d centre;
-        double radius, weight;  // ball holding the chunk's edges; their summed weights
+        double radius, area;  // ball holding the chunk's triangles; their weighted area
         size_t first, count;
     };
-    std::vector<Edge> edges;
     std::vector<Chunk> chunks;
 
-    // An upper bound on |grad w| over the ball of radius `reach` around p (infinite if an edge
-    // comes that close).
-    double gradient_bound(const Vec3d& p, double reach) const {
+    // w of the fans at p, in double.
+    double winding(const Vec3d& p) const {
+        double sum = 0;
+        for (size_t t = 0; t < triangles.size(); ++t)
+            sum += weight[t] * solid_angle_double(&triangles[t][0], &triangles[t][3],
+                                                  &triangles[t][6], p.data());
+        return sum / (4 * M_PI);
+    }
+
+    // An upper bound on |w of the fans| over the ball of radius `reach` around p: a triangle's
+    // solid angle is at most its area over its least distance squared, and at most 2 pi.
+    double bound(const Vec3d& p, double reach) const {
         double sum = 0;
         for (const Chunk& c : chunks) {
             const double gap = distance(p, c.centre) - c.radius - reach;
             if (gap > c.radius) {
-                sum += c.weight / (gap * gap);
+                sum += c.area / (gap * gap);
                 continue;
             }
-            for (size_t e = c.first; e < c.first + c.count; ++e) {
-                const double d = segment_distance(p, edges[e]) - reach;
-                if (!(d > 0)) return INFINITY;
-                sum += edges[e].weight / (d * d);
+            for (size_t t = c.first; t < c.first + c.count; ++t) {
+                const Ball ball = ball_of(t);
+                const double d = distance(p, ball.centre) - ball.radius - reach;
+                sum += weight[t] * (d > 0 ? std::min(2 * M_PI, area_of(t) / (d * d)) : 2 * M_PI);
             }
         }
         return sum / (4 * M_PI);
     }
 
+    // An upper bound on |grad w of the fans| over the ball of radius `reach` around p (infinite
+    // if a fan triangle comes that close): the gradient of a triangle's solid angle is at most
+    // 2 area / distance^3.
+    double gradient_bound(const Vec3d& p, double reach) const {
+        double sum = 0;
+        for (const Chunk& c : chunks) {
+            const double gap = distance(p, c.centre) - c.radius - reach;
+            if (gap > c.radius) {
+                sum += 2 * c.area / (gap * gap * gap);
+                continue;
+            }
+            for (size_t t = c.first; t < c.first + c.count; ++t) {
+                const Ball ball = ball_of(t);
+                const double d = distance(p, ball.centre) - ball.radius - reach;
+                if (!(d > 0)) return INFINITY;
+                sum += 2 * weight[t] * area_of(t) / (d * d * d);
+            }
+        }
+        return sum / (4 * M_PI);
+    }
+
+    struct Ball {
+        Vec3d centre;
+        double radius;
+    };
+    Ball ball_of(size_t t) const {
+        const auto& v = triangles[t];
+        Ball b{{(v[0] + v[3] + v[6]) / 3, (v[1] + v[4] + v[7]) / 3, (v[2] + v[5] + v[8]) / 3}, 0};
+        for (int i = 0; i < 3; ++i)
+            b.radius =
+                std::max(b.radius, distance(b.centre, {v[3 * i], v[3 * i + 1], v[3 * i + 2]}));
+        return b;
+    }
+    double area_of(size_t t) const {
+        const auto& v = triangles[t];
+        const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+        const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+        const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                             e1[0] * e2[1] - e1[1] * e2[0]};
+        return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) / 2;
+    }
     static double distance(const Vec3d& p, const Vec3d& q) {
         return std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
                          (p[2] - q[2]) * (p[2] - q[2]));
     }
-    static double segment_distance(const Vec3d& p, const Edge& e) {
-        double ab[3], ap[3], len2 = 0, t = 0;
-        for (int k = 0; k < 3; ++k) {
-            ab[k] = e.b[k] - e.a[k];
-            ap[k] = p[k] - e.a[k];
-            len2 += ab[k] * ab[k];
-            t += ab[k] * ap[k];
-        }
-        t = len2 > 0 ? std::clamp(t / len2, 0.0, 1.0) : 0.0;
-        return distance(p, {e.a[0] + t * ab[0], e.a[1] + t * ab[1], e.a[2] + t * ab[2]});
-    }
 };
 
-constexpr size_t kEdgesPerChunk = 16;
+constexpr size_t kFanTrianglesPerChunk = 16;
 
-void build_chunks(BoundaryCurrents& bc, size_t lo, size_t hi) {
-    auto mid_point = [&](size_t e, int k) { return (bc.edges[e].a[k] + bc.edges[e].b[k]) / 2; };
-    if (hi - lo > kEdgesPerChunk) {
+// Groups fan triangles [lo, hi) into chunks by recursive median splits of their centroids.
+void build_chunks(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size_t hi) {
+    auto centroid = [&](size_t t, int k) {
+        const auto& v = fans.triangles[t];
+        return (v[k] + v[3 + k] + v[6 + k]) / 3;
+    };
+    if (hi - lo > kFanTrianglesPerChunk) {
         double extent[3];
         for (int k = 0; k < 3; ++k) {
             double mn = INFINITY, mx = -INFINITY;
-            for (size_t e = lo; e < hi; ++e) {
-                mn = std::min(mn, mid_point(e, k));
-                mx = std::max(mx, mid_point(e, k));
+            for (size_t i = lo; i < hi; ++i) {
+                mn = std::min(mn, centroid(order[i], k));
+                mx = std::max(mx, centroid(order[i], k));
             }
             extent[k] = mx - mn;
         }
         const int axis = int(std::max_element(extent, extent + 3) - extent);
         const size_t mid = lo + (hi - lo) / 2;
-        std::nth_element(bc.edges.begin() + lo, bc.edges.begin() + mid, bc.edges.begin() + hi,
-                         [&](const auto& x, const auto& y) {
-                             return x.a[axis] + x.b[axis] < y.a[axis] + y.b[axis];
-                         });
-        build_chunks(bc, lo, mid);
-        build_chunks(bc, mid, hi);
+        std::nth_element(order.begin() + lo, order.begin() + mid, order.begin() + hi,
+                         [&](size_t x, size_t y) { return centroid(x, axis) < centroid(y, axis); });
+        build_chunks(fans, order, lo, mid);
+        build_chunks(fans, order, mid, hi);
         return;
     }
-    BoundaryCurrents::Chunk chunk{{0, 0, 0}, 0, 0, lo, hi - lo};
-    for (size_t e = lo; e < hi; ++e)
-        for (int k = 0; k < 3; ++k) chunk.centre[k] += mid_point(e, k) / double(hi - lo);
-    for (size_t e = lo; e < hi; ++e) {
-        chunk.radius =
-            std::max({chunk.radius, BoundaryCurrents::distance(chunk.centre, bc.edges[e].a),
-                      BoundaryCurrents::distance(chunk.centre, bc.edges[e].b)});
-        chunk.weight += bc.edges[e].weight;
+    BoundaryFans::Chunk chunk{{0, 0, 0}, 0, 0, lo, hi - lo};
+    for (size_t i = lo; i < hi; ++i)
+        for (int k = 0; k < 3; ++k) chunk.centre[k] += centroid(order[i], k) / double(hi - lo);
+    for (size_t i = lo; i < hi; ++i) {
+        const auto& v = fans.triangles[order[i]];
+        for (int c = 0; c < 3; ++c)
+            chunk.radius = std::max(
+                chunk.radius,
+                BoundaryFans::distance(chunk.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
+        chunk.area += fans.weight[order[i]] * fans.area_of(order[i]);
     }
-    bc.chunks.push_back(chunk);
+    fans.chunks.push_back(chunk);
 }
 
-BoundaryCurrents boundary_currents(const Mesh& mesh, const Grid& grid) {
+BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid) {
     const WeldedEdges welded = weld_edges(mesh);
-    BoundaryCurrents bc;
-    for (const auto& [edge, uses] : welded.uses) {
-        const double current = std::fabs(double(uses[0]) - double(uses[1]));
-        if (current == 0) continue;
-        BoundaryCurrents::Edge e;
-        for (int k = 0; k < 3; ++k) {
-            e.a[k] = (welded.positions[edge.first][k] - grid.origin[k]) / grid.voxel_size;
-            e.b[k] = (welded.positions[edge.second][k] - grid.origin[k]) / grid.voxel_size;
+    // Boundary edges (net count != 0), and their connected components by union-find.
+    std::vector<std::pair<std::pair<uint32_t, uint32_t>, int64_t>> edges;
+    for (const auto& [edge, uses] : welded.uses)
+        if (uses[0] != uses[1]) edges.push_back({edge, int64_t(uses[0]) - int64_t(uses[1])});
+    BoundaryFans fans;
+    if (edges.empty()) return fans;
+    std::vector<uint32_t> parent(welded.positions.size());
+    for (size_t v = 0; v < parent.size(); ++v) parent[v] = uint32_t(v);
+    auto find = [&](uint32_t v) {
+        while (parent[v] != v) v = parent[v] = parent[parent[v]];
+        return v;
+    };
+    for (const auto& [edge, net] : edges) parent[find(edge.first)] = find(edge.second);
+    // Apex per component: the mean of its vertices (each edge end counted once per edge).
+    std::map<uint32_t, std::array<double, 4>> apex;
+    for (const auto& [edge, net] : edges)
+        for (uint32_t v : {edge.first, edge.second}) {
+            auto& a = apex[find(v)];
+            for (int k = 0; k < 3; ++k) a[k] += welded.positions[v][k];
+            a[3] += 1;
         }
-        e.weight = current * BoundaryCurrents::distance(e.a, e.b);
-        bc.edges.push_back(e);
+    auto to_grid = [&](const std::array<double, 3>& p, int k) {
+        return (p[k] - grid.origin[k]) / grid.voxel_size;
+    };
+    for (const auto& [edge, net] : edges) {
+        const auto& a = apex[find(edge.first)];
+        const std::array<double, 3> centre{a[0] / a[3], a[1] / a[3], a[2] / a[3]};
+        // The fan triangle's boundary runs low -> high `net` times, like the mesh's.
+        const uint32_t from = net > 0 ? edge.first : edge.second;
+        const uint32_t to = net > 0 ? edge.second : edge.first;
+        std::array<double, 9> t;
+        for (int k = 0; k < 3; ++k) {
+            t[k] = to_grid(centre, k);
+            t[3 + k] = to_grid(welded.positions[from], k);
+            t[6 + k] = to_grid(welded.positions[to], k);
+        }
+        fans.triangles.push_back(t);
+        fans.weight.push_back(double(net > 0 ? net : -net));
     }
-    if (!bc.edges.empty()) build_chunks(bc, 0, bc.edges.size());
-    return bc;
+    std::vector<size_t> order(fans.triangles.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    build_chunks(fans, order, 0, order.size());
+    // Store the triangles in chunk order.
+    BoundaryFans sorted;
+    sorted.chunks = std::move(fans.chunks);
+    for (size_t i : order) {
+        sorted.triangles.push_back(fans.triangles[i]);
+        sorted.weight.push_back(fans.weight[i]);
+    }
+    return sorted;
 }
 
 // Evaluates the winding number at points on the device, in launches short enough for a GPU's
@@ -850,27 +946,26 @@ constexpr int kFinestTileLevel = 3;
 // Tile evaluations accept a subtree only when its expansion error bound is at most this (in
 // units of w); the sum of the accepted bounds is the tile's certified error.
 constexpr float kTileNodeTolerance = 1e-2f;
-// Certified margins from |w| = 1/2 are kept per voxel in kMarginSteps steps of 1/2 / kMarginSteps,
-// rounded down.
-constexpr int kMarginSteps = 126;
-constexpr double kMarginStep = 0.5 / kMarginSteps;
+// Slack for float rounding in a tile's w (a few hundred terms of relative error 2^-24 or so).
+constexpr double kTileRounding = 1e-3;
 
 struct Tile {
     int64_t lo[3], hi[3];  // box-relative voxel range, inclusive
 };
 
 // The winding-number solid on the device, with tree evaluations only where they can matter.
+// w = n + w_fans (BoundaryFans), where the integer n changes only across the mesh or a fan.
 // Phases:
-// 1. the tree over the triangles, the voxels of the box that the surface touches (with a pyramid
-//    of coarser tiles over them), and the mesh's boundary currents;
-// 2. per level, from the first level's tiles down to kFinestTileLevel: a tile the surface does
-//    not touch is decided by w at its centre when |w| differs from 1/2 by more than kTileMargin
-//    plus the certified expansion error plus the most w can change inside the tile (zero for
-//    closed meshes, bounded through the boundary currents otherwise); any other tile splits;
-// 3. the voxels of undecided tiles flood from decided neighbours across segments between voxel
-//    centres that no triangle meets (w changes along them only through the boundary currents,
-//    so the decision carries over while the tracked margin stays positive);
-// 4. the voxels still undecided take |w| > 1/2 at their centres from the tree;
+// 1. the tree over the triangles, the fans over the holes, and the voxels of the box that the
+//    mesh or a fan touches (with a pyramid of coarser tiles over them);
+// 2. per level, from the first level's tiles down to kFinestTileLevel: a tile that neither the
+//    mesh nor a fan touches takes n from w (tree, certified error) minus w_fans (double) at its
+//    centre; if the fans' w is certainly below 1/2 over the tile, n decides it (inside iff
+//    n != 0); any other tile splits;
+// 3. the voxels of undecided tiles take n from a neighbour across the segment between their
+//    centres when no triangle of the mesh or a fan meets it (a flood from the decided tiles);
+//    each decides |n + w_fans| > 1/2, with w_fans in double where its bound does not settle it;
+// 4. the voxels still without n take |w| > 1/2 at their centres from the tree;
 // 5. the inside bits into bricks.
 void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                     const VoxelizeOptions& options, VoxelizeStats& stats) {
@@ -890,12 +985,15 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     constexpr int kSteps = 4;  // progress: tiles, flood, voxels, bricks
 
     // Phase 1.
-    const auto tri = grid_triangles(mesh, grid);
+    auto tri = grid_triangles(mesh, grid);
     const WindingTree tree = build_winding_tree(tri);
+    const BoundaryFans fans = boundary_fans(mesh, grid);
+    tri.insert(tri.end(), fans.triangles.begin(), fans.triangles.end());
     const SurfaceVoxels surface = surface_voxels(tri, box);
+    BoxBits fan_pyramid = surface_voxels(fans.triangles, box).bits;
+    for (int level = 0; level < kFinestTileLevel; ++level) fan_pyramid = fan_pyramid.coarser();
     std::vector<BoxBits> pyramid{surface.bits.coarser()};
     while (int(pyramid.size()) < kTopLevel) pyramid.push_back(pyramid.back().coarser());
-    const BoundaryCurrents currents = boundary_currents(mesh, grid);
     stats.seconds_binning += seconds_since(t);
     WindingEvaluator evaluator(cl, tree, stats);
     const int64_t n[3] = {surface.bits.dim(0), surface.bits.dim(1), surface.bits.dim(2)};
@@ -906,9 +1004,16 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         return c;
     };
 
-    // Phase 2. Per voxel: kUnknown, or whether it is inside (bit 7) and the margin from
-    // |w| = 1/2 it certainly keeps (kMarginSteps and below).
-    constexpr uint8_t kUnknown = 0xFF;
+    // The farthest a voxel centre of the tile lies from the tile's centre.
+    auto tile_reach = [](const Tile& tile) {
+        double reach2 = 0;
+        for (int k = 0; k < 3; ++k)
+            reach2 += double(tile.hi[k] - tile.lo[k]) * double(tile.hi[k] - tile.lo[k]) / 4;
+        return std::sqrt(reach2);
+    };
+
+    // Phase 2. Per voxel: kUnknown, or n + kZero (n in [-kZero, kZero]).
+    constexpr uint8_t kUnknown = 0xFF, kZero = 0x7F;
     BoxBits inside(n[0], n[1], n[2]);
     std::vector<uint8_t> state(size_t(n[0] * n[1] * n[2]), kUnknown);
     std::vector<Tile> pending;
@@ -954,27 +1059,28 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         evaluator.evaluate(points, OVS_WINDING_FAR, kTileNodeTolerance, w, error);
         for (size_t i = 0; i < evaluated.size(); ++i) {
             const Tile& tile = evaluated[i];
-            double reach2 = 0;
-            for (int k = 0; k < 3; ++k)
-                reach2 += double(tile.hi[k] - tile.lo[k]) * double(tile.hi[k] - tile.lo[k]) / 4;
-            const double reach = std::sqrt(reach2);
-            const double change = currents.edges.empty()
-                                      ? 0.0
-                                      : reach * currents.gradient_bound(centre_of(tile), reach);
-            // The least distance of |w| from 1/2 over the tile's voxel centres.
-            const double magnitude = std::fabs(double(w[i]));
-            const double margin = std::fabs(magnitude - 0.5) - double(error[i]) - change;
-            const int steps =
-                margin > 0 ? int(std::min<double>(kMarginSteps, margin / kMarginStep)) : -1;
-            if (steps < 0 || !(magnitude != 0.5)) {
+            const Vec3d centre = centre_of(tile);
+            const double reach = tile_reach(tile);
+            const double cycle =
+                double(w[i]) - (fans.triangles.empty() ? 0.0 : fans.winding(centre));
+            const double whole = std::round(cycle);
+            const bool certain =
+                std::fabs(cycle - whole) + double(error[i]) + kTileRounding < 0.5 &&
+                std::fabs(whole) < kZero;
+            if (!certain || (!fans.triangles.empty() && !(fans.bound(centre, reach) < 0.5))) {
                 split(tile);
                 continue;
             }
-            const uint8_t decided = uint8_t((magnitude > 0.5 ? 0x80 : 0) | steps);
+            const uint8_t decided = uint8_t(int(whole) + kZero);
             for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
-                for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y) {
                     std::fill_n(state.begin() + int64_t(inside.index(tile.lo[0], y, z)),
                                 tile.hi[0] - tile.lo[0] + 1, decided);
+                    if (whole != 0) {
+                        const int64_t lo[3] = {tile.lo[0], y, z}, hi[3] = {tile.hi[0], y, z};
+                        inside.fill(lo, hi);
+                    }
+                }
         }
         pending = std::move(children);
     }
@@ -985,9 +1091,8 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     for (const Tile& tile : pending)
         for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
             for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
-                for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
+                for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x)
                     queue.push_back(inside.index(x, y, z));
-                }
     auto coords = [&](uint64_t i, int64_t* v) {
         v[0] = int64_t(i % uint64_t(n[0]));
         v[1] = int64_t(i / uint64_t(n[0]) % uint64_t(n[1]));
@@ -998,90 +1103,118 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                                 std::pair<uint64_t, uint32_t>{i, 0},
                                 [](const auto& a, const auto& b) { return a.first < b.first; });
     };
-    // Whether no triangle meets the segment between the centres of voxel i and its neighbour j
-    // one step up `axis` from it.
-    auto clear = [&](uint64_t i, uint64_t j, int axis) {
+    const uint64_t step[3] = {1, uint64_t(n[0]), uint64_t(n[0]) * uint64_t(n[1])};
+    // Whether no triangle (mesh or fan) meets the segment from the centre of voxel i one step up
+    // `axis`: any that does touches one of the two voxels.
+    auto clear = [&](uint64_t i, int axis) {
         int64_t v[3];
         coords(i, v);
         const Vec3d p{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
                       double(box.lo[2] + v[2]) + 0.5};
-        for (uint64_t end : {i, j}) {
+        for (uint64_t end : {i, i + step[axis]}) {
             const auto range = triangles_of(end);
             for (auto it = range.first; it != range.second; ++it)
                 if (may_cross(tri[it->second], p, axis)) return false;
         }
         return true;
     };
-    const uint64_t step[3] = {1, uint64_t(n[0]), uint64_t(n[0]) * uint64_t(n[1])};
-    // Voxel i (undecided) takes the decision of the neighbour that leaves it the largest margin;
-    // false if none can give one.
+    // Voxel i (without n) takes n from a neighbour across a clear segment; false if none can.
     auto settle = [&](uint64_t i) {
         int64_t v[3];
         coords(i, v);
-        int best = -1;
-        bool best_inside = false;
         for (int axis = 0; axis < 3; ++axis)
             for (int dir = -1; dir <= 1; dir += 2) {
                 if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
                 const uint64_t j = dir > 0 ? i + step[axis] : i - step[axis];
                 if (state[j] == kUnknown) continue;
-                const int from = state[j] & 0x7f;
-                if (from <= best) continue;
-                const uint64_t low = dir > 0 ? i : j;
                 const bool free = !surface.bits.get(i) && !surface.bits.get(j);
-                if (!free && !clear(low, low + step[axis], axis)) continue;
-                int left = from;
-                if (!currents.edges.empty()) {
-                    Vec3d mid{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
-                              double(box.lo[2] + v[2]) + 0.5};
-                    mid[axis] += 0.5 * dir;
-                    const double change = currents.gradient_bound(mid, 0.5);
-                    if (!(change < from * kMarginStep)) continue;
-                    left = from - int(std::ceil(change / kMarginStep));
-                    if (left < 0) continue;
-                }
-                if (left > best) {
-                    best = left;
-                    best_inside = (state[j] & 0x80) != 0;
-                }
+                if (!free && !clear(dir > 0 ? i : j, axis)) continue;
+                state[i] = state[j];
+                return true;
             }
-        if (best < 0) return false;
-        state[i] = uint8_t((best_inside ? 0x80 : 0) | best);
-        return true;
+        return false;
     };
-    // Largest margins first (a bucket queue), so that a voxel takes its decision along the path
-    // that keeps the most margin, not along whichever the flood found first.
-    std::vector<std::vector<uint64_t>> buckets(kMarginSteps + 1);
-    for (uint64_t i : queue)
-        if (settle(i)) buckets[state[i] & 0x7f].push_back(i);
-    for (int level = kMarginSteps; level >= 0; --level)
-        while (!buckets[level].empty()) {
-            const uint64_t k = buckets[level].back();
-            buckets[level].pop_back();
+    std::vector<uint64_t> work;
+    for (uint64_t i : queue) {
+        if (state[i] != kUnknown || !settle(i)) continue;
+        work.push_back(i);
+        while (!work.empty()) {
+            const uint64_t k = work.back();
+            work.pop_back();
             int64_t v[3];
             coords(k, v);
             for (int axis = 0; axis < 3; ++axis)
                 for (int dir = -1; dir <= 1; dir += 2) {
                     if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
                     const uint64_t j = dir > 0 ? k + step[axis] : k - step[axis];
-                    if (state[j] == kUnknown && settle(j))
-                        buckets[std::min(level, state[j] & 0x7f)].push_back(j);
+                    if (state[j] == kUnknown && settle(j)) work.push_back(j);
                 }
         }
+    }
+    std::vector<uint64_t> unsettled;
+    std::vector<uint64_t> near_voxels;
+    std::vector<int> near_whole;
+    std::vector<float> near_points;
+    points.clear();
+    for (const Tile& tile : pending) {
+        // Per voxel, w_fans matters only where its bound over the tile does not settle it. In a
+        // tile that no fan touches, w_fans is within `spread` of its value at the tile's centre.
+        const Vec3d tile_centre = centre_of(tile);
+        const double reach = tile_reach(tile);
+        const bool near_fans = !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
+        double fan_centre = 0, spread = INFINITY;
+        if (near_fans &&
+            !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
+                             tile.lo[2] >> kFinestTileLevel)) {
+            fan_centre = fans.winding(tile_centre);
+            spread = reach * fans.gradient_bound(tile_centre, reach);
+        }
+        for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+            for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
+                    const uint64_t i = inside.index(x, y, z);
+                    const Vec3d centre{double(box.lo[0] + x) + 0.5, double(box.lo[1] + y) + 0.5,
+                                       double(box.lo[2] + z) + 0.5};
+                    if (state[i] == kUnknown) {
+                        unsettled.push_back(i);
+                        for (double c : centre) points.push_back(float(c));
+                        continue;
+                    }
+                    const int whole = int(state[i]) - kZero;
+                    bool in = whole != 0;
+                    if (near_fans) {
+                        const double low = std::fabs(whole + fan_centre) - spread;
+                        const double high = std::fabs(whole + fan_centre) + spread;
+                        if (low > 0.5)
+                            in = true;
+                        else if (high < 0.5)
+                            in = false;
+                        else {
+                            // Decided below, from w_fans summed on the device.
+                            near_voxels.push_back(i);
+                            near_whole.push_back(whole);
+                            for (double c : centre) near_points.push_back(float(c));
+                            continue;
+                        }
+                    }
+                    if (in) inside.set(i);
+                }
+    }
     report_progress(options, 2 * bricks.size() / kSteps, bricks.size());
 
-    // Phase 4.
-    std::vector<uint64_t> unsettled;
-    points.clear();
-    for (uint64_t i = 0; i < state.size(); ++i)
-        if (state[i] != kUnknown && (state[i] & 0x80)) inside.set(i);
-    for (uint64_t i : queue) {
-        if (state[i] != kUnknown) continue;
-        unsettled.push_back(i);
-        int64_t v[3];
-        coords(i, v);
-        for (int k = 0; k < 3; ++k) points.push_back(float(double(box.lo[k] + v[k]) + 0.5));
+    if (!near_voxels.empty()) {
+        // w_fans from a tree over the fans (each triangle as many times as its weight), like
+        // the mesh's.
+        std::vector<std::array<double, 9>> weighted;
+        for (size_t f = 0; f < fans.triangles.size(); ++f)
+            weighted.insert(weighted.end(), size_t(fans.weight[f]), fans.triangles[f]);
+        WindingEvaluator fan_evaluator(cl, build_winding_tree(weighted), stats);
+        fan_evaluator.evaluate(near_points, OVS_WINDING_FAR, INFINITY, w, error);
+        for (size_t u = 0; u < near_voxels.size(); ++u)
+            if (std::fabs(near_whole[u] + w[u]) > 0.5f) inside.set(near_voxels[u]);
     }
+
+    // Phase 4.
     evaluator.evaluate(points, OVS_WINDING_FAR, INFINITY, w, error);
     for (size_t u = 0; u < unsettled.size(); ++u)
         if (std::fabs(w[u]) > 0.5f) inside.set(unsettled[u]);
