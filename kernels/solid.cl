@@ -93,37 +93,37 @@ static float solid_angle(float3 a, float3 b, float3 c) {
     return 2.0f * atan2(det, den);
 }
 
-// Generalized winding number at voxel centres: one work item per voxel of a batch of bricks,
-// walking the winding tree: far subtrees count as dipoles, near leaves triangle by triangle
-// (vertices in voxel units relative to the grid origin, in leaf order). Only centres in [lo, hi]
-// (the mesh's bounding box) are evaluated. Inside is |w| > 1/2, not w > 1/2, so that a
-// consistently inward-facing mesh (w = -1 inside) fills like its flipped copy.
-__kernel void winding(__global const float* vertices, __global const OvWindingNode* nodes,
-                      uint node_count, __global const int* slot_brick, uint item_base,
-                      uint item_end, int brick_size, int lo_x, int lo_y, int lo_z, int hi_x,
-                      int hi_y, int hi_z, __global uint* blocks) {
+// Generalized winding number w at points (x, y, z in voxel units relative to the grid origin),
+// walking the winding tree: subtrees farther than far_ratio radii count as their second-order
+// expansion (solid_math.h), near leaves triangle by triangle (vertices in leaf order). Writes w
+// and a bound on the error of the expansions (not counting float rounding); far_ratio = INFINITY
+// sums every triangle exactly.
+__kernel void winding_points(__global const float* vertices, __global const OvWindingNode* nodes,
+                             uint node_count, __global const float* points, uint item_base,
+                             uint item_end, float far_ratio, float node_tolerance,
+                             __global float* w,
+                             __global float* error) {
     uint item = item_base + (uint)get_global_id(0);
     if (item >= item_end) return;
-    uint per_brick = (uint)(brick_size * brick_size * brick_size);
-    uint slot = item / per_brick, local_index = item % per_brick;
-    int lx = (int)(local_index % (uint)brick_size);
-    int ly = (int)(local_index / (uint)brick_size % (uint)brick_size);
-    int lz = (int)(local_index / (uint)(brick_size * brick_size));
-    int x = slot_brick[3 * slot] * brick_size + lx;
-    int y = slot_brick[3 * slot + 1] * brick_size + ly;
-    int z = slot_brick[3 * slot + 2] * brick_size + lz;
-    if (x < lo_x || y < lo_y || z < lo_z || x > hi_x || y > hi_y || z > hi_z) return;
-
-    float3 p = (float3)((float)x + 0.5f, (float)y + 0.5f, (float)z + 0.5f);
-    float sum = 0.0f;
+    float3 p = vload3(item, points);
+    float sum = 0.0f, bound = 0.0f;
     for (uint i = 0; i < node_count;) {
         __global const OvWindingNode* n = nodes + i;
         float3 d = (float3)(n->centre[0], n->centre[1], n->centre[2]) - p;
         float dist2 = dot(d, d);
-        float reach = OVS_WINDING_FAR * n->radius;
-        if (dist2 > reach * reach) {
+        float reach = far_ratio * n->radius;
+        float gap = sqrt(dist2) - n->radius;
+        float node_bound = 3.0f * n->abs_area * n->radius * n->radius / (gap * gap * gap * gap);
+        if (dist2 > reach * reach && gap > 0.0f && node_bound <= node_tolerance) {
             float3 an = (float3)(n->area_normal[0], n->area_normal[1], n->area_normal[2]);
-            sum += dot(an, d) / (dist2 * sqrt(dist2));
+            float3 md = (float3)(n->moment[0] * d.x + n->moment[1] * d.y + n->moment[2] * d.z,
+                                 n->moment[3] * d.x + n->moment[4] * d.y + n->moment[5] * d.z,
+                                 n->moment[6] * d.x + n->moment[7] * d.y + n->moment[8] * d.z);
+            float trace = n->moment[0] + n->moment[4] + n->moment[8];
+            float dist = sqrt(dist2);
+            float inv3 = 1.0f / (dist2 * dist);
+            sum += (dot(an, d) + trace) * inv3 - 3.0f * dot(d, md) * inv3 / dist2;
+            bound += node_bound;
             i = n->skip;
         } else if (n->count) {
             for (uint t = n->first; t < n->first + n->count; ++t) {
@@ -138,10 +138,6 @@ __kernel void winding(__global const float* vertices, __global const OvWindingNo
             ++i;
         }
     }
-    if (!(fabs(sum) > 2.0f * M_PI_F)) return;
-
-    int nb = brick_size / 4;
-    size_t block = (size_t)slot * nb * nb * nb + (size_t)(lx / 4 + nb * (ly / 4 + nb * (lz / 4)));
-    int bit = (lx & 3) + 4 * ((ly & 3) + 4 * (lz & 3));
-    atomic_or(&blocks[2 * block + (bit >> 5)], 1u << (bit & 31));
+    w[item] = sum / (4.0f * M_PI_F);
+    error[item] = bound / (4.0f * M_PI_F);
 }

@@ -323,17 +323,29 @@ OVS_FN unsigned int ovs_prefix_xor(unsigned int word, unsigned int carry) {
 
 // A node of the winding-number tree (after Barill et al. 2018). Nodes are in depth-first order:
 // an inner node's first child follows it and `skip` is the index just past its subtree, so the
-// kernel walks the tree without a stack. Seen from further than OVS_WINDING_FAR radii, a subtree's
-// solid angle is taken as that of a dipole: area_normal . (centre - p) / |centre - p|^3.
+// kernel walks the tree without a stack. Seen from a point p farther than OVS_WINDING_FAR radii
+// from `centre`, a subtree's solid angle is taken from the second-order Taylor expansion of
+// f(x) = (x - p) / |x - p|^3 about the centre, with d = centre - p, r = |d|:
+//   area_normal . d / r^3 + trace(M) / r^3 - 3 d.M.d / r^5,
+// where M = sum over the subtree's triangles of area_normal_t (centroid_t - centre)^T. The
+// linear term is exact for flat triangles (the mean of x - centre over a triangle is its
+// centroid's offset), so the remainder is the quadratic Taylor term, bounded by
+//   3 * abs_area * radius^2 / (r - radius)^4
+// (the third derivatives of 1/|x| have norm 6/|x|^4); the kernel sums this bound per point.
 typedef struct {
     float centre[3];       // area-weighted centroid of the subtree's triangles (voxel units)
     float radius;          // of the ball around centre holding every vertex of the subtree
     float area_normal[3];  // sum of (b - a) x (c - a) / 2 over the subtree
+    float abs_area;        // sum of the triangles' areas
+    float moment[9];       // M above, row-major: moment[3 * i + j] = M_ij
     unsigned int skip;
     unsigned int first, count;  // a leaf's triangles [first, first + count); count 0 inside
 } OvWindingNode;
 
-#define OVS_WINDING_FAR 3.0f
+// Far-field acceptance: a subtree counts as its expansion beyond this many radii (Barill et al.
+// use 2 with their second-order term); the kernel adds the remainder bound of every subtree it
+// accepts to the point's error bound.
+#define OVS_WINDING_FAR 2.0f
 
 #ifndef __OPENCL_VERSION__
 }  // namespace oclvox::detail
