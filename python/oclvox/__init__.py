@@ -119,22 +119,32 @@ def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat"
                             device=_selector(device), reference=reference, progress=progress)
 
 
+def _field_pad(pad, band, origin, dims):
+    """The CLI's rule: a fitted field grid gets field_padding(band) voxels on every side (so the
+    zero level set closes inside it) unless pad, origin or dims place the grid."""
+    if pad is not None:
+        return pad
+    return 0 if origin is not None or dims is not None else _oclvox.field_padding(band)
+
+
 def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, inside="auto",
-        voxel_size=None, origin=None, dims=None, pad=0, cubic=False, brick_size=64, device=None,
+        voxel_size=None, origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None,
         reference=False):
     """Signed distance field (negative inside) at voxel centres; returns a Field.
 
     Exact within `band` voxels of the surface, clamped to +-band * voxel_size beyond it, or
-    propagated to every voxel with full_grid=True. Grid options as for voxelize.
+    propagated to every voxel with full_grid=True. Grid options as for voxelize, except that
+    `pad` defaults to ceil(band) + 1 when neither origin nor dims is given, as on the CLI.
     """
     mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
+    pad = _field_pad(pad, band, origin, dims)
     return _oclvox.sdf(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), band=band,
                        full_grid=full_grid, inside=inside, brick_size=brick_size,
                        device=_selector(device), reference=reference)
 
 
 def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", voxel_size=None,
-        origin=None, dims=None, pad=0, cubic=False, brick_size=64, device=None, reference=False):
+        origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None, reference=False):
     """Combines two shapes; op is "union", "intersection" or "difference" (a minus b).
 
     - two meshes: their signed distance fields on one grid fitted around both (grid and SDF
@@ -149,6 +159,7 @@ def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", v
         _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic)
         return _oclvox.csg_voxels(a, op, b)
     if _is_mesh(a) and _is_mesh(b):
+        pad = _field_pad(pad, band, origin, dims)
         return _oclvox.csg_meshes(_as_mesh(a), op, _as_mesh(b),
                                   _fit(resolution, voxel_size, origin, dims, pad, cubic),
                                   band=band, full_grid=full_grid, inside=inside,
@@ -160,7 +171,7 @@ def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", v
 
 def _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic):
     if (resolution != 256 or voxel_size is not None or origin is not None or dims is not None
-            or pad != 0 or cubic):
+            or pad not in (None, 0) or cubic):
         raise ValueError("grid options apply to mesh inputs only (fields and voxel grids "
                          "keep their own grid)")
 

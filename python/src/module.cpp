@@ -434,6 +434,7 @@ PYBIND11_MODULE(_oclvox, m) {
     m.def("csg_voxels", &csg_voxels, "a"_a, "op"_a, "b"_a);
     m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a);
     m.def("devices", &devices);
+    m.def("field_padding", &oclvox::field_padding, "band_voxels"_a);
     // The classes are documented and used as oclvox.Mesh, oclvox.VoxelGrid, oclvox.Field.
     for (const char* name : {"Mesh", "GridFit", "VoxelGrid", "Field"})
         m.attr(name).attr("__module__") = "oclvox";
