@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -116,6 +117,9 @@ OutputTarget::OutputTarget(const std::string& given, const std::string& extensio
 
 void OutputTarget::finish() const {
     if (!is_stdout()) return;
+    // A reader that stops early (`| head`) must not kill the run by SIGPIPE before the staged
+    // file is removed: the write fails with EPIPE instead and is reported.
+    std::signal(SIGPIPE, SIG_IGN);
     std::ifstream in(staged_->path(), std::ios::binary);
     std::cout.flush();
     char buffer[1 << 16];
