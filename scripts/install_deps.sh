@@ -5,7 +5,7 @@
 set -euo pipefail
 
 packages=(
-  cmake g++ make python3 time
+  cmake g++ make python3 time libpng-dev
   ocl-icd-opencl-dev opencl-c-headers opencl-clhpp-headers pocl-opencl-icd clinfo
   libtinyobjloader-dev libassimp-dev nlohmann-json3-dev libcli11-dev
   libopenvdb-dev libboost-iostreams-dev

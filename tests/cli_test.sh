@@ -568,6 +568,209 @@ cmp -s "$WORK/cubic_plain.binvox" "$WORK/cubic_centre.binvox" && pass "--cubic i
 expect_failure "--cubic=middle" "$WORK/cubic_x.binvox" 'cubic' \
     voxelize "$MESH" -r 16 --cubic=middle -o "$WORK/cubic_x.binvox"
 
+# ---- --json and --stats-json on every command --------------------------------------------------
+# stdout must be exactly one JSON document (python3 -m json.tool refuses anything else), with the
+# command's name and the keys a program needs.
+json_keys() {  # FILE KEY...: "ok" or the keys missing
+    python3 - "$@" <<'EOF_PY'
+import json, sys
+doc = json.load(open(sys.argv[1]))
+missing = []
+for path in sys.argv[2:]:
+    value = doc
+    for key in path.split("."):
+        if not isinstance(value, dict) or key not in value:
+            missing.append(path)
+            break
+        value = value[key]
+print("ok" if not missing else "missing " + " ".join(missing))
+EOF_PY
+}
+common_keys=(oclvox_version command inputs outputs backend device grid.dims grid.voxel_size
+    grid.origin seconds.total warnings)
+json_case() {  # NAME, command, expected extra keys (space-separated), oclvox arguments...
+    local name=$1 command=$2 extra=$3
+    shift 3
+    run "$command" "$@" --json
+    printf '%s' "$OUT" >"$WORK/run.json"
+    local keys
+    if [ "$RC" -ne 0 ] || ! python3 -m json.tool "$WORK/run.json" >/dev/null 2>&1; then
+        fail "$name --json: one JSON document on stdout" "rc=$RC out=${OUT:0:300} err=$ERR"
+        return
+    fi
+    # shellcheck disable=SC2086
+    keys=$(json_keys "$WORK/run.json" $extra)
+    if [ "$(json_field "$WORK/run.json" command)" = "$command" ] && [ "$keys" = ok ]; then
+        pass "$name --json: one JSON document with the expected keys"
+    else
+        fail "$name --json keys" "$keys; command=$(json_field "$WORK/run.json" command)"
+    fi
+}
+json_case "devices" devices "devices"
+json_case "voxelize" voxelize "${common_keys[*]} voxels_set seconds.voxelize seconds.kernels mode test" \
+    "$MESH" -r 24 -o "$WORK/json.npy"
+[ "$(json_field "$WORK/run.json" voxels_set)" = "$(npy_ones "$WORK/json.npy")" ] &&
+    pass "voxelize --json voxels_set equals the ones in the .npy" ||
+    fail "voxelize --json voxels_set" "$(json_field "$WORK/run.json" voxels_set)"
+json_case "sdf" sdf "${common_keys[*]} band seconds.field mesh.triangles border_samples_inside" \
+    "$MESH" -r 20 -o "$WORK/json_sdf.npy" --mesh "$WORK/json_sdf.obj"
+[ "$(json_field "$WORK/run.json" mesh.triangles)" = "$(obj_faces "$WORK/json_sdf.obj")" ] &&
+    pass "sdf --json mesh.triangles equals the faces of the OBJ" ||
+    fail "sdf --json mesh.triangles" "$(json_field "$WORK/run.json" mesh.triangles)"
+json_case "csg" csg "${common_keys[*]} op mesher mesh.triangles" \
+    "$MESH" difference "$WORK/spot_moved.obj" -r 20 -o "$WORK/json_csg.obj"
+json_case "mesh" mesh "${common_keys[*]} iso mesher mesh.vertices" \
+    "$WORK/sdf.npy" -o "$WORK/json_mesh.ply"
+for command in devices voxelize sdf csg mesh; do
+    case $command in
+    devices) args=() ;;
+    voxelize) args=("$MESH" -r 16 -q -o "$WORK/sj.binvox") ;;
+    sdf) args=("$MESH" -r 16 -q -o "$WORK/sj.vdb") ;;
+    csg) args=("$MESH" union "$WORK/spot_moved.obj" -r 16 -q -o "$WORK/sj.stl") ;;
+    mesh) args=("$MESH" -r 16 -q -o "$WORK/sj.obj") ;;
+    esac
+    run "$command" "${args[@]}" --stats-json "$WORK/sj_$command.json"
+    [ "$RC" -eq 0 ] && [ "$(json_field "$WORK/sj_$command.json" command)" = "$command" ] &&
+        pass "$command --stats-json writes the run's JSON" ||
+        fail "$command --stats-json" "rc=$RC err=$ERR"
+done
+
+# ---- typos get the closest valid name -----------------------------------------------------------
+typo_case() {  # expected suggestion, arguments...
+    local want=$1
+    shift
+    run "$@"
+    [ "$RC" -eq 2 ] && grep -qF "did you mean '$want'?" <<<"$ERR" &&
+        pass "typo '$*' suggests '$want'" || fail "typo '$*'" "rc=$RC err=$ERR"
+}
+typo_case voxelize voxelise "$MESH" -o "$WORK/t.binvox"
+typo_case devices devises
+typo_case --resolution voxelize "$MESH" --resolutoin 32 -o "$WORK/t.binvox"
+typo_case --band sdf "$MESH" --bnad 2 -o "$WORK/t.npy"
+typo_case --mesher csg "$MESH" union "$MESH" --meshr=surface-nets -o "$WORK/t.obj"
+typo_case --stats-json mesh "$MESH" --stat-json x.json -o "$WORK/t.obj"
+
+# ---- - as input (stdin) and output (stdout) -----------------------------------------------------
+# A binary STL of the sample written here, so stdin must be recognised as STL by its size rule.
+python3 - "$MESH" "$WORK/spot_binary.stl" <<'EOF_PY'
+import struct, sys
+vs, fs = [], []
+for line in open(sys.argv[1]):
+    w = line.split()
+    if w and w[0] == "v": vs.append(tuple(map(float, w[1:4])))
+    if w and w[0] == "f": fs.append([int(x.split("/")[0]) - 1 for x in w[1:]])
+tris = [(f[0], f[i], f[i + 1]) for f in fs for i in range(1, len(f) - 1)]
+with open(sys.argv[2], "wb") as out:
+    out.write(b"solid but binary".ljust(80, b" ") + struct.pack("<I", len(tris)))
+    for t in tris:
+        out.write(struct.pack("<12fH", 0, 0, 0, *[c for i in t for c in vs[i]], 0))
+EOF_PY
+"$OCLVOX" voxelize "$MESH" -r 24 -q -o "$WORK/file.binvox"
+"$OCLVOX" voxelize - -r 24 -o - --output-format binvox <"$MESH" >"$WORK/piped.binvox" \
+    2>"$WORK/stderr"
+RC=$?
+[ "$RC" -eq 0 ] && cmp -s "$WORK/piped.binvox" "$WORK/file.binvox" &&
+    grep -q '^output   - (stdout)' "$WORK/stderr" &&
+    pass "OBJ on stdin to .binvox on stdout equals the file run; summary on stderr" ||
+    fail "stdin/stdout .binvox" "rc=$RC $(cat "$WORK/stderr")"
+"$OCLVOX" voxelize "$WORK/spot_binary.stl" -r 24 -q -o "$WORK/stl_file.npy"
+run voxelize - -r 24 -q -o "$WORK/stl_piped.npy" <"$WORK/spot_binary.stl"
+[ "$RC" -eq 0 ] && cmp -s "$WORK/stl_file.npy" "$WORK/stl_piped.npy" &&
+    pass "binary STL on stdin is recognised without --input-format" ||
+    fail "binary STL on stdin" "rc=$RC err=$ERR"
+run voxelize - -r 24 -q --input-format obj -o "$WORK/stl_as_obj.npy" <"$WORK/spot_binary.stl"
+[ "$RC" -eq 1 ] && grep -q 'stdin' <<<"$ERR" && [ -z "$(ls "${TMPDIR:-/tmp}"/oclvox-* 2>/dev/null)" ] &&
+    pass "a wrong --input-format fails naming stdin, nothing staged left" ||
+    fail "wrong --input-format" "rc=$RC err=$ERR"
+"$OCLVOX" mesh - -r 20 -o - --output-format obj --mesher surface-nets <"$MESH" \
+    >"$WORK/piped_mesh.obj" 2>/dev/null
+"$OCLVOX" mesh "$MESH" -r 20 -q -o "$WORK/file_mesh.obj" --mesher surface-nets
+cmp -s "$WORK/piped_mesh.obj" "$WORK/file_mesh.obj" && pass "mesh from stdin to stdout equals the file run" ||
+    fail "mesh stdin/stdout"
+expect_failure "-o - as .npy (a sidecar cannot stream)" "$WORK/none" 'sidecar' \
+    voxelize "$MESH" -r 16 -o - --output-format npy
+[ "$RC" -eq 2 ] && pass "-o - as .npy is a usage error" || fail "-o - npy exit" "rc=$RC"
+expect_failure "-o - without --output-format" "$WORK/none" 'output-format' voxelize "$MESH" -o -
+expect_failure "--json with -o -" "$WORK/none" 'json' \
+    voxelize "$MESH" -o - --output-format binvox --json
+expect_failure "garbage on stdin" "$WORK/none" 'input-format' voxelize - -o "$WORK/g.binvox" \
+    <"$WORK/garbage.obj"
+
+# ---- --preview PNG ------------------------------------------------------------------------------
+# Decoded here from the PNG specification (zlib and the five row filters, no image library), and
+# compared pixel by pixel with the max-projections of the .npy the same run wrote.
+check_preview() {  # PNG, NPY (uint8 occupancy, or float field: inside is < 0)
+    python3 - "$@" <<'EOF_PY'
+import ast, json, struct, sys, zlib
+import numpy as np
+png = open(sys.argv[1], "rb").read()
+assert png[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG"
+at, idat, text = 8, b"", {}
+while at < len(png):
+    length, kind = struct.unpack(">I4s", png[at:at + 8])
+    body = png[at + 8:at + 8 + length]
+    if kind == b"IHDR":
+        width, height, depth, colour = struct.unpack(">IIBB", body[:10])
+        assert (depth, colour) == (8, 0), "expected 8-bit grey"
+    elif kind == b"IDAT":
+        idat += body
+    elif kind == b"tEXt":
+        key, value = body.split(b"\0", 1)
+        text[key.decode()] = value.decode("latin1")
+    at += 12 + length
+raw, rows, previous = zlib.decompress(idat), [], [0] * width
+for r in range(height):
+    line = raw[r * (width + 1):(r + 1) * (width + 1)]
+    f, row = line[0], []
+    for i, x in enumerate(line[1:]):
+        a = row[i - 1] if i else 0
+        b, c = previous[i], previous[i - 1] if i else 0
+        p = a + b - c
+        pred = [0, a, b, (a + b) // 2,
+                a if abs(p - a) <= min(abs(p - b), abs(p - c)) else (b if abs(p - b) <= abs(p - c) else c)][f]
+        row.append((x + pred) & 255)
+    rows.append(row)
+    previous = row
+image = np.array(rows, dtype=np.uint8)
+layout = json.loads(text["oclvox-layout"])
+data = open(sys.argv[2], "rb").read()
+hlen = struct.unpack("<H", data[8:10])[0]
+header = ast.literal_eval(data[10:10 + hlen].decode("latin1"))
+values = np.frombuffer(data[10 + hlen:], dtype=np.dtype(header["descr"]))
+values = values.reshape(header["shape"], order="F" if header["fortran_order"] else "C")
+inside = values > 0 if values.dtype == np.uint8 else values < 0
+s, d = layout["pixels_per_voxel"], layout["voxels_per_pixel"]
+assert d == 1, "test grids are small"
+for axis, panel in enumerate(layout["panels"]):
+    expected = inside.any(axis=axis)  # (horizontal, vertical): the two other axes in order
+    expected = np.repeat(np.repeat(expected, s, axis=0), s, axis=1).T[::-1]  # rows: up first
+    got = image[panel["top"]:panel["top"] + panel["height"], panel["left"]:panel["left"] + panel["width"]]
+    if got.shape != expected.shape or not np.array_equal(got == 255, expected):
+        print("panel along %s differs: %s vs %s" % (panel["along"], got.shape, expected.shape)); sys.exit()
+    if expected.all() or not expected.any():
+        print("panel along %s is uniform" % panel["along"]); sys.exit()
+bar = layout["scale_bar"]
+lit = image[bar["top"] + 1, :] == 255
+length = layout["scale_bar"]["length"]
+pixel = float(json.load(open(sys.argv[2] + ".json"))["voxel_size"]) / s
+if lit.sum() != bar["pixels"] or abs(bar["pixels"] * pixel - length) > pixel:
+    print("scale bar %d pixels for %g units at %g per pixel" % (lit.sum(), length, pixel)); sys.exit()
+print("ok")
+EOF_PY
+}
+run voxelize "$MESH" -r 24 --mode solid -q -o "$WORK/preview.npy" --preview "$WORK/preview.png"
+verdict=$(check_preview "$WORK/preview.png" "$WORK/preview.npy" 2>&1)
+[ "$RC" -eq 0 ] && [ "$verdict" = ok ] &&
+    pass "voxelize --preview: the PNG's three panels are the .npy's max-projections" ||
+    fail "voxelize --preview" "rc=$RC $verdict $ERR"
+run sdf "$MESH" -r 20 -q -o "$WORK/preview_sdf.npy" --preview "$WORK/preview_sdf.png"
+verdict=$(check_preview "$WORK/preview_sdf.png" "$WORK/preview_sdf.npy" 2>&1)
+[ "$RC" -eq 0 ] && [ "$verdict" = ok ] &&
+    pass "sdf --preview: the PNG's panels are the field's inside projected" ||
+    fail "sdf --preview" "rc=$RC $verdict $ERR"
+expect_failure "--preview not a .png" "$WORK/p.jpg" 'png' \
+    voxelize "$MESH" -r 16 -o "$WORK/p.binvox" --preview "$WORK/p.jpg"
+
 # ---- Ctrl-C -------------------------------------------------------------------------------------
 # A run that voxelizes for about 3 s on PoCL, in many small batches, gets one SIGINT after 1 s,
 # sent to its whole process group as a terminal's Ctrl-C is (job control gives the run its own

@@ -1,0 +1,160 @@
+// `oclvox csg`: union, intersection or difference of two meshes (through their signed distance
+// fields on one grid) or of two .npy fields.
+#include "commands.hpp"
+#include "field_commands.hpp"
+#include "interrupt.hpp"
+#include "stdio_files.hpp"
+
+namespace oclvox_cli {
+
+namespace {
+
+void add_options(CLI::App& command, FieldArgs& args) {
+    command
+        .add_option("a", args.input,
+                    std::string("first mesh file (") + kMeshFormatsText +
+                        "; - reads stdin), or a .npy signed distance field")
+        ->type_name("A")
+        ->required();
+    command.add_option("op", args.op, "union, intersection or difference (A minus B)")
+        ->type_name("OP")
+        ->check(CLI::IsMember({"union", "intersection", "difference"}))
+        ->required();
+    command.add_option("b", args.input_b, "second mesh file, or a .npy field on A's grid")
+        ->type_name("B")
+        ->required();
+    command
+        .add_option("-o,--output", args.output,
+                    "a mesh (.obj, .ply, .stl: the result's zero level set) or a field (.npy, "
+                    ".vdb); - writes stdout (with --output-format)")
+        ->type_name("OUTPUT")
+        ->required();
+    add_input_format_option(command, args.files);
+    add_output_format_option(command, args.files);
+    args.grid_options = add_grid_options(command, args.fit);
+    describe_field_padding(args.grid_options);
+    add_distance_options(command, args);
+    add_device_options(command, args.device, "Distance");
+    add_mesher_option(command, args);
+    add_reporting_options(command, args.reporting);
+}
+
+int run(const FieldArgs& args) {
+    const Clock::time_point start = Clock::now();
+    RunRecord record;
+    record.command = "csg";
+    start_interrupt_watcher();
+
+    // Phase 1: the operands' kinds and the output paths, before any work is spent.
+    const oclvox::CsgOp op = oclvox::csg_op_from_string(args.op);
+    const bool mesh_out = is_mesh_output(args.output, args.files);
+    check_output(args.output, {args.input, args.input_b}, {".obj", ".ply", ".stl", ".npy", ".vdb"},
+                 args.files);
+    check_reporting(args.reporting, {args.input, args.input_b}, {args.output});
+    if (args.input == "-" && args.input_b == "-")
+        throw UsageError("only one of A and B can be read from stdin (-)");
+    if (!args.files.input_format.empty() && args.input != "-" && args.input_b != "-")
+        throw UsageError("--input-format applies to stdin (-) only; A and B are files");
+    const bool fields_in = is_field_path(args.input) && is_field_path(args.input_b);
+    if (!fields_in && (is_field_path(args.input) || is_field_path(args.input_b)))
+        throw UsageError("csg takes two meshes or two .npy fields, not one of each");
+    if (fields_in && any_given(args.grid_options))
+        throw UsageError("grid options do not apply to .npy field inputs (their grids are used)");
+    const OutputTarget output(args.output, output_extension(args.output, args.files));
+
+    // Phase 2: both operands as fields on one grid.
+    std::optional<oclvox::ScalarField> a, b;
+    std::optional<oclvox::Device> device;
+    oclvox::VoxelizeStats stats_a, stats_b;
+    if (fields_in) {
+        record.inputs.resize(2);
+        timed(record.seconds.load, [&] {
+            a = read_field_input(args.input, record.inputs[0]);
+            b = read_field_input(args.input_b, record.inputs[1]);
+            return 0;
+        });
+        // occupancy_to_field's values step by +-0.5 across the surface; they are not distances.
+        if ((record.inputs[0].kind == "occupancy" || record.inputs[1].kind == "occupancy") &&
+            !mesh_out)
+            throw UsageError(
+                "csg of an occupancy .npy writes a mesh (.obj, .ply, .stl), not a "
+                "distance field");
+        record.grid = a->grid;
+        stop_if_interrupted();
+        if (mesh_out) device = open_device(args.device, record.seconds.device_open);
+    } else {
+        const MeshInput input_a(args.input, args.input == "-" ? args.files.input_format : "");
+        const MeshInput input_b(args.input_b, args.input_b == "-" ? args.files.input_format : "");
+        oclvox::Mesh mesh_a, mesh_b;
+        timed(record.seconds.load, [&] {
+            mesh_a = load_mesh_input(input_a);
+            mesh_b = load_mesh_input(input_b);
+            return 0;
+        });
+        record.grid = timed(record.seconds.fit,
+                            [&] { return oclvox::fit_grid(mesh_a, mesh_b, field_fit(args)); });
+        record.inputs = {{input_a.name(), "mesh", mesh_a.triangles.size()},
+                         {input_b.name(), "mesh", mesh_b.triangles.size()}};
+        stop_if_interrupted();
+        device = open_device(args.device, record.seconds.device_open);
+        timed(record.seconds.compute, [&] {
+            a = signed_distance(device, mesh_a, *record.grid, args, &stats_a);
+            stop_if_interrupted();
+            b = signed_distance(device, mesh_b, *record.grid, args, &stats_b);
+            return 0;
+        });
+        stop_if_interrupted();
+        oclvox::VoxelizeStats stats = stats_a;  // both runs' counts together
+        stats.triangles_in += stats_b.triangles_in;
+        stats.triangles_used += stats_b.triangles_used;
+        stats.work_items += stats_b.work_items;
+        record.stats = stats;
+    }
+
+    // Phase 3: combine, and mesh if the output is a mesh.
+    const oclvox::ScalarField combined = oclvox::csg(*a, *b, op);
+    a.reset();
+    b.reset();
+    std::optional<oclvox::Mesh> surface;
+    if (mesh_out) {
+        surface = timed(record.seconds.mesh,
+                        [&] { return extract_surface(device, combined, args.mesher, 0.0f); });
+        stop_if_interrupted();
+    }
+
+    // Phase 4: the file, then the report.
+    timed(record.seconds.write, [&] {
+        if (surface)
+            oclvox::write_mesh(output.path(), *surface);
+        else
+            oclvox::write_field(output.path(), combined, fields_in || args.full ? 0.0 : args.band);
+        output.finish();
+        return 0;
+    });
+    record.seconds.total = seconds_since(start);
+
+    record.outputs = {args.output};
+    if (device) record.device = device->info();
+    record_field_settings(record, args);
+    if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
+    record.border_inside = oclvox::border_samples_inside(combined);
+    report_run(record, args.reporting, output.is_stdout());
+    return 0;
+}
+
+}  // namespace
+
+Command add_csg_command(CLI::App& app) {
+    CLI::App* command = app.add_subcommand(
+        "csg", "union, intersection or difference of two meshes (or two .npy fields)");
+    command->footer(
+        std::string(kExitCodesText) +
+        "Both signed distance fields are computed on one grid fitted to both meshes and\n"
+        "padded by band + 1 voxels, so the result's surface closes inside it.\n"
+        "Example: oclvox csg a.obj difference b.obj -r 128 -o a_minus_b.obj");
+    auto args = std::make_shared<FieldArgs>();
+    add_options(*command, *args);
+    return {command, [args] { return run(*args); }};
+}
+
+}  // namespace oclvox_cli

@@ -1,0 +1,138 @@
+// `oclvox mesh`: the iso-surface of a .npy field, or a mesh remeshed through a voxel field.
+#include <unistd.h>
+
+#include "commands.hpp"
+#include "field_commands.hpp"
+#include "interrupt.hpp"
+#include "progress_bar.hpp"
+#include "stdio_files.hpp"
+
+namespace oclvox_cli {
+
+namespace {
+
+void add_options(CLI::App& command, FieldArgs& args) {
+    command
+        .add_option("input", args.input,
+                    std::string("a .npy scalar field (with its .json sidecar), meshed at --iso; "
+                                "or a mesh file (") +
+                        kMeshFormatsText +
+                        "; - reads stdin), which is voxelized (mode solid, on the grid options' "
+                        "grid), turned into a field by occupancy_to_field (one smoothing pass) "
+                        "and meshed: a remeshed voxel surface, not the original")
+        ->type_name("INPUT")
+        ->required();
+    command
+        .add_option("-o,--output", args.output,
+                    "mesh file: .obj, .ply or .stl; - writes stdout (with --output-format)")
+        ->type_name("OUTPUT")
+        ->required();
+    add_input_format_option(command, args.files);
+    add_output_format_option(command, args.files);
+    args.grid_options = add_grid_options(command, args.fit);
+    command
+        .add_option("--inside", args.inside,
+                    "inside test when voxelizing a mesh input: auto, parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Meshing");
+    add_mesher_option(command, args);
+    command.add_option("--iso", args.iso, "iso-value of the surface (inside is below it)")
+        ->type_name("V")
+        ->check(kFinite)
+        ->capture_default_str()
+        ->group("Meshing");
+    add_device_options(command, args.device, "Meshing");
+    add_reporting_options(command, args.reporting);
+}
+
+int run(const FieldArgs& args) {
+    const Clock::time_point start = Clock::now();
+    RunRecord record;
+    record.command = "mesh";
+    start_interrupt_watcher();
+
+    // Phase 1: output paths, before any work is spent.
+    check_output(args.output, {args.input}, kMeshExtensions, args.files);
+    check_reporting(args.reporting, {args.input}, {args.output});
+    const bool field_in = is_field_path(args.input);
+    if (field_in && any_given(args.grid_options))
+        throw UsageError("grid options do not apply to a .npy field input (its grid is used)");
+    if (field_in && !args.files.input_format.empty())
+        throw UsageError("--input-format applies to a mesh read from stdin (-) only");
+    const OutputTarget output(args.output, output_extension(args.output, args.files));
+
+    // Phase 2: the field, read or made from the mesh's solid voxels.
+    std::optional<oclvox::ScalarField> field;
+    std::optional<oclvox::Device> device;
+    if (field_in) {
+        record.inputs.resize(1);
+        field = timed(record.seconds.load,
+                      [&] { return read_field_input(args.input, record.inputs[0]); });
+        stop_if_interrupted();
+        device = open_device(args.device, record.seconds.device_open);
+    } else {
+        const MeshInput input(args.input, args.files.input_format);
+        const oclvox::Mesh mesh =
+            timed(record.seconds.load, [&] { return load_mesh_input(input); });
+        const oclvox::Grid grid =
+            timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
+        record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};
+        stop_if_interrupted();
+        device = open_device(args.device, record.seconds.device_open);
+        oclvox::VoxelizeOptions options;
+        options.mode = oclvox::VoxelizeMode::Solid;
+        options.inside = oclvox::inside_test_from_string(args.inside);
+        oclvox::VoxelizeStats stats;
+        field = timed(record.seconds.compute, [&] {
+            ProgressBar bar("voxelizing", "bricks", !args.reporting.quiet && isatty(STDERR_FILENO));
+            options.progress = [&](uint64_t done, uint64_t total) {
+                bar.update(done, total);
+                return !interrupted();
+            };
+            const oclvox::SparseVoxels voxels =
+                device ? device->voxelize(mesh, grid, options, &stats)
+                       : oclvox::voxelize_reference(mesh, grid, options, &stats);
+            return oclvox::occupancy_to_field(voxels);
+        });
+        record.stats = stats;
+        stop_if_interrupted();
+    }
+
+    // Phase 3: the surface, the file, the report.
+    const oclvox::Mesh surface = timed(record.seconds.mesh, [&] {
+        return extract_surface(device, *field, args.mesher, float(args.iso));
+    });
+    stop_if_interrupted();
+    timed(record.seconds.write, [&] {
+        oclvox::write_mesh(output.path(), surface);
+        output.finish();
+        return 0;
+    });
+    record.seconds.total = seconds_since(start);
+
+    record.outputs = {args.output};
+    record.grid = field->grid;
+    if (device) record.device = device->info();
+    record_field_settings(record, args);
+    record.mesh_made = {{surface.triangles.size(), surface.positions.size()}};
+    record.border_inside = oclvox::border_samples_inside(*field, float(args.iso));
+    report_run(record, args.reporting, output.is_stdout());
+    return 0;
+}
+
+}  // namespace
+
+Command add_mesh_command(CLI::App& app) {
+    CLI::App* command = app.add_subcommand(
+        "mesh", "mesh the iso-surface of a .npy field, or remesh a mesh through a voxel field");
+    command->footer(std::string(kExitCodesText) +
+                    "A mesh INPUT is voxelized (mode solid) and meshed via occupancy_to_field.\n"
+                    "Example: oclvox mesh bunny.npy --iso 0 -o bunny.ply --mesher marching-cubes");
+    auto args = std::make_shared<FieldArgs>();
+    add_options(*command, *args);
+    return {command, [args] { return run(*args); }};
+}
+
+}  // namespace oclvox_cli

@@ -1,0 +1,170 @@
+// `oclvox voxelize`: a mesh file into a voxel file.
+#include <unistd.h>
+
+#include "commands.hpp"
+#include "interrupt.hpp"
+#include "options.hpp"
+#include "preview.hpp"
+#include "progress_bar.hpp"
+#include "report.hpp"
+#include "stdio_files.hpp"
+
+namespace oclvox_cli {
+
+namespace {
+
+struct VoxelizeArgs {
+    std::string input, output, preview;
+    FileArgs files;
+    oclvox::GridFit fit;
+    std::string test = "sat";
+    std::string mode = "surface";
+    std::string inside = "auto";
+    std::string boundary = "closed";
+    DeviceArgs device;
+    TilingArgs tiling;
+    ReportingArgs reporting;
+};
+
+void add_options(CLI::App& command, VoxelizeArgs& args) {
+    command
+        .add_option("input", args.input,
+                    std::string("mesh file: ") + kMeshFormatsText + "; - reads stdin")
+        ->type_name("INPUT")
+        ->required();
+    command
+        .add_option("-o,--output", args.output,
+                    "voxel file; the format follows from the extension: .vdb (OpenVDB, sparse), "
+                    ".binvox, .npy (with a .json sidecar), .vox (MagicaVoxel), .obj, .ply or .stl "
+                    "(exposed cube faces); - writes stdout (with --output-format)")
+        ->type_name("OUTPUT")
+        ->required();
+    add_input_format_option(command, args.files);
+    add_output_format_option(command, args.files);
+    command
+        .add_option("--preview", args.preview,
+                    "also write a PNG: the voxels' orthographic max-projections along x, y and z "
+                    "side by side, with a scale bar")
+        ->type_name("FILE.png")
+        ->group("Files");
+
+    add_grid_options(command, args.fit);
+
+    command
+        .add_option("--test", args.test,
+                    "triangle/box overlap test; both are always available: sat (default, 13 "
+                    "separating axes) or pef (plane and projected edge functions)")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"pef", "sat"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--mode", args.mode,
+                    "surface (conservative, 26-separating: every voxel touching a triangle), "
+                    "thin (6-separating, Schwarz & Seidel), solid (voxel centres inside the "
+                    "mesh) or filled (solid and surface)")
+        ->type_name("MODE")
+        ->check(CLI::IsMember({"surface", "thin", "solid", "filled"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--inside", args.inside,
+                    "inside test for solid/filled: auto (parity for closed meshes, winding "
+                    "number otherwise), parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--boundary", args.boundary,
+                    "closed (voxels are closed boxes: a face on a voxel face marks both voxels) "
+                    "or half-open ([i, i+1): it marks exactly one layer)")
+        ->type_name("RULE")
+        ->check(CLI::IsMember({"closed", "half-open"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    add_device_options(command, args.device, "Voxelization");
+    add_tiling_options(command, args.tiling);
+    add_reporting_options(command, args.reporting);
+}
+
+int run(const VoxelizeArgs& args) {
+    const Clock::time_point start = Clock::now();
+    RunRecord record;
+    record.command = "voxelize";
+    start_interrupt_watcher();
+
+    // Phase 1: output paths, before any work is spent.
+    check_output(args.output, {args.input}, kVoxelExtensions, args.files);
+    if (!args.preview.empty()) check_output(args.preview, {args.input}, {".png"});
+    check_reporting(args.reporting, {args.input}, {args.output, args.preview});
+    const OutputTarget output(args.output, output_extension(args.output, args.files));
+
+    // Phase 2: the mesh and the grid around it.
+    const MeshInput input(args.input, args.files.input_format);
+    const oclvox::Mesh mesh = timed(record.seconds.load, [&] { return load_mesh_input(input); });
+    const oclvox::Grid grid =
+        timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
+    stop_if_interrupted();
+
+    // Phase 3: the device.
+    std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
+
+    // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
+    oclvox::VoxelizeOptions options;
+    options.test = oclvox::overlap_test_from_string(args.test);
+    options.mode = oclvox::voxelize_mode_from_string(args.mode);
+    options.inside = oclvox::inside_test_from_string(args.inside);
+    options.boundary = oclvox::boundary_from_string(args.boundary);
+    options.brick_size = args.tiling.brick_size;
+    options.device_budget_bytes = args.tiling.device_mib << 20;
+    options.host_budget_bytes = args.tiling.host_mib << 20;
+    oclvox::VoxelizeStats stats;
+    const oclvox::SparseVoxels voxels = timed(record.seconds.compute, [&] {
+        ProgressBar bar("voxelizing", "bricks", !args.reporting.quiet && isatty(STDERR_FILENO));
+        options.progress = [&](uint64_t done, uint64_t total) {
+            bar.update(done, total);
+            return !interrupted();
+        };
+        return device ? device->voxelize(mesh, grid, options, &stats)
+                      : oclvox::voxelize_reference(mesh, grid, options, &stats);
+    });
+    stop_if_interrupted();
+
+    // Phase 5: the files, then the report.
+    timed(record.seconds.write, [&] {
+        oclvox::write_voxels(output.path(), voxels);
+        if (!args.preview.empty()) write_preview(args.preview, voxels);
+        output.finish();
+        return 0;
+    });
+    record.seconds.total = seconds_since(start);
+
+    record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};
+    record.outputs = {args.output};
+    if (!args.preview.empty()) record.outputs.push_back(args.preview);
+    record.grid = grid;
+    if (device) record.device = device->info();
+    record.settings = {{"test", args.test},
+                       {"mode", args.mode},
+                       {"boundary", args.boundary},
+                       {"brick_size", args.tiling.brick_size}};
+    record.stats = stats;
+    report_run(record, args.reporting, output.is_stdout());
+    return 0;
+}
+
+}  // namespace
+
+Command add_voxelize_command(CLI::App& app) {
+    CLI::App* command = app.add_subcommand("voxelize", "voxelize a mesh file into a voxel file");
+    command->footer(std::string(kExitCodesText) +
+                    "Example: oclvox voxelize bunny.obj -r 512 -o bunny.binvox --stats\n"
+                    "         cat part.stl | oclvox voxelize - -r 64 -o - --output-format binvox "
+                    "> part.binvox");
+    auto args = std::make_shared<VoxelizeArgs>();
+    add_options(*command, *args);
+    return {command, [args] { return run(*args); }};
+}
+
+}  // namespace oclvox_cli

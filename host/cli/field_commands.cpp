@@ -1,0 +1,115 @@
+#include "field_commands.hpp"
+
+#include <algorithm>
+#include <variant>
+
+#include "file_names.hpp"
+
+namespace oclvox_cli {
+
+void add_mesher_option(CLI::App& command, FieldArgs& args) {
+    command
+        .add_option("--mesher", args.mesher,
+                    "iso-surface method: marching-cubes (asymptotic decider: closed and "
+                    "manifold meshes) or surface-nets (Naive Surface Nets: fewer slivers, but "
+                    "non-manifold where a cell face has four sign changes, as at CSG seams)")
+        ->type_name("METHOD")
+        ->check(CLI::IsMember({"surface-nets", "marching-cubes"}))
+        ->capture_default_str()
+        ->group("Meshing");
+}
+
+void describe_field_padding(const std::vector<CLI::Option*>& grid_options) {
+    for (CLI::Option* o : grid_options)
+        if (o->check_name("--pad"))
+            o->description(
+                 "empty voxels added on every side; by default band + 1 (band rounded up) so the "
+                 "zero level set closes inside the grid, or 0 when --origin or --dims place it")
+                ->default_str("band+1");
+}
+
+void add_distance_options(CLI::App& command, FieldArgs& args) {
+    command
+        .add_option("--band", args.band,
+                    "half-width of the band of exact distances, in voxels; outside it a "
+                    "narrow-band field holds +-band * voxel size")
+        ->type_name("VOXELS")
+        ->check(kPositiveFinite)
+        ->capture_default_str()
+        ->group("Distance");
+    command
+        .add_option("--inside", args.inside,
+                    "inside test that gives the sign: auto (parity for closed meshes, winding "
+                    "number otherwise), parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Distance");
+    command
+        .add_flag("--full", args.full,
+                  "distances in every voxel (jump flooding), not only in the narrow band")
+        ->group("Distance");
+}
+
+bool is_field_path(const std::string& path) {
+    return oclvox::detail::lowercase_extension(path) == ".npy";
+}
+
+bool is_mesh_output(const std::string& path, const FileArgs& files) {
+    const std::string ext = output_extension(path, files);
+    return std::find(kMeshExtensions.begin(), kMeshExtensions.end(), ext) != kMeshExtensions.end();
+}
+
+oclvox::GridFit field_fit(const FieldArgs& args) {
+    oclvox::GridFit fit = args.fit;
+    const bool placed =
+        std::any_of(args.grid_options.begin(), args.grid_options.end(), [](const CLI::Option* o) {
+            return o->count() > 0 &&
+                   (o->check_name("--pad") || o->check_name("--origin") || o->check_name("--dims"));
+        });
+    if (!placed) fit.pad = oclvox::field_padding(args.band);
+    return fit;
+}
+
+oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
+                                    const oclvox::Grid& grid, const FieldArgs& args,
+                                    oclvox::VoxelizeStats* stats) {
+    oclvox::SdfOptions options;
+    options.band_voxels = args.band;
+    options.full_grid = args.full;
+    options.inside = oclvox::inside_test_from_string(args.inside);
+    return device ? oclvox::signed_distance(*device, mesh, grid, options, stats)
+                  : oclvox::signed_distance_reference(mesh, grid, options, stats);
+}
+
+oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
+                             const oclvox::ScalarField& field, const std::string& mesher,
+                             float iso) {
+    if (mesher == "marching-cubes")
+        return device ? oclvox::marching_cubes(*device, field, iso)
+                      : oclvox::marching_cubes(field, iso);
+    return device ? oclvox::surface_nets(*device, field, iso) : oclvox::surface_nets(field, iso);
+}
+
+oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record) {
+    if (path == "-")
+        throw UsageError("a .npy field has a .json sidecar file, so it cannot be read from stdin");
+    std::variant<oclvox::ScalarField, oclvox::SparseVoxels> data = oclvox::read_npy(path);
+    const bool occupancy = std::holds_alternative<oclvox::SparseVoxels>(data);
+    record = {path, occupancy ? "occupancy" : "field", 0};
+    if (occupancy) return oclvox::occupancy_to_field(std::get<oclvox::SparseVoxels>(data));
+    return std::get<oclvox::ScalarField>(std::move(data));
+}
+
+void record_field_settings(RunRecord& record, const FieldArgs& args) {
+    if (!args.op.empty()) record.settings["op"] = args.op;
+    if (record.command != "mesh") {
+        record.settings["band"] = args.band;
+        record.settings["full"] = args.full;
+    } else {
+        record.settings["iso"] = args.iso;
+    }
+    record.settings["mesher"] = args.mesher;
+}
+
+}  // namespace oclvox_cli

@@ -1,0 +1,61 @@
+// What the field commands (sdf, csg, mesh) share: their options, the signed distance and meshing
+// calls on a device or the CPU reference, and .npy field inputs.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "oclvox/field.hpp"
+#include "oclvox/oclvox.hpp"
+#include "oclvox/sdf.hpp"
+#include "options.hpp"
+#include "report.hpp"
+
+namespace oclvox_cli {
+
+struct FieldArgs {
+    std::string input, op, input_b, output, mesh_output;
+    FileArgs files;
+    oclvox::GridFit fit;
+    std::vector<CLI::Option*> grid_options;  // to reject them for .npy field inputs
+    double band = 3.0;
+    bool full = false;
+    std::string inside = "auto";
+    // Marching Cubes by default: its meshes are closed and manifold (Surface Nets' are not where
+    // a cell face has four sign changes, which CSG results and thin parts produce).
+    std::string mesher = "marching-cubes";
+    double iso = 0.0;
+    DeviceArgs device;
+    ReportingArgs reporting;
+};
+
+void add_mesher_option(CLI::App& command, FieldArgs& args);
+// --band and --inside.
+void add_distance_options(CLI::App& command, FieldArgs& args);
+// sdf and csg pad fitted grids by default (field_fit): say so in their --pad help.
+void describe_field_padding(const std::vector<CLI::Option*>& grid_options);
+
+bool is_field_path(const std::string& path);
+bool is_mesh_output(const std::string& path, const FileArgs& files);
+
+// The grid fit of sdf and csg: a fitted grid gets field_padding(band) voxels on every side, so the
+// zero level set closes inside it, unless the user places the grid (--pad, --origin or --dims).
+oclvox::GridFit field_fit(const FieldArgs& args);
+
+oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
+                                    const oclvox::Grid& grid, const FieldArgs& args,
+                                    oclvox::VoxelizeStats* stats);
+
+oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
+                             const oclvox::ScalarField& field, const std::string& mesher,
+                             float iso);
+
+// A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
+// occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
+oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record);
+
+// The settings every field command reports.
+void record_field_settings(RunRecord& record, const FieldArgs& args);
+
+}  // namespace oclvox_cli
