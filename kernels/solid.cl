@@ -101,8 +101,7 @@ static float solid_angle(float3 a, float3 b, float3 c) {
 __kernel void winding_points(__global const float* vertices, __global const OvWindingNode* nodes,
                              uint node_count, __global const float* points, uint item_base,
                              uint item_end, float far_ratio, float node_tolerance,
-                             __global float* w,
-                             __global float* error) {
+                             __global float* w, __global float* error) {
     uint item = item_base + (uint)get_global_id(0);
     if (item >= item_end) return;
     float3 p = vload3(item, points);
