@@ -13,17 +13,7 @@ MESH="$OCLVOX_SAMPLE_DIR/spot.obj"
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 
-passed=0
-failed=0
-pass() {
-    echo "PASS  $1"
-    passed=$((passed + 1))
-}
-fail() {
-    echo "FAIL  $1"
-    [ $# -gt 1 ] && printf '      %s\n' "$2"
-    failed=$((failed + 1))
-}
+source "$(dirname "${BASH_SOURCE[0]}")/shell_checks.sh"
 
 # Runs oclvox with the given arguments; leaves its exit code, stdout and stderr in RC, OUT, ERR.
 run() {
