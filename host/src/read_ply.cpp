@@ -209,46 +209,29 @@ void check_counts_fit(const std::string& path, const Header& header, uint64_t bo
 // Body
 // ---------------------------------------------------------------------------------------------
 
-double binary_double(Scalar type, const char* bytes, bool big_endian) {
+// One value of any PLY scalar type, as Value (double for coordinates; int64_t for list lengths and
+// indices, which the header has already checked are of integer types).
+template <typename Value>
+Value binary_scalar(Scalar type, const char* bytes, bool big_endian) {
     switch (type) {
         case Scalar::Int8:
-            return load_scalar<int8_t>(bytes, big_endian);
+            return Value(load_scalar<int8_t>(bytes, big_endian));
         case Scalar::UInt8:
-            return load_scalar<uint8_t>(bytes, big_endian);
+            return Value(load_scalar<uint8_t>(bytes, big_endian));
         case Scalar::Int16:
-            return load_scalar<int16_t>(bytes, big_endian);
+            return Value(load_scalar<int16_t>(bytes, big_endian));
         case Scalar::UInt16:
-            return load_scalar<uint16_t>(bytes, big_endian);
+            return Value(load_scalar<uint16_t>(bytes, big_endian));
         case Scalar::Int32:
-            return load_scalar<int32_t>(bytes, big_endian);
+            return Value(load_scalar<int32_t>(bytes, big_endian));
         case Scalar::UInt32:
-            return load_scalar<uint32_t>(bytes, big_endian);
+            return Value(load_scalar<uint32_t>(bytes, big_endian));
         case Scalar::Float32:
-            return load_scalar<float>(bytes, big_endian);
+            return Value(load_scalar<float>(bytes, big_endian));
         case Scalar::Float64:
-            return load_scalar<double>(bytes, big_endian);
+            return Value(load_scalar<double>(bytes, big_endian));
     }
     return 0;
-}
-
-// Integer types only (the header checks lengths and indices are integers).
-int64_t binary_integer(Scalar type, const char* bytes, bool big_endian) {
-    switch (type) {
-        case Scalar::Int8:
-            return load_scalar<int8_t>(bytes, big_endian);
-        case Scalar::UInt8:
-            return load_scalar<uint8_t>(bytes, big_endian);
-        case Scalar::Int16:
-            return load_scalar<int16_t>(bytes, big_endian);
-        case Scalar::UInt16:
-            return load_scalar<uint16_t>(bytes, big_endian);
-        case Scalar::Int32:
-            return load_scalar<int32_t>(bytes, big_endian);
-        case Scalar::UInt32:
-            return load_scalar<uint32_t>(bytes, big_endian);
-        default:
-            return 0;
-    }
 }
 
 std::string record_name(const Element& element, uint64_t record) {
@@ -275,12 +258,12 @@ void read_binary_body(const std::string& path, const Header& header, const std::
                     need(1, size);
                     if (property.role != Role::Skip)
                         position[int(property.role) - int(Role::X)] =
-                            binary_double(property.value, at, big_endian);
+                            binary_scalar<double>(property.value, at, big_endian);
                     at += size;
                     continue;
                 }
                 need(1, size_of(property.length));
-                const int64_t length = binary_integer(property.length, at, big_endian);
+                const int64_t length = binary_scalar<int64_t>(property.length, at, big_endian);
                 at += size_of(property.length);
                 if (length < 0)
                     fail(path, record_name(element, record) + " has a negative list length");
@@ -290,8 +273,8 @@ void read_binary_body(const std::string& path, const Header& header, const std::
                     if (uint64_t(length) > std::numeric_limits<uint32_t>::max())
                         fail(path, record_name(element, record) + " has too many corners");
                     for (int64_t k = 0; k < length; ++k)
-                        out.corners.push_back(
-                            binary_integer(property.value, at + k * entry_size, big_endian));
+                        out.corners.push_back(binary_scalar<int64_t>(
+                            property.value, at + k * entry_size, big_endian));
                     out.corner_counts.push_back(uint32_t(length));
                 }
                 at += uint64_t(length) * entry_size;
