@@ -263,7 +263,8 @@ class Answer {
     explicit Answer(const std::string& bytes) : bytes_(bytes) {}
     bool take(void* out, size_t n) {
         if (bytes_.size() - at_ < n) return false;
-        std::memcpy(out, bytes_.data() + at_, n);
+        if (n > 0)
+            std::memcpy(out, bytes_.data() + at_, n);  // an empty vector's data() may be null
         at_ += n;
         return true;
     }
