@@ -1,0 +1,221 @@
+"""oclvox.distributed on a local Dask cluster of two worker processes.
+
+Sharded runs are checked against the single-process run in this process (voxel for voxel, and a
+.vdb read back by OpenVDB's own Python module); batches against single-process runs read back by
+numpy; the CLI's cluster paths against the CLI's plain path, byte for byte.
+"""
+
+import filecmp
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import oclvox
+from conftest import SPOT
+
+distributed = pytest.importorskip("distributed", reason="Dask (python3-distributed) not installed")
+from oclvox.distributed import mesh_paths, shards_of, voxelize_many, voxelize_sharded  # noqa: E402
+
+CLI = os.environ.get("OCLVOX_CLI")
+
+
+@pytest.fixture(scope="module")
+def client():
+    # Two single-threaded worker processes, as on a cluster of one-device workers. Each worker's
+    # PoCL device gets one thread, so that the two share this machine's cores instead of each
+    # starting a thread per core; the workers pick their device as this process does
+    # ($OCLVOX_DEVICE, inherited).
+    env = {"POCL_MAX_PTHREAD_COUNT": "1"}
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, env=env) as cluster, \
+            distributed.Client(cluster) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def open_spot():
+    """Spot with a patch of triangles taken out: an open mesh (winding and parity differ)."""
+    vertices, faces = oclvox.load_mesh(SPOT)
+    centroids = vertices[faces].mean(axis=1)
+    keep = np.linalg.norm(centroids - centroids[0], axis=1) > 0.15
+    assert 0 < np.count_nonzero(~keep) < len(faces) // 10
+    return vertices, faces[keep]
+
+
+def shard_tasks(stream):
+    return [t for t in stream.data if t["key"].startswith("_voxelize_shard")]
+
+
+@pytest.mark.parametrize("resolution,options,shard_bricks", [
+    (96, dict(mode="surface"), 12),
+    (96, dict(mode="thin", boundary="half-open", test="pef"), 12),
+    (64, dict(mode="solid", inside="parity"), 8),
+    # The winding-number solid computes the whole grid in every shard: few shards, small grid.
+    (40, dict(mode="filled", inside="winding"), 6),
+])
+def test_sharded_equals_single_process(client, open_spot, resolution, options, shard_bricks):
+    options = dict(options, brick_size=16)
+    single = oclvox.voxelize(open_spot, resolution, **options)
+    with distributed.get_task_stream(client) as stream:
+        sharded = voxelize_sharded(open_spot, resolution, client=client,
+                                   shard_bricks=shard_bricks, **options)
+    tasks = shard_tasks(stream)
+    assert len(tasks) >= 3, "too few shards to test sharding"
+    assert len({t["worker"] for t in tasks}) == 2, "both workers should have taken shards"
+    assert single.count > 0
+    assert sharded.same_voxels(single)
+    assert (sharded.dims, sharded.origin, sharded.voxel_size) == \
+        (single.dims, single.origin, single.voxel_size)
+    assert np.array_equal(sharded.to_numpy(), single.to_numpy())
+
+
+def test_sharded_vdb_reads_back_as_single_process(client, tmp_path):
+    pyopenvdb = pytest.importorskip("pyopenvdb", reason="python3-openvdb not installed")
+    single = oclvox.voxelize(SPOT, 128, brick_size=16).to_numpy()
+    sharded = voxelize_sharded(SPOT, 128, client=client, shard_bricks=32, brick_size=16)
+    sharded.save(tmp_path / "spot.vdb")
+    vdb = pyopenvdb.read(str(tmp_path / "spot.vdb"), "occupancy")
+    assert vdb.activeVoxelCount() == np.count_nonzero(single)
+    values = np.zeros(single.shape, bool)
+    vdb.copyToArray(values)
+    assert np.array_equal(values, single.astype(bool))
+
+
+def test_shards_of_balances_contiguous_runs():
+    bricks = np.arange(10, 110, dtype=np.uint64)
+    shards = shards_of(bricks, 30)
+    assert [len(s) for s in shards] == [25, 25, 25, 25]
+    assert np.array_equal(np.concatenate(shards), bricks)
+    assert [len(s) for s in shards_of(bricks[:0], 30)] == [0]
+    with pytest.raises(ValueError):
+        shards_of(bricks, 0)
+
+
+def test_sharded_errors_reach_the_client(client):
+    with pytest.raises(oclvox.DeviceError, match="no-such-device"):
+        voxelize_sharded(SPOT, 32, client=client, device="no-such-device")
+    with pytest.raises(TypeError, match="colour"):
+        voxelize_sharded(SPOT, 32, client=client, colour="red")
+
+
+# ---- many meshes --------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def mesh_folder(tmp_path_factory):
+    """20 meshes: scaled and moved copies of spot, and one corrupt file among them."""
+    folder = tmp_path_factory.mktemp("meshes")
+    vertices, faces = oclvox.load_mesh(SPOT)
+    rng = np.random.default_rng(12)
+    for i in range(19):
+        scale, shift = rng.uniform(0.5, 2.0, 3), rng.uniform(-5, 5, 3)
+        oclvox.save_mesh(folder / f"spot{i:02d}.obj", vertices * scale + shift, faces)
+    (folder / "corrupt.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 7\n")
+    (folder / "notes.txt").write_text("not a mesh: not in the batch\n")
+    return folder
+
+
+def test_voxelize_many_resumes_and_reports_failures(client, mesh_folder, tmp_path):
+    paths = mesh_paths(mesh_folder)
+    assert len(paths) == 20
+    out = tmp_path / "out"
+    with distributed.get_task_stream(client) as stream:
+        first = voxelize_many(paths, out, 24, client=client, ext="npy", mode="solid")
+
+    # 19 outputs, each the single-process voxels (read back by numpy); one failure, named.
+    assert len(first.written) == 19 and first.skipped == []
+    assert list(first.failed) == [str(mesh_folder / "corrupt.obj")]
+    assert "corrupt.obj" in first.failed[str(mesh_folder / "corrupt.obj")]
+    for path in (p for p in paths if p.name != "corrupt.obj"):
+        expected = oclvox.voxelize(path, 24, mode="solid").to_numpy()
+        assert np.array_equal(np.load(out / (path.stem + ".npy")), expected), path
+    # The corrupt mesh was tried twice (one retry): the scheduler sent its task to a worker twice.
+    tasks = [t for t in stream.data if t["key"].startswith("_voxelize_file")]
+    assert [t["status"] for t in tasks].count("OK") == 19
+    [erred] = [t["key"] for t in tasks if t["status"] == "error"]
+    starts = [s for s in client.story(erred) if s[0] == "scheduler" and s[3] == "processing"]
+    assert len(starts) == 2
+
+    # A rerun writes nothing again; an output without its sidecar is not complete and is redone.
+    stamps = {f: f.stat().st_mtime_ns for f in out.iterdir()}
+    (out / "spot03.npy.json").unlink()
+    second = voxelize_many(paths, out, 24, client=client, ext=".npy", mode="solid")
+    assert second.written == [str(out / "spot03.npy")]
+    assert len(second.skipped) == 18 and list(second.failed) == list(first.failed)
+    for f, stamp in stamps.items():
+        if f.name not in ("spot03.npy", "spot03.npy.json"):
+            assert f.stat().st_mtime_ns == stamp, f
+    third = voxelize_many(paths, out, 24, client=client, ext=".npy", mode="solid")
+    assert third.written == [] and len(third.skipped) == 19 and not third.ok
+
+
+def test_voxelize_many_checks_outputs_before_work(client, mesh_folder, tmp_path):
+    with pytest.raises(oclvox.OutputError, match="unknown extension"):
+        voxelize_many(mesh_paths(mesh_folder), tmp_path, 24, client=client, ext="xyz")
+    twins = [mesh_folder / "spot00.obj", tmp_path / "spot00.stl"]
+    with pytest.raises(oclvox.InputError, match="both be written"):
+        voxelize_many(twins, tmp_path, 24, client=client)
+
+
+def test_list_file_paths_are_relative_to_its_folder(mesh_folder, tmp_path):
+    listing = mesh_folder / "list.txt"
+    listing.write_text("# two of them\nspot01.obj\n\n" + str(mesh_folder / "spot02.obj") + "\n")
+    assert mesh_paths(listing) == [mesh_folder / "spot01.obj", mesh_folder / "spot02.obj"]
+    listing.unlink()
+    with pytest.raises(oclvox.InputError, match="neither a folder"):
+        mesh_paths(tmp_path / "missing")
+
+
+# ---- the CLI ------------------------------------------------------------------------------------
+
+def run_cli(*args, check=True, **env):
+    # The CLI runs the Python back end with the interpreter running these tests.
+    environment = dict(os.environ, OCLVOX_PYTHON=sys.executable)
+    environment.update(env)
+    return subprocess.run([CLI, *map(str, args), "--quiet"], env=environment, check=check,
+                          capture_output=True, text=True)
+
+
+@pytest.mark.skipif(not CLI, reason="OCLVOX_CLI (the oclvox tool) not given")
+def test_cli_cluster_paths_write_the_plain_paths_files(mesh_folder, tmp_path):
+    batch = run_cli("batch", mesh_folder, "-o", tmp_path / "batch", "-r", 20, "--mode", "filled",
+                    "--workers", 2, check=False)
+    # A failed mesh: exit code 1, the file named; the others written.
+    assert batch.returncode == 1 and "corrupt.obj" in batch.stderr, batch.stderr
+    assert len(list((tmp_path / "batch").iterdir())) == 19
+    for i in range(3):
+        plain = tmp_path / f"plain{i}.binvox"
+        run_cli("voxelize", mesh_folder / f"spot0{i}.obj", "-r", 20, "--mode", "filled", "-o",
+                plain)
+        assert filecmp.cmp(plain, tmp_path / "batch" / f"spot0{i}.binvox", shallow=False)
+
+    grid = ["-r", 100, "--brick-size", 16, "--mode", "thin", "--pad", 2]
+    run_cli("voxelize", SPOT, *grid, "-o", tmp_path / "plain.npy")
+    run_cli("voxelize", SPOT, *grid, "--workers", 2, "--shard-bricks", 10, "-o",
+            tmp_path / "sharded.npy")
+    assert filecmp.cmp(tmp_path / "plain.npy", tmp_path / "sharded.npy", shallow=False)
+    sidecars = [json.loads((tmp_path / f"{name}.npy.json").read_text())
+                for name in ("plain", "sharded")]
+    assert sidecars[0].pop("file") == "plain.npy" and sidecars[1].pop("file") == "sharded.npy"
+    assert sidecars[0] == sidecars[1]
+
+
+@pytest.mark.skipif(not CLI, reason="OCLVOX_CLI (the oclvox tool) not given")
+def test_cli_cluster_paths_fail_clearly(mesh_folder, tmp_path):
+    # A Python without the package (an `oclvox` that is not this one shadows it).
+    (tmp_path / "oclvox").mkdir()
+    (tmp_path / "oclvox" / "__init__.py").write_text("")
+    missing = run_cli("batch", mesh_folder, "-o", tmp_path / "out", check=False,
+                      PYTHONPATH=str(tmp_path))
+    assert missing.returncode == 1
+    assert "the distributed path needs the Python package: pip install ." in missing.stderr
+    no_python = run_cli("batch", mesh_folder, "-o", tmp_path / "out", check=False,
+                        OCLVOX_PYTHON=str(tmp_path / "no-python"))
+    assert no_python.returncode == 1 and "OCLVOX_PYTHON" in no_python.stderr
+    for refused in (["--stats"], ["--cubic=min"], ["--preview", tmp_path / "p.png"]):
+        run = run_cli("voxelize", SPOT, "-o", tmp_path / "x.vdb", "--workers", 2, *refused,
+                      check=False)
+        assert run.returncode == 2 and "not available with --workers" in run.stderr, refused
