@@ -325,8 +325,8 @@ def _parse_args(argv):
 def main(argv=None):
     """The command line; returns the exit code (0 done, 1 an error or a failed mesh)."""
     args = _parse_args(argv)
-    options = json.loads(args.options)
     try:
+        options = json.loads(args.options)
         with _cluster_client(args) as client:
             start = time.perf_counter()
             if args.command == "voxelize":
