@@ -42,14 +42,41 @@ double cull_margin(const OvTriangle& t) {
     return 1e-3 + 1e-5 * double(largest);
 }
 
-}  // namespace
-
-Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
-                      uint64_t max_pairs) {
+// Calls f(brick index) for every brick triangle t may touch: those its voxel range overlaps, less
+// (for a triangle spanning several bricks) those the double-precision test on the brick box
+// grown by cull_margin proves it misses.
+template <class F>
+void for_each_brick_of(const PreparedTriangles& prepared, size_t t, const Grid& grid,
+                       int brick_size, F&& f) {
+    BrickRange b;
+    if (!brick_range(prepared.ranges[t], grid, brick_size, b)) return;
     const int64_t nbx = (grid.dims[0] + brick_size - 1) / brick_size;
     const int64_t nby = (grid.dims[1] + brick_size - 1) / brick_size;
+    const bool cull = b.count() > 1;
+    const OvTriangle& tri = prepared.triangles[t];
+    Vec3d v[3];
+    for (int i = 0; i < 3; ++i)
+        for (int k = 0; k < 3; ++k) v[i][k] = double(tri.anchor[k]) + double(tri.u[3 * i + k]);
+    const double margin = cull ? cull_margin(tri) : 0;
+    for (int64_t bz = b.lo[2]; bz <= b.hi[2]; ++bz)
+        for (int64_t by = b.lo[1]; by <= b.hi[1]; ++by)
+            for (int64_t bx = b.lo[0]; bx <= b.hi[0]; ++bx) {
+                if (cull) {
+                    const Vec3d lo{double(bx * brick_size) - margin,
+                                   double(by * brick_size) - margin,
+                                   double(bz * brick_size) - margin};
+                    const Vec3d hi{double((bx + 1) * brick_size) + margin,
+                                   double((by + 1) * brick_size) + margin,
+                                   double((bz + 1) * brick_size) + margin};
+                    if (!triangle_box_overlap_double(v[0], v[1], v[2], lo, hi)) continue;
+                }
+                f(uint64_t(bx + nbx * (by + nby * bz)));
+            }
+}
 
-    // Phase 1: refuse absurd work before allocating any of it.
+// The (triangle, brick) pairs of the triangles' brick ranges; throws GridError over max_pairs.
+uint64_t candidate_pairs(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
+                         uint64_t max_pairs) {
     uint64_t candidates = 0;
     for (const OvRange& r : prepared.ranges) {
         BrickRange b;
@@ -59,34 +86,24 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
         throw GridError("binning would examine " + std::to_string(candidates) +
                         " (triangle, brick) pairs, more than the limit of " +
                         std::to_string(max_pairs) + ": lower the resolution or use larger bricks");
+    return candidates;
+}
 
-    // Phase 2: (brick, triangle) pairs, culling bricks of multi-brick triangles.
+}  // namespace
+
+Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
+                      const BrickSelection& selection, uint64_t max_pairs) {
+    // Phase 1: refuse absurd work before allocating any of it.
+    const uint64_t candidates = candidate_pairs(prepared, grid, brick_size, max_pairs);
+
+    // Phase 2: (brick, triangle) pairs of the selected bricks, culling bricks of multi-brick
+    // triangles.
     std::vector<std::pair<uint64_t, uint32_t>> pairs;
-    pairs.reserve(candidates);
-    for (size_t t = 0; t < prepared.ranges.size(); ++t) {
-        BrickRange b;
-        if (!brick_range(prepared.ranges[t], grid, brick_size, b)) continue;
-        const bool cull = b.count() > 1;
-        const OvTriangle& tri = prepared.triangles[t];
-        Vec3d v[3];
-        for (int i = 0; i < 3; ++i)
-            for (int k = 0; k < 3; ++k) v[i][k] = double(tri.anchor[k]) + double(tri.u[3 * i + k]);
-        const double margin = cull ? cull_margin(tri) : 0;
-        for (int64_t bz = b.lo[2]; bz <= b.hi[2]; ++bz)
-            for (int64_t by = b.lo[1]; by <= b.hi[1]; ++by)
-                for (int64_t bx = b.lo[0]; bx <= b.hi[0]; ++bx) {
-                    if (cull) {
-                        const Vec3d lo{double(bx * brick_size) - margin,
-                                       double(by * brick_size) - margin,
-                                       double(bz * brick_size) - margin};
-                        const Vec3d hi{double((bx + 1) * brick_size) + margin,
-                                       double((by + 1) * brick_size) + margin,
-                                       double((bz + 1) * brick_size) + margin};
-                        if (!triangle_box_overlap_double(v[0], v[1], v[2], lo, hi)) continue;
-                    }
-                    pairs.emplace_back(uint64_t(bx + nbx * (by + nby * bz)), uint32_t(t));
-                }
-    }
+    pairs.reserve(selection.everything() ? candidates : 0);
+    for (size_t t = 0; t < prepared.ranges.size(); ++t)
+        for_each_brick_of(prepared, t, grid, brick_size, [&](uint64_t brick) {
+            if (selection.contains(brick)) pairs.emplace_back(brick, uint32_t(t));
+        });
 
     // Phase 3: group by brick (sorted, so every run is deterministic).
     std::sort(pairs.begin(), pairs.end());
@@ -103,4 +120,64 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
     return out;
 }
 
+std::vector<uint64_t> touched_bricks(const PreparedTriangles& prepared, const Grid& grid,
+                                     int brick_size, uint64_t max_pairs) {
+    candidate_pairs(prepared, grid, brick_size, max_pairs);
+    std::vector<uint64_t> bricks;
+    for (size_t t = 0; t < prepared.ranges.size(); ++t)
+        for_each_brick_of(prepared, t, grid, brick_size,
+                          [&](uint64_t brick) { bricks.push_back(brick); });
+    std::sort(bricks.begin(), bricks.end());
+    bricks.erase(std::unique(bricks.begin(), bricks.end()), bricks.end());
+    return bricks;
+}
+
 }  // namespace oclvox::detail
+
+namespace oclvox {
+
+std::vector<uint64_t> candidate_bricks(const Mesh& mesh, const Grid& grid,
+                                       const VoxelizeOptions& options) {
+    const SparseVoxels layout(grid, options.brick_size);  // validates the brick size
+    if (options.mode == VoxelizeMode::Surface || options.mode == VoxelizeMode::Thin)
+        return detail::touched_bricks(detail::prepare_triangles(mesh, grid, options.boundary), grid,
+                                      options.brick_size);
+
+    // Solid voxels have their centres inside the mesh (and Filled's surface voxels touch it), so
+    // they lie in the voxels meeting its bounding box; one voxel more on each side covers the
+    // rounding of the box to voxels.
+    validate_mesh(mesh);
+    validate_grid(grid);
+    std::array<double, 3> lo, hi;
+    lo.fill(HUGE_VAL);
+    hi.fill(-HUGE_VAL);
+    for (const auto& t : mesh.triangles)
+        for (const uint32_t v : t)
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = std::min(lo[k], mesh.positions[v][k]);
+                hi[k] = std::max(hi[k], mesh.positions[v][k]);
+            }
+    int64_t first[3], last[3];
+    uint64_t count = 1;
+    for (int k = 0; k < 3; ++k) {
+        const double a = std::floor((lo[k] - grid.origin[k]) / grid.voxel_size) - 1;
+        const double b = std::floor((hi[k] - grid.origin[k]) / grid.voxel_size) + 1;
+        if (b < 0 || a > double(grid.dims[k] - 1)) return {};
+        first[k] = int64_t(std::max(a, 0.0)) / options.brick_size;
+        last[k] = int64_t(std::min(b, double(grid.dims[k] - 1))) / options.brick_size;
+        count *= uint64_t(last[k] - first[k] + 1);
+    }
+    if (count > uint64_t(1) << 31)
+        throw GridError("the mesh's bounding box meets " + std::to_string(count) +
+                        " bricks, more than 2^31: use larger bricks");
+    const auto nb = layout.brick_dims();
+    std::vector<uint64_t> bricks;
+    bricks.reserve(count);
+    for (int64_t bz = first[2]; bz <= last[2]; ++bz)
+        for (int64_t by = first[1]; by <= last[1]; ++by)
+            for (int64_t bx = first[0]; bx <= last[0]; ++bx)
+                bricks.push_back(uint64_t(bx + nb[0] * (by + nb[1] * bz)));
+    return bricks;
+}
+
+}  // namespace oclvox

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "brick_selection.hpp"
 #include "prepare.hpp"
 
 namespace oclvox::detail {
@@ -16,9 +17,14 @@ struct Binning {
     std::vector<uint32_t> pair_triangle;
 };
 
-// Throws GridError if the binning itself would be absurdly large (more than max_pairs candidate
-// (triangle, brick) pairs).
+// Bins into the selected bricks only. Throws GridError if the binning itself would be absurdly
+// large (more than max_pairs candidate (triangle, brick) pairs).
 Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
-                      uint64_t max_pairs = uint64_t(1) << 31);
+                      const BrickSelection& selection, uint64_t max_pairs = uint64_t(1) << 31);
+
+// The bricks bin_triangles would make active without a selection, sorted, without keeping the
+// pairs (the same GridError guard).
+std::vector<uint64_t> touched_bricks(const PreparedTriangles& prepared, const Grid& grid,
+                                     int brick_size, uint64_t max_pairs = uint64_t(1) << 31);
 
 }  // namespace oclvox::detail

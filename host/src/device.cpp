@@ -12,6 +12,7 @@
 #include <cstring>
 
 #include "binning.hpp"
+#include "brick_selection.hpp"
 #include "host_memory.hpp"
 #include "opencl_runtime.hpp"
 #include "prepare.hpp"
@@ -105,6 +106,8 @@ Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles
 
 SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                               VoxelizeStats* stats_out) {
+    SparseVoxels result(grid, options.brick_size);
+    const detail::BrickSelection selection(options.bricks, result);
     // Solid and filled: the inside voxels, plus (filled) the conservative surface.
     if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled) {
         VoxelizeStats stats;
@@ -114,13 +117,14 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             surface.mode = VoxelizeMode::Surface;
             detail::add_surface(out, voxelize(mesh, grid, surface), stats);
         }
+        selection.restrict(out);
+        stats.voxels_set = out.count();
         if (stats_out) *stats_out = stats;
         return out;
     }
     VoxelizeStats stats;
     const detail::SurfaceKernels kernels =
         detail::surface_kernels(detail::surface_test_for(options));
-    SparseVoxels result(grid, options.brick_size);
     const int brick_size = options.brick_size;
     Impl& cl = *impl_;
 
@@ -128,7 +132,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     auto t = Clock::now();
     const detail::PreparedTriangles prepared =
         detail::prepare_triangles(mesh, grid, options.boundary);
-    const detail::Binning binning = detail::bin_triangles(prepared, grid, brick_size);
+    const detail::Binning binning = detail::bin_triangles(prepared, grid, brick_size, selection);
     const auto nbricks = result.brick_dims();
     stats.triangles_in = mesh.triangles.size();
     stats.triangles_used = prepared.triangles.size();

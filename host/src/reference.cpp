@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 
+#include "brick_selection.hpp"
 #include "oclvox/oclvox.hpp"
 #include "prepare.hpp"
 #include "solid.hpp"
@@ -59,26 +60,31 @@ void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels&
 
 SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                                 VoxelizeStats* stats) {
+    SparseVoxels out(grid, options.brick_size);
+    // The reference computes every brick and keeps the selected ones.
+    const detail::BrickSelection selection(options.bricks, out);
     if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled) {
         VoxelizeStats solid_stats;
-        SparseVoxels out = detail::solid_reference(mesh, grid, options, solid_stats);
+        out = detail::solid_reference(mesh, grid, options, solid_stats);
         if (options.mode == VoxelizeMode::Filled) {
             VoxelizeOptions surface = options;
             surface.mode = VoxelizeMode::Surface;
             detail::add_surface(out, voxelize_reference(mesh, grid, surface), solid_stats);
         }
+        selection.restrict(out);
+        solid_stats.voxels_set = out.count();
         if (stats) *stats = solid_stats;
         return out;
     }
     const auto start = std::chrono::steady_clock::now();
     const detail::SurfaceTest test = detail::surface_test_for(options);
-    SparseVoxels out(grid, options.brick_size);
     const detail::PreparedTriangles prepared =
         detail::prepare_triangles(mesh, grid, options.boundary);
     refuse_absurd_work(prepared, grid);
     detail::with_host_surface_test(test, options.boundary, [&](auto setup, auto overlaps) {
         voxelize_triangles(prepared, out, setup, overlaps);
     });
+    selection.restrict(out);
     if (stats) {
         *stats = VoxelizeStats{};
         stats->triangles_in = mesh.triangles.size();

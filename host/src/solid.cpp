@@ -19,6 +19,7 @@
 #include <cmath>
 #include <map>
 
+#include "brick_selection.hpp"
 #include "opencl_runtime.hpp"
 #include "overlap_double.hpp"
 #include "solid_math.h"
@@ -116,14 +117,15 @@ Layout make_layout(const SparseVoxels& result) {
             result.blocks_per_brick()};
 }
 
-// Triangles by brick column (index bx + nbx * by), only those that can flip a grid voxel.
+// Triangles by selected brick column (index bx + nbx * by), only those that can flip a grid voxel.
 struct ColumnBins {
     std::vector<uint64_t> columns;     // brick columns with at least one triangle, ascending
     std::vector<uint64_t> first_pair;  // per column, into pair_triangle; one extra at the end
     std::vector<uint32_t> pair_triangle;
 };
 
-ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l) {
+ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l,
+                       const BrickSelection& selection) {
     // A crossing at or above the centre of the top voxel flips nothing in the grid.
     const int64_t top_centre = int64_t(l.nz - 1) * OVS_UNITS + OVS_UNITS / 2;
     std::vector<std::pair<uint64_t, uint32_t>> pairs;
@@ -133,8 +135,10 @@ ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Lay
         OvColumnRange r;
         if (!ovs_column_range(&tri, 0, 0, std::max(l.nx, l.ny), l.nx, l.ny, &r)) continue;
         for (int by = r.lo[1] / l.brick; by <= r.hi[1] / l.brick; ++by)
-            for (int bx = r.lo[0] / l.brick; bx <= r.hi[0] / l.brick; ++bx)
-                pairs.push_back({uint64_t(bx) + uint64_t(l.nbx) * uint64_t(by), uint32_t(t)});
+            for (int bx = r.lo[0] / l.brick; bx <= r.hi[0] / l.brick; ++bx) {
+                const uint64_t column = uint64_t(bx) + uint64_t(l.nbx) * uint64_t(by);
+                if (selection.contains_column(column)) pairs.push_back({column, uint32_t(t)});
+            }
     }
     std::sort(pairs.begin(), pairs.end());
     ColumnBins bins;
@@ -219,7 +223,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
                    SparseVoxels& result, const VoxelizeOptions& options, VoxelizeStats& stats) {
     auto t = Clock::now();
     const Layout l = make_layout(result);
-    const ColumnBins bins = bin_columns(triangles, l);
+    const ColumnBins bins = bin_columns(triangles, l, BrickSelection(options.bricks, result));
     stats.brick_pairs = bins.pair_triangle.size();
     stats.bricks_active = bins.columns.size() * uint64_t(l.nbz);
     stats.seconds_binning += seconds_since(t);
@@ -323,7 +327,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
 void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxels& result,
                       VoxelizeStats& stats) {
     const Layout l = make_layout(result);
-    const ColumnBins bins = bin_columns(triangles, l);
+    const ColumnBins bins = bin_columns(triangles, l, BrickSelection({}, result));
     stats.brick_pairs = bins.pair_triangle.size();
     stats.bricks_active = bins.columns.size() * uint64_t(l.nbz);
     std::vector<uint32_t> bits(size_t(l.brick) * l.brick * l.words);

@@ -87,6 +87,9 @@ uint64_t SparseVoxels::count() const {
 }
 
 void SparseVoxels::merge_brick(uint64_t brick_index, const uint64_t* blocks) {
+    const auto nb = brick_dims();
+    if (brick_index >= uint64_t(nb[0]) * uint64_t(nb[1]) * uint64_t(nb[2]))
+        throw GridError("brick index " + std::to_string(brick_index) + " is outside the grid");
     const size_t n = blocks_per_brick();
     bool any = false;
     for (size_t w = 0; w < n && !any; ++w) any = blocks[w] != 0;

@@ -29,7 +29,7 @@ from ._oclvox import (
 from . import _oclvox
 
 __all__ = [
-    "load_mesh", "save_mesh", "voxelize", "sdf", "csg", "mesh", "devices", "load_field",
+    "load_mesh", "save_mesh", "voxelize", "candidate_bricks", "sdf", "csg", "mesh", "devices", "load_field",
     "Mesh", "VoxelGrid", "Field", "Error", "InputError",
     "GridError", "DeviceError", "KernelBuildError", "OutputError", "Cancelled",
 ]
@@ -98,7 +98,7 @@ def save_mesh(path, vertices, faces=None):
 def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat", inside="auto",
              boundary="closed", voxel_size=None, origin=None, dims=None, pad=0, cubic=False,
              brick_size=64, device_memory=None, host_memory=None, device=None, reference=False,
-             progress=None):
+             progress=None, bricks=None):
     """Voxelizes a mesh; returns a VoxelGrid.
 
     mode: "surface" (conservative: every voxel whose closed box touches a triangle), "thin"
@@ -111,12 +111,31 @@ def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat"
     brick_size: voxels per brick edge (multiple of 4); device_memory / host_memory: MiB budgets.
     progress: called as progress(bricks_done, bricks_total) after each batch; returning False
     cancels the run, which raises oclvox.Cancelled (an exception it raises is passed on).
+    bricks: compute only these bricks of the whole grid (linear indices bx + nbx * (by + nby * bz)
+    of brick_size bricks, nb = ceil(dims / brick_size)); the result holds exactly the whole run's
+    voxels in them, so results over disjoint selections merge (VoxelGrid.merge) into the whole.
+    Surface, thin and parity solid do only those bricks' work; the winding number does the whole
+    grid's and keeps the selected bricks. See candidate_bricks and oclvox.distributed.
     """
     options = dict(mode=mode, test=test, inside=inside, boundary=boundary, brick_size=brick_size,
                    device_memory=device_memory, host_memory=host_memory)
     mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
     return _oclvox.voxelize(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), **options,
-                            device=_selector(device), reference=reference, progress=progress)
+                            device=_selector(device), reference=reference, progress=progress,
+                            bricks=bricks)
+
+
+def candidate_bricks(vertices, faces=None, resolution=256, *, mode="surface", inside="auto",
+                     boundary="closed", voxel_size=None, origin=None, dims=None, pad=0,
+                     cubic=False, brick_size=64):
+    """The bricks that voxelize with these options can set voxels in: a sorted uint64 array of
+    linear brick indices, a superset of the result's bricks, found on the host (no device).
+    Surface and thin: the bricks the binning gives triangles; solid and filled: every brick meeting
+    the mesh's bounding box. Split it to run voxelize(..., bricks=part) in pieces."""
+    mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
+    return _oclvox.candidate_bricks(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic),
+                                    mode=mode, inside=inside, boundary=boundary,
+                                    brick_size=brick_size)
 
 
 def _field_pad(pad, band, origin, dims):

@@ -123,10 +123,27 @@ std::string device_name(const std::shared_ptr<SharedDevice>& device) {
     return device ? device->device.info().name : "reference";
 }
 
+// Brick indices from any 1-D array-like of non-negative integers.
+std::vector<uint64_t> brick_list(const py::object& bricks) {
+    if (bricks.is_none()) return {};
+    const auto array =
+        py::array_t<uint64_t, py::array::c_style | py::array::forcecast>::ensure(bricks);
+    if (!array || array.ndim() != 1)
+        throw py::value_error("bricks must be a 1-D sequence of brick indices");
+    return std::vector<uint64_t>(array.data(), array.data() + array.size());
+}
+
+py::array_t<uint64_t> brick_array(const std::vector<uint64_t>& bricks) {
+    py::array_t<uint64_t> out(py::ssize_t(bricks.size()));
+    std::copy(bricks.begin(), bricks.end(), out.mutable_data());
+    return out;
+}
+
 oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::string& test,
                                          const std::string& inside, const std::string& boundary,
                                          int brick_size, std::optional<uint64_t> device_mib,
-                                         std::optional<uint64_t> host_mib) {
+                                         std::optional<uint64_t> host_mib,
+                                         const py::object& bricks = py::none()) {
     oclvox::VoxelizeOptions options;
     options.mode = oclvox::voxelize_mode_from_string(mode);
     options.test = oclvox::overlap_test_from_string(test);
@@ -135,6 +152,7 @@ oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::str
     options.brick_size = brick_size;
     if (device_mib) options.device_budget_bytes = *device_mib << 20;
     if (host_mib) options.host_budget_bytes = *host_mib << 20;
+    options.bricks = brick_list(bricks);
     return options;
 }
 
@@ -146,6 +164,52 @@ oclvox::SdfOptions sdf_options(double band, bool full_grid, const std::string& i
     options.inside = oclvox::inside_test_from_string(inside);
     options.brick_size = brick_size;
     return options;
+}
+
+// A VoxelGrid's pickled state: the grid, the brick size and the stored bricks (indices and their
+// words), so a sparse result travels between processes without a dense copy.
+py::tuple voxel_grid_state(const VoxelGrid& g) {
+    const oclvox::SparseVoxels& v = g.voxels;
+    const std::vector<uint64_t> indices = v.brick_indices();
+    py::array_t<uint64_t> words({py::ssize_t(indices.size()), py::ssize_t(v.blocks_per_brick())});
+    for (size_t b = 0; b < indices.size(); ++b)
+        std::copy_n(v.brick_blocks(indices[b]), v.blocks_per_brick(),
+                    words.mutable_data(py::ssize_t(b), 0));
+    return py::make_tuple(origin_tuple(v.grid()), v.grid().voxel_size, dims_tuple(v.grid()),
+                          v.brick_size(), brick_array(indices), words, g.device);
+}
+
+VoxelGrid voxel_grid_from_state(const py::tuple& state) {
+    if (state.size() != 7) throw py::value_error("not a pickled oclvox.VoxelGrid");
+    oclvox::Grid grid = grid_base(state[0].cast<std::array<double, 3>>(), state[1].cast<double>());
+    grid.dims = state[2].cast<std::array<int64_t, 3>>();
+    oclvox::validate_grid(grid);
+    VoxelGrid g;
+    g.voxels = oclvox::SparseVoxels(grid, state[3].cast<int>());
+    const std::vector<uint64_t> indices = brick_list(state[4]);
+    const auto words =
+        py::array_t<uint64_t, py::array::c_style | py::array::forcecast>::ensure(state[5]);
+    const size_t blocks = g.voxels.blocks_per_brick();
+    if (!words || words.ndim() != 2 || size_t(words.shape(0)) != indices.size() ||
+        size_t(words.shape(1)) != blocks)
+        throw py::value_error("not a pickled oclvox.VoxelGrid: brick words do not match");
+    for (size_t b = 0; b < indices.size(); ++b)
+        g.voxels.merge_brick(indices[b], words.data(py::ssize_t(b), 0));
+    g.stats.voxels_set = g.voxels.count();
+    g.device = state[6].cast<std::string>();
+    return g;
+}
+
+// ORs `other`'s voxels into `into`; both must have the same grid and brick size.
+void merge_voxel_grids(VoxelGrid& into, const VoxelGrid& other) {
+    const oclvox::Grid &a = into.voxels.grid(), &b = other.voxels.grid();
+    if (a.origin != b.origin || a.voxel_size != b.voxel_size || a.dims != b.dims ||
+        into.voxels.brick_size() != other.voxels.brick_size())
+        throw oclvox::GridError("merge needs two VoxelGrids with the same grid and brick size");
+    py::gil_scoped_release release;
+    for (const uint64_t brick : other.voxels.brick_indices())
+        into.voxels.merge_brick(brick, other.voxels.brick_blocks(brick));
+    into.stats.voxels_set = into.voxels.count();
 }
 
 // ---- work ---------------------------------------------------------------------------------------
@@ -286,10 +350,20 @@ PYBIND11_MODULE(_oclvox, m) {
                 oclvox::write_mesh(path.string(), mesh);
             },
             "path"_a)
-        .def("__repr__", [](const oclvox::Mesh& mesh) {
-            return "<oclvox.Mesh " + std::to_string(mesh.positions.size()) + " vertices, " +
-                   std::to_string(mesh.triangles.size()) + " triangles>";
-        });
+        .def("__repr__",
+             [](const oclvox::Mesh& mesh) {
+                 return "<oclvox.Mesh " + std::to_string(mesh.positions.size()) + " vertices, " +
+                        std::to_string(mesh.triangles.size()) + " triangles>";
+             })
+        .def(py::pickle(
+            [](py::object self) {
+                oclvox::Mesh& mesh = self.cast<oclvox::Mesh&>();
+                return py::make_tuple(vertices_view(mesh, self), faces_array(mesh));
+            },
+            [](const py::tuple& state) {
+                if (state.size() != 2) throw py::value_error("not a pickled oclvox.Mesh");
+                return mesh_from_arrays(state[0], state[1]);
+            }));
 
     py::class_<oclvox::GridFit>(m, "GridFit")
         .def(py::init(&make_fit), "resolution"_a, "voxel_size"_a, "origin"_a, "dims"_a, "pad"_a,
@@ -317,6 +391,21 @@ PYBIND11_MODULE(_oclvox, m) {
                         std::to_string(grid.dims[1]) + "x" + std::to_string(grid.dims[2]) + ", " +
                         std::to_string(g.voxels.count()) + " voxels set>";
              })
+        .def("merge", &merge_voxel_grids, "other"_a,
+             "ORs another VoxelGrid's voxels into this one (same grid and brick size), e.g. "
+             "the results of voxelize(..., bricks=shard) over the shards of a split.")
+        .def(
+            "same_voxels",
+            [](const VoxelGrid& a, const VoxelGrid& b) {
+                py::gil_scoped_release release;
+                return a.voxels.same_voxels(b.voxels);
+            },
+            "other"_a, "Whether both have the same grid and the same set voxels.")
+        .def(
+            "brick_indices",
+            [](const VoxelGrid& g) { return brick_array(g.voxels.brick_indices()); },
+            "The linear indices of the stored (non-empty) bricks, ascending, as uint64.")
+        .def(py::pickle(&voxel_grid_state, &voxel_grid_from_state))
         .def(
             "to_field",
             [](const VoxelGrid& g, int smoothing) {
@@ -403,14 +492,29 @@ PYBIND11_MODULE(_oclvox, m) {
            const std::string& test, const std::string& inside, const std::string& boundary,
            int brick_size, std::optional<uint64_t> device_memory,
            std::optional<uint64_t> host_memory, py::object device, bool reference,
-           py::object progress) {
+           py::object progress, py::object bricks) {
             return voxelize(mesh, fit,
                             voxelize_options(mode, test, inside, boundary, brick_size,
-                                             device_memory, host_memory),
+                                             device_memory, host_memory, bricks),
                             device, reference, std::move(progress));
         },
         "mesh"_a, "fit"_a, "mode"_a, "test"_a, "inside"_a, "boundary"_a, "brick_size"_a,
-        "device_memory"_a, "host_memory"_a, "device"_a, "reference"_a, "progress"_a);
+        "device_memory"_a, "host_memory"_a, "device"_a, "reference"_a, "progress"_a,
+        "bricks"_a = py::none());
+    m.def(
+        "candidate_bricks",
+        [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const std::string& mode,
+           const std::string& inside, const std::string& boundary, int brick_size) {
+            const oclvox::VoxelizeOptions options =
+                voxelize_options(mode, "sat", inside, boundary, brick_size, {}, {});
+            std::vector<uint64_t> bricks;
+            {
+                py::gil_scoped_release release;
+                bricks = oclvox::candidate_bricks(mesh, oclvox::fit_grid(mesh, fit), options);
+            }
+            return brick_array(bricks);
+        },
+        "mesh"_a, "fit"_a, "mode"_a, "inside"_a, "boundary"_a, "brick_size"_a);
     m.def(
         "sdf",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, double band, bool full_grid,

@@ -142,7 +142,8 @@ class SparseVoxels {
     std::vector<uint64_t> brick_indices() const;
     // The blocks_per_brick() words of a stored brick, or nullptr if the brick has no set voxel.
     const uint64_t* brick_blocks(uint64_t brick_index) const;
-    // Adds (ORs) a brick's blocks; all-zero bricks are dropped.
+    // Adds (ORs) a brick's blocks; all-zero bricks are dropped. Throws GridError for a brick
+    // index outside the grid.
     void merge_brick(uint64_t brick_index, const uint64_t* blocks);
 
     // Calls f(i, j, k) for every set voxel, brick by brick (order unspecified across bricks).
@@ -218,7 +219,22 @@ struct VoxelizeOptions {
     uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
     uint64_t host_budget_bytes = 0;             // 0: half of physical memory
     ProgressCallback progress;
+    // Compute only these bricks of the whole grid (linear indices bx + nbx*(by + nby*bz) of
+    // brick_size bricks, as SparseVoxels::brick_indices gives them; any order). The result holds
+    // exactly the voxels of the unrestricted run that lie in them, bit for bit, so runs over
+    // disjoint selections can be merged into the whole (e.g. on several machines). Empty: every
+    // brick. Surface, Thin and parity Solid do only the selected bricks' work; the winding number
+    // does the whole grid's work and keeps the selected bricks (its flood crosses bricks).
+    std::vector<uint64_t> bricks;
 };
+
+// The bricks that can hold set voxels of a run with these options (a sorted superset of the
+// result's bricks), found on the host without a device: for Surface and Thin, the bricks the
+// binning gives triangles; for Solid and Filled, every brick meeting the mesh's bounding box grown
+// by one voxel. For splitting a run into VoxelizeOptions::bricks selections. Throws like
+// voxelize for a bad mesh or grid, and GridError if there are more than 2^31 such bricks.
+std::vector<uint64_t> candidate_bricks(const Mesh& mesh, const Grid& grid,
+                                       const VoxelizeOptions& options);
 
 // Timing breakdown and counts of one run (seconds).
 struct VoxelizeStats {
