@@ -83,10 +83,9 @@ def _collect(client, futures, on_result):
 
 # ---- one grid in shards -------------------------------------------------------------------------
 
-def _voxelize_shard(mesh_arrays, resolution, bricks, device, options):
+def _voxelize_shard(mesh, resolution, bricks, device, options):
     """A worker's task: the voxels of the whole grid that lie in `bricks`."""
-    vertices, faces = mesh_arrays
-    return oclvox.voxelize(vertices, faces, resolution, bricks=bricks, device=device, **options)
+    return oclvox.voxelize(mesh, resolution, bricks=bricks, device=device, **options)
 
 
 def shards_of(bricks, shard_bricks):
@@ -123,14 +122,14 @@ def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=256, device=N
     _check_options(options)
     # Phase 1: the mesh, read once, and the bricks worth a task.
     mesh = oclvox._as_mesh(mesh)
-    arrays = (np.array(mesh.vertices), mesh.faces)
     grid_options = {k: v for k, v in options.items()
                     if k in inspect.signature(oclvox.candidate_bricks).parameters}
     candidates = oclvox.candidate_bricks(mesh, resolution, **grid_options)
     shards = shards_of(candidates, shard_bricks)
 
-    # Phase 2: the mesh to every worker once, then one task per shard.
-    [mesh_on_workers] = client.scatter([arrays], broadcast=True)
+    # Phase 2: the mesh to every worker once (a worker keeps it for all its tasks), then one task
+    # per shard.
+    [mesh_on_workers] = client.scatter([mesh], broadcast=True)
     futures = {client.submit(_voxelize_shard, mesh_on_workers, resolution, shard, device,
                              options): len(shard)
                for shard in shards}
