@@ -73,10 +73,10 @@ void add_cluster_options(CLI::App& command, ClusterArgs& args, bool sharded) {
     if (sharded)
         command
             .add_option("--shard-bricks", args.shard_bricks,
-                        "bricks per task when one grid is split over a cluster")
+                        "bricks per task when one grid is split over a cluster (default: about "
+                        "four tasks per worker, at least 64 bricks each)")
             ->type_name("K")
             ->check(CLI::Range(int64_t(1), int64_t(1) << 40))
-            ->capture_default_str()
             ->group("Cluster");
 }
 

@@ -18,7 +18,7 @@ namespace oclvox_cli {
 struct ClusterArgs {
     int workers = 0;  // 0: not asked for
     std::string scheduler;
-    int64_t shard_bricks = 256;
+    int64_t shard_bricks = 0;  // 0: about four shards per worker (oclvox.distributed)
     bool wanted() const { return workers > 0 || !scheduler.empty(); }
 };
 void add_cluster_options(CLI::App& command, ClusterArgs& args, bool sharded);

@@ -64,15 +64,12 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
         throw UsageError(
             "stdin, stdout and --preview are not available with --workers/--scheduler");
     check_output(args.output, {args.input}, kVoxelExtensions, args.files);
-    run_on_cluster({{"voxelize", args.input, "-o", args.output, "--shard-bricks",
-                     std::to_string(args.cluster.shard_bricks)},
-                    &args.cluster,
-                    &args.fit,
-                    &args.voxelization,
-                    &args.device,
-                    args.device_option->count() > 0,
-                    &args.tiling,
-                    &args.reporting});
+    std::vector<std::string> command{"voxelize", args.input, "-o", args.output};
+    if (args.cluster.shard_bricks > 0)
+        command.insert(command.end(),
+                       {"--shard-bricks", std::to_string(args.cluster.shard_bricks)});
+    run_on_cluster({command, &args.cluster, &args.fit, &args.voxelization, &args.device,
+                    args.device_option->count() > 0, &args.tiling, &args.reporting});
 }
 
 int run(const VoxelizeArgs& args) {

@@ -98,14 +98,23 @@ def shards_of(bricks, shard_bricks):
     return np.array_split(np.asarray(bricks, dtype=np.uint64), count)
 
 
-def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=256, device=None,
+def _auto_shard_bricks(brick_count, client):
+    """About four shards per worker: a worker that finishes early takes another, so the run ends
+    at most about a quarter of a worker's share after the work runs out. At least 64 bricks a
+    shard, because every shard also pays for binning the whole mesh and for a task."""
+    workers = max(1, len(client.scheduler_info()["workers"]))
+    return max(64, math.ceil(brick_count / (4 * workers)))
+
+
+def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=None,
                      progress=None, **options):
     """Voxelizes one mesh on a Dask cluster; returns the VoxelGrid oclvox.voxelize returns.
 
     mesh: as for oclvox.voxelize (a path is read here, on the client). options: voxelize's
     (mode, test, inside, boundary, grid options, brick_size, device_memory, host_memory,
     reference). The bricks that can hold set voxels (oclvox.candidate_bricks, computed here
-    without a device) are cut into shards of about `shard_bricks` bricks; the mesh is sent to
+    without a device) are cut into shards of about `shard_bricks` bricks (default: about four
+    shards per worker, at least 64 bricks each); the mesh is sent to
     every worker once; each shard is one task, oclvox.voxelize(..., bricks=shard), on the device
     `device` names on that worker (default: the worker's $OCLVOX_DEVICE, else its first GPU, else
     its first device). The shards' results are merged as they arrive, so the client holds the
@@ -125,7 +134,7 @@ def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=256, device=N
     grid_options = {k: v for k, v in options.items()
                     if k in inspect.signature(oclvox.candidate_bricks).parameters}
     candidates = oclvox.candidate_bricks(mesh, resolution, **grid_options)
-    shards = shards_of(candidates, shard_bricks)
+    shards = shards_of(candidates, shard_bricks or _auto_shard_bricks(len(candidates), client))
 
     # Phase 2: the mesh to every worker once (a worker keeps it for all its tasks), then one task
     # per shard.
@@ -301,7 +310,8 @@ def _parse_args(argv):
     sharded = commands.add_parser("voxelize", help="one mesh, its bricks in shards")
     sharded.add_argument("input")
     sharded.add_argument("-o", "--output", required=True)
-    sharded.add_argument("--shard-bricks", type=int, default=256)
+    sharded.add_argument("--shard-bricks", type=int,
+                         help="bricks per task (default: about four tasks per worker)")
     batch = commands.add_parser("batch", help="one output per mesh of a folder or list file")
     batch.add_argument("input", help="a folder of meshes or a list file (one path a line)")
     batch.add_argument("-o", "--output", required=True, help="output folder")

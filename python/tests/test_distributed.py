@@ -75,8 +75,12 @@ def test_sharded_equals_single_process(client, open_spot, resolution, options, s
 
 def test_sharded_vdb_reads_back_as_single_process(client, tmp_path):
     pyopenvdb = pytest.importorskip("pyopenvdb", reason="python3-openvdb not installed")
-    single = oclvox.voxelize(SPOT, 128, brick_size=16).to_numpy()
-    sharded = voxelize_sharded(SPOT, 128, client=client, shard_bricks=32, brick_size=16)
+    single = oclvox.voxelize(SPOT, 256, brick_size=16).to_numpy()
+    candidates = len(oclvox.candidate_bricks(SPOT, 256, brick_size=16))
+    assert candidates > 8 * 64  # enough that the default makes four shards per worker
+    with distributed.get_task_stream(client) as stream:
+        sharded = voxelize_sharded(SPOT, 256, client=client, brick_size=16)
+    assert len(shard_tasks(stream)) == 8
     sharded.save(tmp_path / "spot.vdb")
     vdb = pyopenvdb.read(str(tmp_path / "spot.vdb"), "occupancy")
     assert vdb.activeVoxelCount() == np.count_nonzero(single)
