@@ -85,7 +85,14 @@ def single_process_seconds(mesh, resolution):
     return float(out[0]), int(out[1]), int(out[2])
 
 
+def compute_times(stream, prefix):
+    """Per task of `prefix`: (start, stop) of its compute on the worker, from Dask's task stream."""
+    return [next((s["start"], s["stop"]) for s in t["startstops"] if s["action"] == "compute")
+            for t in stream.data if t["key"].startswith(prefix)]
+
+
 def sharded(mesh, resolution, shard_bricks, workers):
+    """One voxelize_sharded run; returns its figures and the grid."""
     with cluster(workers) as c, distributed.Client(c) as client:
         warm_up(client, mesh)
         before = load()
@@ -93,11 +100,32 @@ def sharded(mesh, resolution, shard_bricks, workers):
             start = time.perf_counter()
             grid = voxelize_sharded(mesh, resolution, client=client, shard_bricks=shard_bricks)
             wall = time.perf_counter() - start
-    computes = [sum(s["stop"] - s["start"] for s in t["startstops"] if s["action"] == "compute")
-                for t in stream.data if t["key"].startswith("_voxelize_shard")]
-    return dict(wall=wall, shards=len(computes), compute=sum(computes),
-                shard_median=statistics.median(computes), bytes=len(pickle.dumps(grid)),
-                bricks=grid.brick_count, count=grid.count, load=f"{before}/{load()}")
+    spans = compute_times(stream, "_voxelize_shard")
+    computes = [stop - start for start, stop in spans]
+    return dict(wall=wall, shards=len(spans), compute=sum(computes),
+                span=max(s for _, s in spans) - min(s for s, _ in spans),
+                shard_median=statistics.median(computes), load=f"{before}/{load()}"), grid
+
+
+def receive_cost(mesh, resolution, shard_bricks):
+    """Wall seconds per MiB for the client to take one finished shard from a worker (Dask's
+    transfer: serialization, compression, TCP, deserialization) and merge it into another: the
+    part of voxelize_sharded that one client does for every shard."""
+    from oclvox.distributed import _voxelize_shard
+    bricks = oclvox.candidate_bricks(mesh, resolution)
+    with cluster(1) as c, distributed.Client(c) as client:
+        warm_up(client, mesh)
+        [on_worker] = client.scatter([oclvox._as_mesh(mesh)], broadcast=True)
+        first, second = (client.submit(_voxelize_shard, on_worker, resolution,
+                                       bricks[i * shard_bricks:(i + 1) * shard_bricks], None, {})
+                         for i in range(2))
+        distributed.wait([first, second])
+        merged = first.result()
+        start = time.perf_counter()
+        merged.merge(second.result())
+        seconds = time.perf_counter() - start
+        mib = len(pickle.dumps(second.result(), protocol=5)) / 2**20
+    return seconds / mib
 
 
 def batch(mesh, count, resolution, workers, folder):
@@ -111,16 +139,18 @@ def batch(mesh, count, resolution, workers, folder):
             summary = voxelize_many(paths, out, resolution, client=client)
             wall = time.perf_counter() - start
     assert summary.ok and len(summary.written) == count, summary
-    computes = [sum(s["stop"] - s["start"] for s in t["startstops"] if s["action"] == "compute")
-                for t in stream.data if t["key"].startswith("_voxelize_file")]
-    return dict(wall=wall, compute=sum(computes), load=f"{before}/{load()}")
+    spans = compute_times(stream, "_voxelize_file")
+    return dict(wall=wall, compute=sum(stop - start for start, stop in spans),
+                load=f"{before}/{load()}")
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--mesh", default=str(MESHES / "bunny00.off"))
     parser.add_argument("--resolution", type=int, default=4096)
-    parser.add_argument("--shard-bricks", type=int, default=256)
+    parser.add_argument("--shard-bricks", type=int,
+                        help="bricks per shard (default: 8 shards, the split voxelize_sharded "
+                             "makes by default on 2 workers; the same for both runs)")
     parser.add_argument("--batch", type=int, default=50)
     parser.add_argument("--batch-resolution", type=int, default=256)
     parser.add_argument("--project", type=int, default=32768)
@@ -134,27 +164,42 @@ def main():
 
     # One grid.
     r = args.resolution
-    alone, _, _ = single_process_seconds(mesh, r)
-    runs = {w: sharded(mesh, r, args.shard_bricks, w) for w in (1, 2)}
-    lines += ["", f"## One grid: {r}^3 surface, shards of {args.shard_bricks} bricks (64^3)", "",
+    candidates = len(oclvox.candidate_bricks(mesh, r))
+    shard_bricks = args.shard_bricks or -(-candidates // 8)
+    alone, _, alone_count = single_process_seconds(mesh, r)
+    runs = {}
+    for w in (1, 2):
+        runs[w], grid = sharded(mesh, r, shard_bricks, w)
+    # The sharded result is the single-process one (checked in full, voxel for voxel).
+    assert grid.count == alone_count and grid.same_voxels(oclvox.voxelize(mesh, r))
+    result_bytes = len(pickle.dumps(grid, protocol=5))
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        grid.save(os.path.join(tmp, "grid.vdb"))
+        vdb_seconds = time.perf_counter() - start
+    receiving = receive_cost(mesh, r, shard_bricks)
+    lines += ["", f"## One grid: {r}^3 surface, shards of {shard_bricks} bricks (64^3)", "",
               f"- single process, one core, the voxelize call alone: {alone:.2f} s "
               f"(load {load()})", "",
-              "| workers | wall s | shards | compute s (sum over shards) | median shard s | "
-              "speed-up vs 1 worker | load |", "|---:|---:|---:|---:|---:|---:|---|"]
+              "| workers | wall s | shards | compute s (sum over shards) | compute span s | "
+              "median shard s | speed-up (wall) vs 1 worker | load |",
+              "|---:|---:|---:|---:|---:|---:|---:|---|"]
     for w, run in runs.items():
         lines.append(f"| {w} | {run['wall']:.2f} | {run['shards']} | {run['compute']:.2f} | "
-                     f"{run['shard_median']:.3f} | {runs[1]['wall'] / run['wall']:.2f} | "
-                     f"{run['load']} |")
+                     f"{run['span']:.2f} | {run['shard_median']:.3f} | "
+                     f"{runs[1]['wall'] / run['wall']:.2f} | {run['load']} |")
     one = runs[1]
-    candidates = len(oclvox.candidate_bricks(mesh, r))
     per_brick = one["compute"] / candidates
-    per_result_brick = one["bytes"] / one["bricks"]
-    lines += ["", f"- {candidates} candidate bricks, {one['bricks']} in the result, "
-                  f"{one['count']} voxels set; result {one['bytes'] / 2**20:.1f} MiB pickled "
-                  f"({per_result_brick / 1024:.1f} KiB per result brick)",
-              f"- compute per candidate brick: {per_brick * 1e3:.2f} ms (1 worker); "
-              f"wall - compute on 1 worker: {one['wall'] - one['compute']:.2f} s "
-              f"({(one['wall'] - one['compute']) / one['shards'] * 1e3:.1f} ms per shard)"]
+    per_result_brick = result_bytes / grid.brick_count
+    lines += ["", f"- sharded == single process: {grid.count} voxels set, same voxels",
+              f"- {candidates} candidate bricks, {grid.brick_count} in the result; result "
+              f"{result_bytes / 2**20:.1f} MiB pickled ({per_result_brick / 1024:.1f} KiB per "
+              f"result brick)",
+              f"- compute per candidate brick: {per_brick * 1e3:.2f} ms (1 worker, sum over "
+              f"shards / candidate bricks)",
+              f"- taking a finished shard from a worker and merging it: {receiving * 1e3:.1f} ms "
+              f"per MiB, wall (load {load()})",
+              f"- writing the merged result as one .vdb: {vdb_seconds:.2f} s (load {load()})"]
 
     # A batch.
     with tempfile.TemporaryDirectory() as tmp:
@@ -174,13 +219,22 @@ def main():
                      f"{run['load']} |")
 
     # The projection.
-    big = len(oclvox.candidate_bricks(mesh, args.project))
-    lines += ["", f"## Projection: {args.project}^3 on 100 workers", "",
-              f"- candidate bricks at {args.project}^3: {big} (oclvox.candidate_bricks)",
-              f"- compute: {big} x {per_brick * 1e3:.2f} ms / 100 = "
-              f"{big * per_brick / 100:.1f} s per worker (one PoCL core each)",
-              f"- result: at most {big} x {per_result_brick / 1024:.1f} KiB = "
-              f"{big * per_result_brick / 2**30:.1f} GiB gathered into the client"]
+    n = args.project
+    big = len(oclvox.candidate_bricks(mesh, n))
+    gib = big * per_result_brick / 2**30
+    compute = big * per_brick / 100
+    receive = gib * 1024 * receiving
+    write = vdb_seconds * big / grid.brick_count
+    lines += ["", f"## Projection: {n}^3 on 100 workers", "",
+              f"- candidate bricks at {n}^3: {big} (oclvox.candidate_bricks; {big / candidates:.0f}x "
+              f"those at {r}^3)",
+              f"- compute: {big} x {per_brick * 1e3:.2f} ms / 100 workers = {compute:.1f} s per "
+              f"worker (one PoCL core each, as measured)",
+              f"- result: {big} x {per_result_brick / 1024:.1f} KiB = {gib:.1f} GiB into the client",
+              f"- client: {gib * 1024:.0f} MiB x {receiving * 1e3:.1f} ms/MiB = {receive:.0f} s "
+              f"of taking and merging shards, one process",
+              f"- one .vdb: {vdb_seconds:.2f} s x {big / grid.brick_count:.0f} = {write:.0f} s "
+              f"(scaled by result bricks from the {r}^3 write)"]
     report = "\n".join(lines) + "\n"
     print(report)
     if args.out:
