@@ -18,9 +18,11 @@ also the back end of the CLI's ``oclvox voxelize --workers/--scheduler`` and ``o
 """
 
 import argparse
+import contextlib
 import dataclasses
 import inspect
 import json
+import logging
 import math
 import os
 import pathlib
@@ -275,18 +277,21 @@ def voxelize_many(paths, out_dir, resolution=256, *, client, ext=".binvox", devi
 
 # ---- command line -------------------------------------------------------------------------------
 
+@contextlib.contextmanager
 def _cluster_client(args):
-    """A Client of the scheduler at --scheduler, or of a local cluster of --workers processes."""
+    """A Client of the scheduler at --scheduler, or of a local cluster of --workers processes
+    (closed on the way out, its worker processes ended)."""
     distributed = _distributed()
     if args.scheduler:
-        return distributed.Client(args.scheduler)
-    import logging
+        with distributed.Client(args.scheduler) as client:
+            yield client
+        return
     # One thread per worker: a worker is one device, which runs one call at a time. The workers'
     # own logs (a failed task's traceback) would repeat what the summary says.
-    cluster = distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1,
-                                       processes=True, dashboard_address=None,
-                                       silence_logs=logging.ERROR)
-    return distributed.Client(cluster)
+    with distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+            distributed.Client(cluster) as client:
+        yield client
 
 
 def _progress_line(what, quiet):
