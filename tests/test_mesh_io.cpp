@@ -5,6 +5,7 @@
 // allocations or leaks, with an InputError that names the file.
 #include <gtest/gtest.h>
 #include <malloc.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -1269,6 +1270,26 @@ TEST_F(MeshFiles, ThreeMfMeshIsRead) {
     std::sort(positions.begin(), positions.end());
     EXPECT_EQ(positions,
               (std::vector<Vec3>{{10, 20, 30}, {10, 20, 32}, {14, 20, 30}, {14, 23, 30}}));
+}
+
+// Files on which the fuzzer (scripts/fuzz.sh) found assimp itself failing: aborting the process on
+// an assertion in its zip reader, asking for 3.7 GB for a 616-byte .glb, leaking. Each must be an
+// InputError naming the file, with this process alive and its memory untouched (the importer
+// runs in a child process under a memory limit).
+TEST(FuzzFindings, AssimpFailuresAreInputErrorsOfAChildProcess) {
+    const std::string folder = std::string(OCLVOX_TEST_DATA_DIR) + "/fuzz_findings/";
+    for (const char* name : {"assimp_zip_assert_abort.3mf", "assimp_glb_3700MB_allocation.glb",
+                             "assimp_gltf_leak_on_error.gltf"}) {
+        SCOPED_TRACE(name);
+        const std::string message = input_error_of(folder + name);
+        EXPECT_TRUE(contains(message, name)) << message;
+    }
+    EXPECT_TRUE(
+        contains(input_error_of(folder + "assimp_zip_assert_abort.3mf"), "killed by signal 6"));
+    // The 3.7 GB request failed in the child, under its limit: no child got near it.
+    rusage children{};
+    ASSERT_EQ(getrusage(RUSAGE_CHILDREN, &children), 0);
+    EXPECT_LT(children.ru_maxrss, 1536L << 10);  // KiB
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -345,6 +345,75 @@ TEST(SdfSign, SignedBoxMatchesAnalyticSignedDistance) {
             }
 }
 
+// ---- layers: a field computed in pieces along z
+// ---------------------------------------------------
+
+// Fields of consecutive layer ranges (cut at layers that are not multiples of 4 or of the brick
+// size) stack into the whole grid's field, sample for sample, bit for bit: signed and unsigned,
+// on the device and the reference, for a mesh far from the origin and an open scan.
+TEST(SdfLayers, LayerFieldsStackIntoTheWholeField) {
+    const Mesh sphere = icosphere(kCentre, 2.6, 2);
+    const Grid g = offset_grid(30, 0.2, kCentre);
+    const std::vector<std::pair<int64_t, int64_t>> cuts{{0, 7}, {7, 13}, {13, 27}, {27, 0}};
+    for (const bool reference : {false, true}) {
+        SCOPED_TRACE(reference ? "reference" : "device");
+        SdfOptions o = band(2.5);
+        o.brick_size = 8;
+        auto run = [&](const SdfOptions& options) {
+            return reference ? signed_distance_reference(sphere, g, options)
+                             : signed_distance(device(), sphere, g, options);
+        };
+        const ScalarField whole = run(o);
+        std::vector<float> stacked;
+        for (const auto& [first, end] : cuts) {
+            SdfOptions part = o;
+            part.first_layer = first;
+            part.end_layer = end;
+            const ScalarField f = run(part);
+            const int64_t layers = (end ? end : g.dims[2]) - first;
+            ASSERT_EQ(f.grid.dims[2], layers);
+            EXPECT_EQ(f.grid.origin[2], g.origin[2] + double(first) * g.voxel_size);
+            stacked.insert(stacked.end(), f.values.begin(), f.values.end());
+        }
+        ASSERT_EQ(stacked.size(), whole.values.size());
+        EXPECT_EQ(0,
+                  std::memcmp(stacked.data(), whole.values.data(), stacked.size() * sizeof(float)));
+        EXPECT_LT(*std::min_element(stacked.begin(), stacked.end()), 0.0f);  // signed
+    }
+
+    // An open scan signed by the winding number, on the device.
+    const Mesh bunny = load_mesh(mesh_path("stanford-bunny.obj"));
+    GridFit fit;
+    fit.resolution = 32;
+    fit.pad = field_padding(2.0);
+    const Grid bg = fit_grid(bunny, fit);
+    SdfOptions o = band(2.0);
+    const ScalarField whole = signed_distance(device(), bunny, bg, o);
+    SdfOptions low = o, high = o;
+    low.end_layer = 11;
+    high.first_layer = 11;
+    ScalarField a = signed_distance(device(), bunny, bg, low);
+    const ScalarField b = signed_distance(device(), bunny, bg, high);
+    a.values.insert(a.values.end(), b.values.begin(), b.values.end());
+    expect_identical(a, whole);
+}
+
+TEST(SdfLayers, BadLayerRangesAndFullGridLayersAreRefused) {
+    const Mesh m = icosphere(kCentre, 2.0, 0);
+    const Grid g = offset_grid(8, 1.0, kCentre);
+    for (const auto& [first, end] :
+         std::vector<std::pair<int64_t, int64_t>>{{-1, 4}, {4, 4}, {5, 3}, {0, 9}, {8, 0}}) {
+        SdfOptions o = band(2.0);
+        o.first_layer = first;
+        o.end_layer = end;
+        EXPECT_THROW(unsigned_distance_reference(m, g, o), GridError) << first << " " << end;
+        EXPECT_THROW(unsigned_distance(device(), m, g, o), GridError) << first << " " << end;
+    }
+    SdfOptions o = band(2.0, true);
+    o.first_layer = 2;
+    EXPECT_THROW(signed_distance(device(), m, g, o), GridError);
+}
+
 // ---- CSG
 // -----------------------------------------------------------------------------------------
 

@@ -1,15 +1,35 @@
 // glTF 2.0 (.gltf, .glb) and 3MF through assimp: every mesh of the scene graph, placed by the
 // world matrix of each node that uses it (composed in double), merged into one polygon set.
 // Assimp stores vertices and matrices in float, so these formats are exact only to float.
+//
+// Assimp is not ours and not hardened: fuzzing found malformed files on which it aborts the
+// process (an ai_assert in its zip reader, from a 1.4 KB .3mf), allocates 3.7 GB (a 616-byte
+// .glb) or leaks. So it runs in a child process under an address-space limit, and hands the
+// polygons back through a pipe: whatever it does to itself, the caller gets an InputError naming
+// the file, and its own memory is untouched.
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
 #include <assimp/LogStream.hpp>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <mutex>
+#include <new>
+#include <nlohmann/json.hpp>
 
+#include "file_names.hpp"
+#include "host_memory.hpp"
 #include "mesh_reading.hpp"
 
 namespace oclvox::mesh_reading {
@@ -107,12 +127,9 @@ void append_node(const aiScene& scene, const aiNode& node, const Matrix& parent_
         append_node(scene, *node.mChildren[c], world, out);
 }
 
-}  // namespace
-
-Polygons read_scene_assimp(const std::string& path) {
+Polygons import_scene(const std::string& path) {
     // Phase 1: import. Validation rejects out-of-range indices; polygons are left to the shared
     // triangulation, and identical vertices are joined later, for all formats at once.
-    require_readable_nonempty(path);
     AssimpErrorLog errors;
     Assimp::Importer importer;
     const aiScene* scene = importer.ReadFile(path, aiProcess_ValidateDataStructure);
@@ -125,6 +142,203 @@ Polygons read_scene_assimp(const std::string& path) {
     Polygons out;
     append_node(*scene, *scene->mRootNode, kIdentity, out);
     return out;
+}
+
+// ---- the child process and what it sends back ----
+
+// The child's address-space budget: room for the importer's work, plus far more than
+// the mesh data the input files can hold (assimp keeps a few copies of it), capped by the host
+// budget.
+uint64_t import_memory_limit(const std::string& path) {
+    std::error_code error;
+    uint64_t input = std::filesystem::file_size(path, error);
+    // A .gltf names its binary buffers; they are input too. (Its JSON is parsed here only to
+    // size the limit: anything unexpected is left for assimp to report.)
+    if (detail::lowercase_extension(path) == ".gltf") {
+        const nlohmann::json j = nlohmann::json::parse(read_whole_file(path), nullptr, false);
+        const std::filesystem::path folder = std::filesystem::path(path).parent_path();
+        if (j.is_object() && j.contains("buffers") && j["buffers"].is_array())
+            for (const nlohmann::json& buffer : j["buffers"])
+                if (buffer.is_object() && buffer.contains("uri") && buffer["uri"].is_string()) {
+                    const uint64_t size = std::filesystem::file_size(
+                        folder / buffer["uri"].get<std::string>(), error);
+                    if (!error) input += size;
+                }
+    }
+    const uint64_t limit = (uint64_t(1) << 30) + 64 * input;
+    return std::min(limit, std::max<uint64_t>(detail::physical_memory() / 2, uint64_t(1) << 30));
+}
+
+// The address space this process has mapped (VmSize), or 0 if unknown.
+uint64_t mapped_bytes() {
+    FILE* statm = std::fopen("/proc/self/statm", "r");
+    if (!statm) return 0;
+    unsigned long long pages = 0;
+    const bool read = std::fscanf(statm, "%llu", &pages) == 1;
+    std::fclose(statm);
+    return read ? uint64_t(pages) * uint64_t(sysconf(_SC_PAGESIZE)) : 0;
+}
+
+void write_all(int fd, const void* data, size_t bytes) {
+    const char* p = static_cast<const char*>(data);
+    while (bytes > 0) {
+        const ssize_t n = ::write(fd, p, bytes);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) _exit(3);
+        p += n;
+        bytes -= size_t(n);
+    }
+}
+
+template <class T>
+void write_vector(int fd, const std::vector<T>& v) {
+    const uint64_t n = v.size();
+    write_all(fd, &n, sizeof n);
+    write_all(fd, v.data(), n * sizeof(T));
+}
+
+// The child: imports and writes either 'P' and the polygons, or 'E' and a message; never returns.
+[[noreturn]] void run_import_child(const std::string& path, uint64_t memory_limit, int fd) {
+    // Die with the parent; take Ctrl-C and SIGTERM as a plain process would (the CLI blocks them
+    // in every thread for its watcher, and the mask is inherited).
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    sigset_t all;
+    sigfillset(&all);
+    sigprocmask(SIG_UNBLOCK, &all, nullptr);
+    for (int sig : {SIGINT, SIGTERM, SIGPIPE}) signal(sig, SIG_DFL);
+    // The library never prints; what assimp would print (assertion failures) goes nowhere.
+    const int null = open("/dev/null", O_WRONLY);
+    if (null >= 0) {
+        dup2(null, STDOUT_FILENO);
+        dup2(null, STDERR_FILENO);
+        close(null);
+    }
+#ifdef __has_feature
+#if __has_feature(address_sanitizer)
+#define OCLVOX_SANITIZED_ADDRESSES 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__) || defined(OCLVOX_SANITIZED_ADDRESSES)
+    // Sanitizers reserve terabytes of address space: no limit in those builds.
+    (void)memory_limit;
+#else
+    // On top of what the process has mapped already (libraries, a device runtime's threads).
+    const rlimit limit{mapped_bytes() + memory_limit, mapped_bytes() + memory_limit};
+    setrlimit(RLIMIT_AS, &limit);
+#endif
+    // The message sent back is the whole InputError message.
+    std::string message;
+    try {
+        const Polygons polygons = import_scene(path);
+        write_all(fd, "P", 1);
+        write_vector(fd, polygons.positions);
+        write_vector(fd, polygons.corners);
+        write_vector(fd, polygons.corner_counts);
+        _exit(0);
+    } catch (const InputError& e) {
+        message = e.what();
+    } catch (const std::bad_alloc&) {
+        message = "mesh file '" + path +
+                  "': the importer (assimp) ran out of its memory limit of " +
+                  std::to_string(memory_limit >> 20) + " MiB";
+    } catch (const std::exception& e) {
+        message = "mesh file '" + path + "': the importer (assimp) failed: " + e.what();
+    } catch (...) {
+        message = "mesh file '" + path + "': the importer (assimp) failed";
+    }
+    write_all(fd, "E", 1);
+    const uint64_t n = message.size();
+    write_all(fd, &n, sizeof n);
+    write_all(fd, message.data(), message.size());
+    _exit(0);
+}
+
+// Reads the child's answer from `bytes`, checking every count against what is there.
+class Answer {
+  public:
+    explicit Answer(const std::string& bytes) : bytes_(bytes) {}
+    bool take(void* out, size_t n) {
+        if (bytes_.size() - at_ < n) return false;
+        std::memcpy(out, bytes_.data() + at_, n);
+        at_ += n;
+        return true;
+    }
+    template <class T>
+    bool take_vector(std::vector<T>& v) {
+        uint64_t n = 0;
+        if (!take(&n, sizeof n) || n > (bytes_.size() - at_) / sizeof(T)) return false;
+        v.resize(size_t(n));
+        return take(v.data(), size_t(n) * sizeof(T));
+    }
+    bool done() const { return at_ == bytes_.size(); }
+
+  private:
+    const std::string& bytes_;
+    size_t at_ = 0;
+};
+
+std::string how_it_ended(int status) {
+    if (WIFSIGNALED(status))
+        return "was killed by signal " + std::to_string(WTERMSIG(status)) + " (" +
+               strsignal(WTERMSIG(status)) + ")";
+    return "exited with status " + std::to_string(WEXITSTATUS(status));
+}
+
+}  // namespace
+
+Polygons read_scene_assimp(const std::string& path) {
+    require_readable_nonempty(path);
+    const uint64_t memory_limit = import_memory_limit(path);
+
+    // Phase 1: the import, in a child process.
+    int fds[2];
+    if (pipe(fds) != 0) fail(path, std::string("cannot create a pipe: ") + std::strerror(errno));
+    const pid_t child = fork();
+    if (child < 0) {
+        close(fds[0]);
+        close(fds[1]);
+        fail(path, std::string("cannot start the importer process: ") + std::strerror(errno));
+    }
+    if (child == 0) {
+        close(fds[0]);
+        run_import_child(path, memory_limit, fds[1]);
+    }
+    close(fds[1]);
+
+    // Phase 2: everything it sends, then how it ended.
+    std::string bytes;
+    char buffer[1 << 16];
+    for (;;) {
+        const ssize_t n = ::read(fds[0], buffer, sizeof buffer);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) break;
+        bytes.append(buffer, size_t(n));
+    }
+    close(fds[0]);
+    int status = 0;
+    while (waitpid(child, &status, 0) < 0 && errno == EINTR) {
+    }
+
+    // Phase 3: the polygons, or the reason there are none.
+    Answer answer(bytes);
+    char kind = 0;
+    if (WIFEXITED(status) && WEXITSTATUS(status) == 0 && answer.take(&kind, 1)) {
+        Polygons polygons;
+        if (kind == 'P' && answer.take_vector(polygons.positions) &&
+            answer.take_vector(polygons.corners) && answer.take_vector(polygons.corner_counts) &&
+            answer.done())
+            return polygons;
+        std::string message;
+        uint64_t n = 0;
+        if (kind == 'E' && answer.take(&n, sizeof n) && n <= bytes.size()) {
+            message.resize(size_t(n));
+            if (answer.take(message.data(), message.size()) && answer.done())
+                throw InputError(message);
+        }
+    }
+    fail(path, "the importer (assimp) " + how_it_ended(status) +
+                   " on this file, which it cannot read (the address-space limit was " +
+                   std::to_string(memory_limit >> 20) + " MiB)");
 }
 
 }  // namespace oclvox::mesh_reading

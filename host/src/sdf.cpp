@@ -2,6 +2,7 @@
 // and the same order-independent minima as kernels/sdf.cl, so the device must match it bit for
 // bit), the conversion to world units, and the sign from the solid voxelization.
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <cstring>
 
@@ -96,10 +97,47 @@ void validate_sdf(const Grid& grid, const SdfOptions& options) {
         throw GridError("the distance band must be a positive number of voxels up to " +
                         std::to_string(kMaxGridAxis) + ", got " +
                         std::to_string(options.band_voxels));
-    if (grid.voxel_count() > kMaxFieldVoxels)
-        throw GridError("a dense distance field of " + std::to_string(grid.voxel_count()) +
+    const int64_t end = options.end_layer ? options.end_layer : grid.dims[2];
+    if (options.first_layer < 0 || options.first_layer >= end || end > grid.dims[2])
+        throw GridError("layers " + std::to_string(options.first_layer) + " to " +
+                        std::to_string(end) + " are not a range within the grid's " +
+                        std::to_string(grid.dims[2]) + " layers");
+    if (options.full_grid && (options.first_layer != 0 || end != grid.dims[2]))
+        throw GridError(
+            "a full-grid field cannot be computed in layers: jump flooding crosses "
+            "them (use a narrow band, or the whole grid)");
+    const uint64_t voxels = field_grid(grid, options).voxel_count();
+    if (voxels > kMaxFieldVoxels)
+        throw GridError("a dense distance field of " + std::to_string(voxels) +
                         " voxels is over the limit of " + std::to_string(kMaxFieldVoxels) +
                         ": lower the resolution");
+}
+
+Grid field_grid(const Grid& grid, const SdfOptions& options) {
+    Grid layers = grid;
+    layers.origin[2] = grid.origin[2] + double(options.first_layer) * grid.voxel_size;
+    layers.dims[2] = (options.end_layer ? options.end_layer : grid.dims[2]) - options.first_layer;
+    return layers;
+}
+
+void keep_layers(SdfTriangles& prepared, const SdfOptions& options) {
+    if (options.first_layer == 0 && options.end_layer == 0) return;
+    const int first = int(options.first_layer);
+    const int last = options.end_layer ? int(options.end_layer) - 1 : INT32_MAX;
+    std::vector<OvSdfTriangle> kept;
+    std::vector<uint64_t> first_item{0};
+    for (OvSdfTriangle t : prepared.triangles) {
+        t.lo[2] = std::max(t.lo[2], first) - first;
+        t.hi[2] = std::min(t.hi[2], last) - first;
+        if (t.lo[2] > t.hi[2]) continue;
+        t.anchor[2] -= first;
+        uint64_t blocks = 1;
+        for (int k = 0; k < 3; ++k) blocks *= uint64_t(t.hi[k] / 4 - t.lo[k] / 4 + 1);
+        kept.push_back(t);
+        first_item.push_back(first_item.back() + blocks);
+    }
+    prepared.triangles = std::move(kept);
+    prepared.first_item = std::move(first_item);
 }
 
 std::vector<int> jump_steps(const Grid& grid) {
@@ -126,12 +164,13 @@ ScalarField distance_field(const Grid& grid, const SdfOptions& options,
     return field;
 }
 
-void apply_sign(ScalarField& field, const SparseVoxels& inside) {
+void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer) {
     // Straight from the bricks' 4x4x4 block masks: no dense copy of the solid, and the work
     // follows the inside voxels, not the grid.
     const auto nbricks = inside.brick_dims();
     const int64_t size = inside.brick_size(), nb = inside.blocks_per_brick_axis();
     const int64_t nx = field.grid.dims[0], ny = field.grid.dims[1];
+    const int64_t end_layer = first_layer + field.grid.dims[2];
     float* values = field.values.data();
     for (const auto& [index, blocks] : inside.bricks()) {
         const int64_t bx = int64_t(index % uint64_t(nbricks[0]));
@@ -143,17 +182,41 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside) {
             const int64_t ox = bx * size + int64_t(w % nb) * 4;
             const int64_t oy = by * size + int64_t(w / nb % nb) * 4;
             const int64_t oz = bz * size + int64_t(w / (nb * nb)) * 4;
-            for (int bit = 0; bit < 64; ++bit)
-                if (mask >> bit & 1) {
+            for (int bit = 0; bit < 64; ++bit) {
+                const int64_t z = oz + bit / 16;
+                if (mask >> bit & 1 && z >= first_layer && z < end_layer) {
                     float& v =
-                        values[(ox + bit % 4) + nx * ((oy + bit / 4 % 4) + ny * (oz + bit / 16))];
+                        values[(ox + bit % 4) + nx * ((oy + bit / 4 % 4) + ny * (z - first_layer))];
                     v = -v;
                 }
+            }
         }
     }
 }
 
 }  // namespace detail
+
+namespace {
+
+// The Solid voxelization that signs a field: of the bricks holding the field's layers only.
+VoxelizeOptions sign_options(const Grid& grid, const SdfOptions& options) {
+    VoxelizeOptions solid;
+    solid.mode = VoxelizeMode::Solid;
+    solid.inside = options.inside;
+    solid.brick_size = options.brick_size;
+    const Grid layers = detail::field_grid(grid, options);
+    if (layers.dims[2] == grid.dims[2]) return solid;
+    const SparseVoxels layout(grid, options.brick_size);
+    const auto nb = layout.brick_dims();
+    const uint64_t per_layer = uint64_t(nb[0]) * uint64_t(nb[1]);
+    const uint64_t first = uint64_t(options.first_layer / options.brick_size);
+    const uint64_t last = uint64_t((options.first_layer + layers.dims[2] - 1) / options.brick_size);
+    for (uint64_t brick = first * per_layer; brick < (last + 1) * per_layer; ++brick)
+        solid.bricks.push_back(brick);
+    return solid;
+}
+
+}  // namespace
 
 int64_t field_padding(double band_voxels) {
     if (!(band_voxels > 0) || !(band_voxels < double(kMaxGridAxis)))
@@ -162,14 +225,16 @@ int64_t field_padding(double band_voxels) {
     return int64_t(std::ceil(band_voxels)) + 1;
 }
 
-ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
+ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& whole_grid,
                                         const SdfOptions& options, VoxelizeStats* stats_out) {
     VoxelizeStats stats;
     // Phase 1: validate and prepare.
     auto t = std::chrono::steady_clock::now();
-    detail::validate_sdf(grid, options);
-    const detail::SdfTriangles prepared =
-        detail::prepare_sdf_triangles(mesh, grid, options.band_voxels);
+    detail::validate_sdf(whole_grid, options);
+    detail::SdfTriangles prepared =
+        detail::prepare_sdf_triangles(mesh, whole_grid, options.band_voxels);
+    detail::keep_layers(prepared, options);
+    const Grid grid = detail::field_grid(whole_grid, options);
     stats.triangles_in = mesh.triangles.size();
     stats.triangles_used = prepared.triangles.size();
     stats.work_items = prepared.first_item.back();
@@ -198,11 +263,9 @@ ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const 
                                       VoxelizeStats* stats_out) {
     VoxelizeStats stats, solid_stats;
     ScalarField field = unsigned_distance_reference(mesh, grid, options, &stats);
-    VoxelizeOptions solid;
-    solid.mode = VoxelizeMode::Solid;
-    solid.inside = options.inside;
-    solid.brick_size = options.brick_size;
-    detail::apply_sign(field, voxelize_reference(mesh, grid, solid, &solid_stats));
+    detail::apply_sign(field,
+                       voxelize_reference(mesh, grid, sign_options(grid, options), &solid_stats),
+                       options.first_layer);
     stats.seconds_binning += solid_stats.seconds_binning;
     stats.seconds_kernels += solid_stats.seconds_kernels;
     stats.voxels_set = solid_stats.voxels_set;
@@ -216,11 +279,9 @@ ScalarField signed_distance(Device& device, const Mesh& mesh, const Grid& grid,
                             const SdfOptions& options, VoxelizeStats* stats_out) {
     VoxelizeStats stats, solid_stats;
     ScalarField field = unsigned_distance(device, mesh, grid, options, &stats);
-    VoxelizeOptions solid;
-    solid.mode = VoxelizeMode::Solid;
-    solid.inside = options.inside;
-    solid.brick_size = options.brick_size;
-    detail::apply_sign(field, device.voxelize(mesh, grid, solid, &solid_stats));
+    detail::apply_sign(field,
+                       device.voxelize(mesh, grid, sign_options(grid, options), &solid_stats),
+                       options.first_layer);
     stats.seconds_binning += solid_stats.seconds_binning;
     stats.seconds_upload += solid_stats.seconds_upload;
     stats.seconds_kernels += solid_stats.seconds_kernels;

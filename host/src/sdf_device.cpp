@@ -38,16 +38,19 @@ uint32_t float_bits(float f) {
 
 }  // namespace
 
-ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& grid,
+ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& whole_grid,
                               const SdfOptions& options, VoxelizeStats* stats_out) {
     VoxelizeStats stats;
     Device::Impl& cl = device.impl();
 
-    // Phase 1: validate and prepare on the host; the dense buffer must fit one allocation.
+    // Phase 1: validate and prepare on the host (on the whole grid, then cut to the layers); the
+    // dense buffer must fit one allocation.
     auto t = Clock::now();
-    detail::validate_sdf(grid, options);
-    const detail::SdfTriangles prepared =
-        detail::prepare_sdf_triangles(mesh, grid, options.band_voxels);
+    detail::validate_sdf(whole_grid, options);
+    detail::SdfTriangles prepared =
+        detail::prepare_sdf_triangles(mesh, whole_grid, options.band_voxels);
+    detail::keep_layers(prepared, options);
+    const Grid grid = detail::field_grid(whole_grid, options);
     const uint64_t voxels = grid.voxel_count();
     if (voxels * sizeof(cl_uint) > cl.info.max_alloc)
         throw GridError("a dense distance field of " + std::to_string(voxels) + " voxels needs " +

@@ -24,9 +24,17 @@ struct SdfTriangles {
     float band = 0, band2 = 0;  // band in voxels and its square, as the kernels compare them
 };
 
-// Throws GridError for a band that is not a finite positive number of voxels or a grid whose
-// dense field is too large to hold.
+// Throws GridError for a band that is not a finite positive number of voxels, layers outside the
+// grid (or with full_grid), or a field too large to hold.
 void validate_sdf(const Grid& grid, const SdfOptions& options);
+
+// The grid of the field a run produces: the whole grid cut to options' layers.
+Grid field_grid(const Grid& grid, const SdfOptions& options);
+
+// Cuts prepared triangles (on the whole grid) to options' layers: their voxel ranges are clipped
+// to the layers and every z coordinate moved down by first_layer. Anchors are integers, so the
+// anchor-relative float vertices, and every distance computed from them, stay the same bits.
+void keep_layers(SdfTriangles& prepared, const SdfOptions& options);
 
 // Validates mesh and grid, maps the triangles to voxel units, drops those farther than the band
 // from every voxel centre and computes each one's distance constants (sdf_prepare.cpp).
@@ -41,7 +49,8 @@ std::vector<int> jump_steps(const Grid& grid);
 ScalarField distance_field(const Grid& grid, const SdfOptions& options,
                            const SdfTriangles& prepared, const std::vector<float>& distance2);
 
-// Negates the samples whose voxels are set in `inside`.
-void apply_sign(ScalarField& field, const SparseVoxels& inside);
+// Negates the samples whose voxels are set in `inside` (a voxelization of the whole grid; the
+// field covers its layers from first_layer on).
+void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer);
 
 }  // namespace oclvox::detail

@@ -148,18 +148,21 @@ def _field_pad(pad, band, origin, dims):
 
 def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, inside="auto",
         voxel_size=None, origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None,
-        reference=False):
+        reference=False, layers=None):
     """Signed distance field (negative inside) at voxel centres; returns a Field.
 
     Exact within `band` voxels of the surface, clamped to +-band * voxel_size beyond it, or
     propagated to every voxel with full_grid=True. Grid options as for voxelize, except that
     `pad` defaults to ceil(band) + 1 when neither origin nor dims is given, as on the CLI.
+    layers=(first, end): only the voxel layers first <= k < end of the whole grid (end 0: to the
+    top), bit for bit the whole field's samples there; stacked along z, consecutive ranges give
+    the whole field (narrow band only). The sign's solid still does its whole columns' work.
     """
     mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
     pad = _field_pad(pad, band, origin, dims)
     return _oclvox.sdf(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), band=band,
                        full_grid=full_grid, inside=inside, brick_size=brick_size,
-                       device=_selector(device), reference=reference)
+                       device=_selector(device), reference=reference, layers=layers)
 
 
 def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", voxel_size=None,

@@ -157,8 +157,13 @@ oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::str
 }
 
 oclvox::SdfOptions sdf_options(double band, bool full_grid, const std::string& inside,
-                               int brick_size) {
+                               int brick_size,
+                               std::optional<std::array<int64_t, 2>> layers = std::nullopt) {
     oclvox::SdfOptions options;
+    if (layers) {
+        options.first_layer = (*layers)[0];
+        options.end_layer = (*layers)[1];
+    }
     options.band_voxels = band;
     options.full_grid = full_grid;
     options.inside = oclvox::inside_test_from_string(inside);
@@ -518,12 +523,13 @@ PYBIND11_MODULE(_oclvox, m) {
     m.def(
         "sdf",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, double band, bool full_grid,
-           const std::string& inside, int brick_size, py::object device, bool reference) {
-            return sdf(mesh, fit, sdf_options(band, full_grid, inside, brick_size), device,
+           const std::string& inside, int brick_size, py::object device, bool reference,
+           std::optional<std::array<int64_t, 2>> layers) {
+            return sdf(mesh, fit, sdf_options(band, full_grid, inside, brick_size, layers), device,
                        reference);
         },
         "mesh"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a, "device"_a,
-        "reference"_a);
+        "reference"_a, "layers"_a = py::none());
     m.def(
         "csg_meshes",
         [](const oclvox::Mesh& a, const std::string& op, const oclvox::Mesh& b,

@@ -1,4 +1,4 @@
-"""Brick selections from Python: voxelize(..., bricks=...) over the shards of candidate_bricks
+"""Pieces of one grid from Python. Brick selections: voxelize(..., bricks=...) over the shards of candidate_bricks
 merges into the unrestricted result, and VoxelGrid and Mesh survive pickling (how Dask moves
 them between processes) with every voxel and coordinate intact."""
 
@@ -60,3 +60,16 @@ def test_mesh_pickles_exactly(spot):
     back = pickle.loads(pickle.dumps(mesh))
     assert np.array_equal(back.vertices, mesh.vertices)
     assert np.array_equal(back.faces, mesh.faces)
+
+
+def test_sdf_layers_stack_into_the_whole_field(spot):
+    whole = oclvox.sdf(spot, 40, band=2.0, brick_size=8)
+    nz = whole.dims[2]
+    cuts = [0, 5, 17, 30, nz]
+    parts = [oclvox.sdf(spot, 40, band=2.0, brick_size=8, layers=(a, b))
+             for a, b in zip(cuts, cuts[1:])]
+    stacked = np.concatenate([p.to_numpy() for p in parts], axis=2)
+    assert np.array_equal(stacked.view(np.uint32), whole.to_numpy().view(np.uint32))
+    assert parts[1].origin[2] == whole.origin[2] + 5 * whole.voxel_size
+    with pytest.raises(oclvox.GridError):
+        oclvox.sdf(spot, 40, full_grid=True, layers=(0, 5))

@@ -21,6 +21,12 @@ struct SdfOptions {
     InsideTest inside = InsideTest::Auto;
     // Bricks of the solid voxelization that gives the sign.
     int brick_size = 64;
+    // Compute only the voxel layers first_layer <= k < end_layer of the whole grid (end_layer 0:
+    // to the top). The field then covers just those layers (its grid starts at layer
+    // first_layer), and its samples are bit for bit those of the whole grid's field there, so
+    // fields of consecutive layer ranges, computed anywhere, stack into the whole field.
+    // Narrow-band fields only: jump flooding (full_grid) crosses layers.
+    int64_t first_layer = 0, end_layer = 0;
 };
 
 // Margin, in voxels on every side, for a grid fitted to a mesh whose distance field is written or
