@@ -3,6 +3,8 @@
 - ``voxelize_sharded(mesh, resolution, client=...)`` splits the grid's bricks that can hold voxels
   into shards, runs one task per shard on the workers and merges the sparse results into one
   VoxelGrid, bit for bit the one ``oclvox.voxelize`` returns.
+- ``sdf_sharded(mesh, resolution, client=...)`` does the same for a narrow-band signed distance
+  field, by slabs of z layers.
 - ``voxelize_many(paths, out_dir, resolution, client=...)`` voxelizes one mesh per task into one
   file per mesh, skips outputs already written, retries a failed task once and reports failures at
   the end.
@@ -92,12 +94,13 @@ def _voxelize_shard(mesh, resolution, bricks, device, options):
 
 def shards_of(bricks, shard_bricks):
     """`bricks` (sorted brick indices) cut into contiguous runs of about `shard_bricks` each, the
-    runs' lengths differing by at most one. No bricks still make one (empty) shard, so that the
-    result has its grid."""
+    runs' lengths differing by at most one."""
     if shard_bricks < 1:
         raise ValueError(f"shard_bricks must be at least 1, got {shard_bricks}")
-    count = max(1, math.ceil(len(bricks) / shard_bricks))
-    return np.array_split(np.asarray(bricks, dtype=np.uint64), count)
+    if len(bricks) == 0:
+        return []
+    return np.array_split(np.asarray(bricks, dtype=np.uint64),
+                          math.ceil(len(bricks) / shard_bricks))
 
 
 def _auto_shard_bricks(brick_count, client):
@@ -137,6 +140,10 @@ def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=
                     if k in inspect.signature(oclvox.candidate_bricks).parameters}
     candidates = oclvox.candidate_bricks(mesh, resolution, **grid_options)
     shards = shards_of(candidates, shard_bricks or _auto_shard_bricks(len(candidates), client))
+    if not shards:
+        # No brick can hold a voxel, so any selection gives the empty whole grid; brick 0 alone
+        # costs least (an empty selection would mean every brick).
+        shards = [np.zeros(1, np.uint64)]
 
     # Phase 2: the mesh to every worker once (a worker keeps it for all its tasks), then one task
     # per shard.
@@ -160,6 +167,72 @@ def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=
 
     _collect(client, futures, merge)
     return merged[0]
+
+
+# ---- a distance field in layers ------------------------------------------------------------------
+
+_SDF_OPTIONS = frozenset(inspect.signature(oclvox.sdf).parameters) - {
+    "vertices", "faces", "resolution", "device", "layers", "full_grid"}
+
+
+def _sdf_layers(mesh, resolution, layers, device, options):
+    """A worker's task: the whole field's samples in voxel layers layers[0] <= k < layers[1]."""
+    field = oclvox.sdf(mesh, resolution, layers=layers, device=device, **options)
+    return np.array(field.to_numpy(), order="F")
+
+
+def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None, **options):
+    """The signed distance field of one mesh on a Dask cluster; returns the Field oclvox.sdf
+    returns (narrow band), bit for bit.
+
+    options: sdf's (band, inside, grid options, brick_size, reference); full_grid is refused,
+    because jump flooding carries distances across the whole grid. The grid's z layers are cut
+    into slabs of `shard_layers` layers (default: about four slabs per worker, a multiple of
+    brick_size so that no brick of the sign's solid is computed twice); each slab is one task,
+    oclvox.sdf(..., layers=(first, end)), whose samples are the whole field's there. The client
+    copies each slab into the whole (dense) field as it arrives: it needs the memory of the field
+    twice at the end (4 bytes a voxel, once for the slabs, once in the Field). Each slab's sign
+    comes from a solid voxelization of its whole columns of bricks.
+    """
+    if options.get("full_grid"):
+        raise ValueError("sdf_sharded computes narrow-band fields only: full_grid's jump "
+                         "flooding crosses every layer (use oclvox.sdf)")
+    options.pop("full_grid", None)
+    unknown = sorted(set(options) - _SDF_OPTIONS)
+    if unknown:
+        raise TypeError(f"unknown sdf option(s): {', '.join(unknown)}")
+    # Phase 1: the mesh and the whole grid (the one oclvox.sdf fits), without a device.
+    mesh = oclvox._as_mesh(mesh)
+    defaults = inspect.signature(oclvox.sdf).parameters
+    band = options.get("band", defaults["band"].default)
+    options["pad"] = oclvox._field_pad(options.get("pad"), band, options.get("origin"),
+                                       options.get("dims"))
+    origin, voxel_size, dims = oclvox._oclvox.fit_grid(mesh, oclvox._fit(
+        resolution, options.get("voxel_size"), options.get("origin"), options.get("dims"),
+        options["pad"], options.get("cubic", False)))
+    brick = options.get("brick_size", defaults["brick_size"].default)
+    if shard_layers is None:
+        workers = max(1, len(client.scheduler_info()["workers"]))
+        shard_layers = brick * max(1, math.ceil(dims[2] / (4 * workers * brick)))
+    if shard_layers < 1:
+        raise ValueError(f"shard_layers must be at least 1, got {shard_layers}")
+    cuts = list(range(0, dims[2], shard_layers)) + [dims[2]]
+
+    # Phase 2: the mesh to every worker once, one task per slab.
+    [mesh_on_workers] = client.scatter([mesh], broadcast=True)
+    futures = {client.submit(_sdf_layers, mesh_on_workers, resolution, (first, end), device,
+                             options): first
+               for first, end in zip(cuts, cuts[1:])}
+
+    # Phase 3: each slab into its place.
+    values = np.empty(dims, np.float32, order="F")
+
+    def place(future, first):
+        slab = future.result()
+        values[:, :, first:first + slab.shape[2]] = slab
+
+    _collect(client, futures, place)
+    return oclvox.Field(values, origin, voxel_size, band)
 
 
 # ---- many meshes --------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -18,7 +19,8 @@ import oclvox
 from conftest import SPOT
 
 distributed = pytest.importorskip("distributed", reason="Dask (python3-distributed) not installed")
-from oclvox.distributed import mesh_paths, shards_of, voxelize_many, voxelize_sharded  # noqa: E402
+from oclvox.distributed import (  # noqa: E402
+    mesh_paths, sdf_sharded, shards_of, voxelize_many, voxelize_sharded)
 
 CLI = os.environ.get("OCLVOX_CLI")
 
@@ -46,8 +48,19 @@ def open_spot():
     return vertices, faces[keep]
 
 
-def shard_tasks(stream):
-    return [t for t in stream.data if t["key"].startswith("_voxelize_shard")]
+def executions(client):
+    """How many tasks each worker has run (finished or failed) so far."""
+    return client.run(lambda dask_worker: dask_worker.state.executed_count)
+
+
+def counting_tasks(client, work):
+    """Runs work(); returns its result and the tasks each worker ran meanwhile."""
+    while any(client.run(lambda dask_worker: len(dask_worker.state.executing)).values()):
+        time.sleep(0.05)  # tasks an earlier test cancelled, still finishing
+    before = executions(client)
+    result = work()
+    after = executions(client)
+    return result, [after[w] - before[w] for w in sorted(after)]
 
 
 @pytest.mark.parametrize("resolution,options,shard_bricks", [
@@ -60,12 +73,13 @@ def shard_tasks(stream):
 def test_sharded_equals_single_process(client, open_spot, resolution, options, shard_bricks):
     options = dict(options, brick_size=16)
     single = oclvox.voxelize(open_spot, resolution, **options)
-    with distributed.get_task_stream(client) as stream:
-        sharded = voxelize_sharded(open_spot, resolution, client=client,
-                                   shard_bricks=shard_bricks, **options)
-    tasks = shard_tasks(stream)
-    assert len(tasks) >= 3, "too few shards to test sharding"
-    assert len({t["worker"] for t in tasks}) == 2, "both workers should have taken shards"
+    sharded, tasks = counting_tasks(client, lambda: voxelize_sharded(
+        open_spot, resolution, client=client, shard_bricks=shard_bricks, **options))
+    grid_options = {k: v for k, v in options.items() if k != "test"}
+    shards = len(shards_of(oclvox.candidate_bricks(open_spot, resolution, **grid_options),
+                           shard_bricks))
+    assert sum(tasks) == shards >= 3, "too few shards to test sharding"
+    assert min(tasks) > 0, "both workers should have taken shards"
     assert single.count > 0
     assert sharded.same_voxels(single)
     assert (sharded.dims, sharded.origin, sharded.voxel_size) == \
@@ -78,9 +92,9 @@ def test_sharded_vdb_reads_back_as_single_process(client, tmp_path):
     single = oclvox.voxelize(SPOT, 256, brick_size=16).to_numpy()
     candidates = len(oclvox.candidate_bricks(SPOT, 256, brick_size=16))
     assert candidates > 8 * 64  # enough that the default makes four shards per worker
-    with distributed.get_task_stream(client) as stream:
-        sharded = voxelize_sharded(SPOT, 256, client=client, brick_size=16)
-    assert len(shard_tasks(stream)) == 8
+    sharded, tasks = counting_tasks(
+        client, lambda: voxelize_sharded(SPOT, 256, client=client, brick_size=16))
+    assert sum(tasks) == 8
     sharded.save(tmp_path / "spot.vdb")
     vdb = pyopenvdb.read(str(tmp_path / "spot.vdb"), "occupancy")
     assert vdb.activeVoxelCount() == np.count_nonzero(single)
@@ -94,7 +108,7 @@ def test_shards_of_balances_contiguous_runs():
     shards = shards_of(bricks, 30)
     assert [len(s) for s in shards] == [25, 25, 25, 25]
     assert np.array_equal(np.concatenate(shards), bricks)
-    assert [len(s) for s in shards_of(bricks[:0], 30)] == [0]
+    assert shards_of(bricks[:0], 30) == []
     with pytest.raises(ValueError):
         shards_of(bricks, 0)
 
@@ -104,6 +118,38 @@ def test_sharded_errors_reach_the_client(client):
         voxelize_sharded(SPOT, 32, client=client, device="no-such-device")
     with pytest.raises(TypeError, match="colour"):
         voxelize_sharded(SPOT, 32, client=client, colour="red")
+
+
+def test_sharded_without_candidate_bricks_is_the_empty_whole_grid(client):
+    # A grid placed away from the mesh: no brick can hold a voxel.
+    grid = dict(origin=(10.0, 10.0, 10.0), voxel_size=0.1, dims=(30, 20, 10), brick_size=8)
+    assert len(oclvox.candidate_bricks(SPOT, **grid)) == 0
+    sharded = voxelize_sharded(SPOT, client=client, **grid)
+    assert sharded.count == 0 and sharded.dims == (30, 20, 10)
+    assert sharded.same_voxels(oclvox.voxelize(SPOT, **grid))
+
+
+@pytest.mark.parametrize("mesh,options", [
+    ("spot", dict(band=2.0)),
+    ("open", dict(band=1.5, inside="winding", pad=1)),
+])
+def test_sdf_sharded_equals_single_process(client, open_spot, mesh, options):
+    mesh = SPOT if mesh == "spot" else open_spot
+    options = dict(options, brick_size=8)
+    single = oclvox.sdf(mesh, 40, **options)
+    sharded, slabs = counting_tasks(client, lambda: sdf_sharded(mesh, 40, client=client,
+                                                                 **options))
+    assert sum(slabs) >= 4 and min(slabs) > 0
+    assert (sharded.dims, sharded.origin, sharded.voxel_size, sharded.band) == \
+        (single.dims, single.origin, single.voxel_size, single.band)
+    assert np.array_equal(sharded.to_numpy().view(np.uint32), single.to_numpy().view(np.uint32))
+    inside = single.to_numpy() < 0
+    assert inside.any() and (~inside).any()
+
+
+def test_sdf_sharded_refuses_full_grid(client):
+    with pytest.raises(ValueError, match="narrow-band"):
+        sdf_sharded(SPOT, 24, client=client, full_grid=True)
 
 
 # ---- many meshes --------------------------------------------------------------------------------
@@ -126,8 +172,8 @@ def test_voxelize_many_resumes_and_reports_failures(client, mesh_folder, tmp_pat
     paths = mesh_paths(mesh_folder)
     assert len(paths) == 20
     out = tmp_path / "out"
-    with distributed.get_task_stream(client) as stream:
-        first = voxelize_many(paths, out, 24, client=client, ext="npy", mode="solid")
+    first, tasks = counting_tasks(
+        client, lambda: voxelize_many(paths, out, 24, client=client, ext="npy", mode="solid"))
 
     # 19 outputs, each the single-process voxels (read back by numpy); one failure, named.
     assert len(first.written) == 19 and first.skipped == []
@@ -136,12 +182,8 @@ def test_voxelize_many_resumes_and_reports_failures(client, mesh_folder, tmp_pat
     for path in (p for p in paths if p.name != "corrupt.obj"):
         expected = oclvox.voxelize(path, 24, mode="solid").to_numpy()
         assert np.array_equal(np.load(out / (path.stem + ".npy")), expected), path
-    # The corrupt mesh was tried twice (one retry): the scheduler sent its task to a worker twice.
-    tasks = [t for t in stream.data if t["key"].startswith("_voxelize_file")]
-    assert [t["status"] for t in tasks].count("OK") == 19
-    [erred] = [t["key"] for t in tasks if t["status"] == "error"]
-    starts = [s for s in client.story(erred) if s[0] == "scheduler" and s[3] == "processing"]
-    assert len(starts) == 2
+    # The corrupt mesh was tried twice (one retry), every other mesh once.
+    assert sum(tasks) == 19 + 2
 
     # A rerun writes nothing again; an output without its sidecar is not complete and is redone.
     stamps = {f: f.stat().st_mtime_ns for f in out.iterdir()}
