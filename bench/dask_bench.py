@@ -43,7 +43,7 @@ def load():
 
 def cluster(workers):
     return distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                    dashboard_address=None, env=ONE_CORE)
+                                    dashboard_address=":0", env=ONE_CORE)
 
 
 def warm_up(client, mesh):
@@ -228,11 +228,12 @@ def main():
     receive = gib * 1024 * receiving
     write = vdb_seconds * big / grid.brick_count
     lines += ["", f"## Projection: {n}^3 on 100 workers", "",
-              f"- candidate bricks at {n}^3: {big} (oclvox.candidate_bricks; {big / candidates:.0f}x "
-              f"those at {r}^3)",
+              f"- candidate bricks at {n}^3: {big} (oclvox.candidate_bricks; "
+              f"{big / candidates:.0f}x those at {r}^3)",
               f"- compute: {big} x {per_brick * 1e3:.2f} ms / 100 workers = {compute:.1f} s per "
               f"worker (one PoCL core each, as measured)",
-              f"- result: {big} x {per_result_brick / 1024:.1f} KiB = {gib:.1f} GiB into the client",
+              f"- result: {big} x {per_result_brick / 1024:.1f} KiB = {gib:.1f} GiB into the "
+              f"client",
               f"- client: {gib * 1024:.0f} MiB x {receiving * 1e3:.1f} ms/MiB = {receive:.0f} s "
               f"of taking and merging shards, one process",
               f"- one .vdb: {vdb_seconds:.2f} s x {big / grid.brick_count:.0f} = {write:.0f} s "

@@ -14,9 +14,12 @@ namespace oclvox_cli {
 namespace {
 
 // Run with `python -c`: like `python -m oclvox.distributed`, but a missing package (or one too
-// old to have the module) is named as such instead of as a traceback.
+// old to have the module) is named as such instead of as a traceback, and the current directory
+// is taken off the module path, so that a folder named oclvox there is never imported instead.
 const char* const kBootstrap =
     "import sys\n"
+    "if sys.path and sys.path[0] == '':\n"
+    "    del sys.path[0]\n"
     "try:\n"
     "    from oclvox.distributed import main\n"
     "except ImportError as error:\n"

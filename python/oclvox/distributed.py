@@ -360,9 +360,10 @@ def _cluster_client(args):
             yield client
         return
     # One thread per worker: a worker is one device, which runs one call at a time. The workers'
-    # own logs (a failed task's traceback) would repeat what the summary says.
+    # own logs (a failed task's traceback) would repeat what the summary says. The scheduler's
+    # HTTP server (the dashboard, with bokeh) on a free port, so that clusters can run side by side.
     with distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                                  dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
             distributed.Client(cluster) as client:
         yield client
 

@@ -33,7 +33,7 @@ def client():
     # ($OCLVOX_DEVICE, inherited).
     env = {"POCL_MAX_PTHREAD_COUNT": "1"}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, env=env) as cluster, \
+                                  dashboard_address=":0", env=env) as cluster, \
             distributed.Client(cluster) as c:
         yield c
 
@@ -120,6 +120,19 @@ def test_sharded_errors_reach_the_client(client):
         voxelize_sharded(SPOT, 32, client=client, colour="red")
 
 
+def test_sharded_progress_counts_bricks_and_can_cancel(client):
+    calls = []
+    voxelize_sharded(SPOT, 128, client=client, brick_size=16, shard_bricks=20,
+                     progress=lambda done, total: calls.append((done, total)))
+    total = len(oclvox.candidate_bricks(SPOT, 128, brick_size=16))
+    assert len(calls) == len(shards_of(np.arange(total), 20)) > 1
+    assert all(t == total for _, t in calls) and calls[-1][0] == total
+    assert all(a[0] < b[0] for a, b in zip(calls, calls[1:]))
+    with pytest.raises(oclvox.Cancelled):
+        voxelize_sharded(SPOT, 128, client=client, brick_size=16, shard_bricks=20,
+                         progress=lambda done, total: False)
+
+
 def test_sharded_without_candidate_bricks_is_the_empty_whole_grid(client):
     # A grid placed away from the mesh: no brick can hold a voxel.
     grid = dict(origin=(10.0, 10.0, 10.0), voxel_size=0.1, dims=(30, 20, 10), brick_size=8)
@@ -172,8 +185,11 @@ def test_voxelize_many_resumes_and_reports_failures(client, mesh_folder, tmp_pat
     paths = mesh_paths(mesh_folder)
     assert len(paths) == 20
     out = tmp_path / "out"
-    first, tasks = counting_tasks(
-        client, lambda: voxelize_many(paths, out, 24, client=client, ext="npy", mode="solid"))
+    calls = []
+    first, tasks = counting_tasks(client, lambda: voxelize_many(
+        paths, out, 24, client=client, ext="npy", mode="solid",
+        progress=lambda done, total: calls.append((done, total))))
+    assert calls == [(i, 20) for i in range(1, 21)]
 
     # 19 outputs, each the single-process voxels (read back by numpy); one failure, named.
     assert len(first.written) == 19 and first.skipped == []
