@@ -94,9 +94,10 @@ SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b_in, CsgOp op) {
     std::vector<uint64_t> blocks(a.blocks_per_brick());
 
     // Every brick of the result is a brick of a, or (union only) of b.
-    for (const auto& [index, a_blocks] : a.bricks()) {
-        const auto found = b.bricks().find(index);
-        const std::vector<uint64_t>& b_blocks = found == b.bricks().end() ? empty : found->second;
+    for (const uint64_t index : a.brick_indices()) {
+        const uint64_t* a_blocks = a.brick_blocks(index);
+        const uint64_t* found = b.brick_blocks(index);
+        const uint64_t* b_blocks = found ? found : empty.data();
         for (size_t w = 0; w < blocks.size(); ++w) {
             switch (op) {
                 case CsgOp::Union:
@@ -113,8 +114,8 @@ SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b_in, CsgOp op) {
         out.merge_brick(index, blocks.data());
     }
     if (op == CsgOp::Union)
-        for (const auto& [index, b_blocks] : b.bricks())
-            if (!a.bricks().count(index)) out.merge_brick(index, b_blocks.data());
+        for (const uint64_t index : b.brick_indices())
+            if (!a.brick_blocks(index)) out.merge_brick(index, b.brick_blocks(index));
     return out;
 }
 

@@ -169,6 +169,18 @@ uint64_t import_memory_limit(const std::string& path) {
     return std::min(limit, std::max<uint64_t>(detail::physical_memory() / 2, uint64_t(1) << 30));
 }
 
+#ifdef __has_feature
+#if __has_feature(address_sanitizer)
+#define OCLVOX_SANITIZED_ADDRESSES 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__) || defined(OCLVOX_SANITIZED_ADDRESSES)
+// Sanitizers reserve terabytes of address space: no limit in those builds.
+constexpr bool kLimitAddressSpace = false;
+#else
+constexpr bool kLimitAddressSpace = true;
+#endif
+
 // The address space this process has mapped (VmSize), or 0 if unknown.
 uint64_t mapped_bytes() {
     FILE* statm = std::fopen("/proc/self/statm", "r");
@@ -213,19 +225,11 @@ void write_vector(int fd, const std::vector<T>& v) {
         dup2(null, STDERR_FILENO);
         close(null);
     }
-#ifdef __has_feature
-#if __has_feature(address_sanitizer)
-#define OCLVOX_SANITIZED_ADDRESSES 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__) || defined(OCLVOX_SANITIZED_ADDRESSES)
-    // Sanitizers reserve terabytes of address space: no limit in those builds.
-    (void)memory_limit;
-#else
-    // On top of what the process has mapped already (libraries, a device runtime's threads).
-    const rlimit limit{mapped_bytes() + memory_limit, mapped_bytes() + memory_limit};
-    setrlimit(RLIMIT_AS, &limit);
-#endif
+    if (kLimitAddressSpace) {
+        // On top of what the process has mapped already (libraries, a device runtime's threads).
+        const rlimit limit{mapped_bytes() + memory_limit, mapped_bytes() + memory_limit};
+        setrlimit(RLIMIT_AS, &limit);
+    }
     // The message sent back is the whole InputError message.
     std::string message;
     try {

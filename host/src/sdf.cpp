@@ -172,11 +172,13 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_la
     const int64_t nx = field.grid.dims[0], ny = field.grid.dims[1];
     const int64_t end_layer = first_layer + field.grid.dims[2];
     float* values = field.values.data();
-    for (const auto& [index, blocks] : inside.bricks()) {
+    const size_t words = inside.blocks_per_brick();
+    for (const uint64_t index : inside.brick_indices()) {
+        const uint64_t* blocks = inside.brick_blocks(index);
         const int64_t bx = int64_t(index % uint64_t(nbricks[0]));
         const int64_t by = int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1]));
         const int64_t bz = int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1])));
-        for (size_t w = 0; w < blocks.size(); ++w) {
+        for (size_t w = 0; w < words; ++w) {
             const uint64_t mask = blocks[w];
             if (!mask) continue;
             const int64_t ox = bx * size + int64_t(w % nb) * 4;

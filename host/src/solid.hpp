@@ -33,7 +33,8 @@ SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeO
 // Filled = solid united with the conservative surface: ORs `surface` into `solid` and updates the
 // voxel count.
 inline void add_surface(SparseVoxels& solid, const SparseVoxels& surface, VoxelizeStats& stats) {
-    for (const auto& [index, blocks] : surface.bricks()) solid.merge_brick(index, blocks.data());
+    for (const uint64_t index : surface.brick_indices())
+        solid.merge_brick(index, surface.brick_blocks(index));
     stats.voxels_set = solid.count();
 }
 

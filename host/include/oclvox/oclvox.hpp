@@ -136,9 +136,8 @@ class SparseVoxels {
     uint64_t count() const;                           // number of set voxels
     size_t brick_count() const { return bricks_.size(); }
 
-    // Brick storage, keyed by linear brick index bx + nbx*(by + nby*bz).
-    const std::unordered_map<uint64_t, std::vector<uint64_t>>& bricks() const { return bricks_; }
-    // The linear indices of the stored bricks (those with a set voxel), in increasing order.
+    // The linear indices bx + nbx*(by + nby*bz) of the stored bricks (those with a set voxel), in
+    // increasing order.
     std::vector<uint64_t> brick_indices() const;
     // The blocks_per_brick() words of a stored brick, or nullptr if the brick has no set voxel.
     const uint64_t* brick_blocks(uint64_t brick_index) const;
