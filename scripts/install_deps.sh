@@ -12,6 +12,7 @@ packages=(
   python3-openvdb python3-numpy
   libgtest-dev libgmock-dev
   python3-dev python3-venv python3-numpy python3-pytest pybind11-dev
+  python3-dask python3-distributed
 )
 fuzz_packages=(clang libclang-rt-14-dev llvm)
 [ "${1:-}" = "--fuzz" ] && packages+=("${fuzz_packages[@]}")

@@ -1,6 +1,7 @@
 // `oclvox voxelize`: a mesh file into a voxel file.
 #include <unistd.h>
 
+#include "cluster.hpp"
 #include "commands.hpp"
 #include "interrupt.hpp"
 #include "options.hpp"
@@ -17,13 +18,12 @@ struct VoxelizeArgs {
     std::string input, output, preview;
     FileArgs files;
     oclvox::GridFit fit;
-    std::string test = "sat";
-    std::string mode = "surface";
-    std::string inside = "auto";
-    std::string boundary = "closed";
+    VoxelizationArgs voxelization;
     DeviceArgs device;
     TilingArgs tiling;
     ReportingArgs reporting;
+    ClusterArgs cluster;
+    const CLI::Option* device_option = nullptr;
 };
 
 void add_options(CLI::App& command, VoxelizeArgs& args) {
@@ -50,45 +50,30 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
 
     add_grid_options(command, args.fit);
 
-    command
-        .add_option("--test", args.test,
-                    "triangle/box overlap test; both are always available: sat (default, 13 "
-                    "separating axes) or pef (plane and projected edge functions)")
-        ->type_name("TEST")
-        ->check(CLI::IsMember({"pef", "sat"}))
-        ->capture_default_str()
-        ->group("Voxelization");
-    command
-        .add_option("--mode", args.mode,
-                    "surface (conservative, 26-separating: every voxel touching a triangle), "
-                    "thin (6-separating, Schwarz & Seidel), solid (voxel centres inside the "
-                    "mesh) or filled (solid and surface)")
-        ->type_name("MODE")
-        ->check(CLI::IsMember({"surface", "thin", "solid", "filled"}))
-        ->capture_default_str()
-        ->group("Voxelization");
-    command
-        .add_option("--inside", args.inside,
-                    "inside test for solid/filled: auto (parity for closed meshes, winding "
-                    "number otherwise), parity or winding")
-        ->type_name("TEST")
-        ->check(CLI::IsMember({"auto", "parity", "winding"}))
-        ->capture_default_str()
-        ->group("Voxelization");
-    command
-        .add_option("--boundary", args.boundary,
-                    "closed (voxels are closed boxes: a face on a voxel face marks both voxels) "
-                    "or half-open ([i, i+1): it marks exactly one layer)")
-        ->type_name("RULE")
-        ->check(CLI::IsMember({"closed", "half-open"}))
-        ->capture_default_str()
-        ->group("Voxelization");
+    add_voxelization_options(command, args.voxelization);
     add_device_options(command, args.device, "Voxelization");
+    args.device_option = command.get_option("--device");
     add_tiling_options(command, args.tiling);
     add_reporting_options(command, args.reporting);
+    add_cluster_options(command, args.cluster, true);
+}
+
+// --workers / --scheduler: the same checks of the output, then the Python back end does the run.
+[[noreturn]] void run_sharded(const VoxelizeArgs& args) {
+    if (args.input == "-" || args.output == "-" || !args.preview.empty())
+        throw UsageError(
+            "stdin, stdout and --preview are not available with --workers/--scheduler");
+    check_output(args.output, {args.input}, kVoxelExtensions, args.files);
+    std::vector<std::string> command{"voxelize", args.input, "-o", args.output};
+    if (args.cluster.shard_bricks > 0)
+        command.insert(command.end(),
+                       {"--shard-bricks", std::to_string(args.cluster.shard_bricks)});
+    run_on_cluster({command, &args.cluster, &args.fit, &args.voxelization, &args.device,
+                    args.device_option->count() > 0, &args.tiling, &args.reporting});
 }
 
 int run(const VoxelizeArgs& args) {
+    if (args.cluster.wanted()) run_sharded(args);
     const Clock::time_point start = Clock::now();
     RunRecord record;
     record.command = "voxelize";
@@ -112,10 +97,10 @@ int run(const VoxelizeArgs& args) {
 
     // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
     oclvox::VoxelizeOptions options;
-    options.test = oclvox::overlap_test_from_string(args.test);
-    options.mode = oclvox::voxelize_mode_from_string(args.mode);
-    options.inside = oclvox::inside_test_from_string(args.inside);
-    options.boundary = oclvox::boundary_from_string(args.boundary);
+    options.test = oclvox::overlap_test_from_string(args.voxelization.test);
+    options.mode = oclvox::voxelize_mode_from_string(args.voxelization.mode);
+    options.inside = oclvox::inside_test_from_string(args.voxelization.inside);
+    options.boundary = oclvox::boundary_from_string(args.voxelization.boundary);
     options.brick_size = args.tiling.brick_size;
     options.device_budget_bytes = args.tiling.device_mib << 20;
     options.host_budget_bytes = args.tiling.host_mib << 20;
@@ -145,9 +130,9 @@ int run(const VoxelizeArgs& args) {
     if (!args.preview.empty()) record.outputs.push_back(args.preview);
     record.grid = grid;
     if (device) record.device = device->info();
-    record.settings = {{"test", args.test},
-                       {"mode", args.mode},
-                       {"boundary", args.boundary},
+    record.settings = {{"test", args.voxelization.test},
+                       {"mode", args.voxelization.mode},
+                       {"boundary", args.voxelization.boundary},
                        {"brick_size", args.tiling.brick_size}};
     record.stats = stats;
     report_run(record, args.reporting, output.is_stdout());
@@ -160,6 +145,8 @@ Command add_voxelize_command(CLI::App& app) {
     CLI::App* command = app.add_subcommand("voxelize", "voxelize a mesh file into a voxel file");
     command->footer(std::string(kExitCodesText) +
                     "Example: oclvox voxelize bunny.obj -r 512 -o bunny.binvox --stats\n"
+                    "         oclvox voxelize city.obj -r 16384 -o city.vdb --scheduler "
+                    "tcp://head:8786\n"
                     "         cat part.stl | oclvox voxelize - -r 64 -o - --output-format binvox "
                     "> part.binvox");
     auto args = std::make_shared<VoxelizeArgs>();

@@ -20,5 +20,6 @@ Command add_voxelize_command(CLI::App& app);
 Command add_sdf_command(CLI::App& app);
 Command add_csg_command(CLI::App& app);
 Command add_mesh_command(CLI::App& app);
+Command add_batch_command(CLI::App& app);
 
 }  // namespace oclvox_cli

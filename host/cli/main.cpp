@@ -1,8 +1,9 @@
 // oclvox: the command-line tool. `oclvox devices` lists the OpenCL devices; `oclvox voxelize`
 // turns a mesh file into a voxel file; `oclvox sdf` writes a signed distance field, `oclvox csg`
-// combines two meshes (or fields) and `oclvox mesh` meshes a field's iso-surface. Each command
-// lives in its own file (command_*.cpp); the option groups they share are in options.cpp, and
-// every run reports through report.cpp. All the work is the library's.
+// combines two meshes (or fields) and `oclvox mesh` meshes a field's iso-surface; `oclvox batch`
+// (and `voxelize --workers/--scheduler`) hand over to the Python package's Dask back end. Each
+// command lives in its own file (command_*.cpp); the option groups they share are in options.cpp,
+// and every run reports through report.cpp. All the work is the library's.
 //
 // Exit codes: 0 success, 1 error (the message names the problem), 2 command-line usage error,
 // 130 stopped by SIGINT (Ctrl-C), 143 stopped by SIGTERM.
@@ -33,8 +34,8 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", std::string("oclvox ") + OCLVOX_VERSION);
     app.require_subcommand(1);
     const std::vector<Command> commands{add_devices_command(app), add_voxelize_command(app),
-                                        add_sdf_command(app), add_csg_command(app),
-                                        add_mesh_command(app)};
+                                        add_sdf_command(app),     add_csg_command(app),
+                                        add_mesh_command(app),    add_batch_command(app)};
 
     // Phase 1: the command line. Help and --version end here with exit code 0; a mistyped
     // command or option is named with the closest valid one.

@@ -165,6 +165,42 @@ bool any_given(const std::vector<CLI::Option*>& options) {
                        [](const CLI::Option* o) { return o->count() > 0; });
 }
 
+void add_voxelization_options(CLI::App& command, VoxelizationArgs& args) {
+    command
+        .add_option("--test", args.test,
+                    "triangle/box overlap test; both are always available: sat (default, 13 "
+                    "separating axes) or pef (plane and projected edge functions)")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"pef", "sat"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--mode", args.mode,
+                    "surface (conservative, 26-separating: every voxel touching a triangle), "
+                    "thin (6-separating, Schwarz & Seidel), solid (voxel centres inside the "
+                    "mesh) or filled (solid and surface)")
+        ->type_name("MODE")
+        ->check(CLI::IsMember({"surface", "thin", "solid", "filled"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--inside", args.inside,
+                    "inside test for solid/filled: auto (parity for closed meshes, winding "
+                    "number otherwise), parity or winding")
+        ->type_name("TEST")
+        ->check(CLI::IsMember({"auto", "parity", "winding"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+    command
+        .add_option("--boundary", args.boundary,
+                    "closed (voxels are closed boxes: a face on a voxel face marks both voxels) "
+                    "or half-open ([i, i+1): it marks exactly one layer)")
+        ->type_name("RULE")
+        ->check(CLI::IsMember({"closed", "half-open"}))
+        ->capture_default_str()
+        ->group("Voxelization");
+}
+
 void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& group) {
     if (const char* env = std::getenv("OCLVOX_DEVICE")) args.selector = env;
     auto* device = command

@@ -35,6 +35,15 @@ extern const std::vector<std::string> kFieldExtensions;
 std::vector<CLI::Option*> add_grid_options(CLI::App& command, oclvox::GridFit& fit);
 bool any_given(const std::vector<CLI::Option*>& options);
 
+// --test, --mode, --inside, --boundary: what voxelize computes (the library's names, validated).
+struct VoxelizationArgs {
+    std::string test = "sat";
+    std::string mode = "surface";
+    std::string inside = "auto";
+    std::string boundary = "closed";
+};
+void add_voxelization_options(CLI::App& command, VoxelizationArgs& args);
+
 // --device / --reference (mutually exclusive; $OCLVOX_DEVICE is the default selector).
 struct DeviceArgs {
     std::string selector;

@@ -545,6 +545,15 @@ PYBIND11_MODULE(_oclvox, m) {
     m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a);
     m.def("devices", &devices);
     m.def("field_padding", &oclvox::field_padding, "band_voxels"_a);
+    // The grid a call with this fit works on, without the work: (origin, voxel_size, dims). For
+    // oclvox.distributed, which splits a grid before any worker computes on it.
+    m.def(
+        "fit_grid",
+        [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit) {
+            const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
+            return py::make_tuple(origin_tuple(grid), grid.voxel_size, dims_tuple(grid));
+        },
+        "mesh"_a, "fit"_a);
     // The classes are documented and used as oclvox.Mesh, oclvox.VoxelGrid, oclvox.Field.
     for (const char* name : {"Mesh", "GridFit", "VoxelGrid", "Field"})
         m.attr(name).attr("__module__") = "oclvox";

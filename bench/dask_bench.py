@@ -1,0 +1,248 @@
+"""Benchmark of oclvox.distributed on local Dask clusters: what sharding and batching cost and gain.
+
+    PYTHONPATH=build/python /usr/bin/python3 bench/dask_bench.py [--mesh M] [--resolution 4096]
+        [--shard-bricks K] [--batch 50] [--batch-resolution 256] [--project 32768] [--out F.md]
+
+Measures, each with the load average beside it (other jobs on a shared machine show there):
+- scheduling overhead: a trivial task's round trip, one at a time, and per task when 1000 are
+  queued at once;
+- one grid (--mesh at --resolution, surface): the single-process call on one core, then
+  voxelize_sharded on 1 and 2 workers, each a process whose PoCL device has one thread (so that
+  1 worker = 1 core): wall time, shards, compute time summed over shards (Dask's task stream),
+  result size (pickled, as it travels);
+- a batch: --batch scaled and moved copies of the mesh through voxelize_many on 1 and 2 workers;
+- a projection for --project^3 on 100 workers from the measured per-brick cost and result bytes
+  (oclvox.candidate_bricks gives the brick count at that size without voxelizing).
+Prints a Markdown report (and writes it to --out).
+"""
+
+import argparse
+import os
+import pathlib
+import pickle
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+import distributed
+import oclvox
+from oclvox.distributed import voxelize_many, voxelize_sharded
+
+MESHES = pathlib.Path(os.environ.get("OCLVOX_MESH_DIR", "/work/shared/data/meshes"))
+# One PoCL thread per worker process: a worker is one core, as it would be one device.
+ONE_CORE = {"POCL_MAX_PTHREAD_COUNT": "1"}
+
+
+def load():
+    return "%.1f" % os.getloadavg()[0]
+
+
+def cluster(workers):
+    return distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                    dashboard_address=":0", env=ONE_CORE)
+
+
+def warm_up(client, mesh):
+    """Opens each worker's device and loads its kernels, so that no timing includes them; starts
+    the scheduler's task stream, which records only from its first use."""
+    client.run(lambda: oclvox.voxelize(mesh, 64).count)
+    client.get_task_stream()
+
+
+def noop(x):
+    return x
+
+
+def overhead(lines):
+    with cluster(1) as c, distributed.Client(c) as client:
+        client.submit(noop, 0).result()
+        trips = []
+        for i in range(200):
+            start = time.perf_counter()
+            client.submit(noop, i, pure=False).result()
+            trips.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        client.gather(client.map(noop, range(1000), pure=False))
+        queued = (time.perf_counter() - start) / 1000
+    lines.append(f"- one trivial task's round trip, one at a time: median "
+                 f"{statistics.median(trips) * 1e3:.1f} ms (load {load()})")
+    lines.append(f"- 1000 trivial tasks queued at once: {queued * 1e3:.2f} ms per task "
+                 f"(load {load()})")
+
+
+def single_process_seconds(mesh, resolution):
+    """oclvox.voxelize in a fresh process on one PoCL thread; the call alone (device open and
+    kernels loaded by a warm-up call first)."""
+    script = ("import sys, time, oclvox\n"
+              "m = oclvox.load_mesh(sys.argv[1]); oclvox.voxelize(m, 64)\n"
+              "t = time.perf_counter(); g = oclvox.voxelize(m, int(sys.argv[2]))\n"
+              "print(time.perf_counter() - t, g.brick_count, g.count)\n")
+    out = subprocess.run([sys.executable, "-c", script, str(mesh), str(resolution)],
+                         env=dict(os.environ, **ONE_CORE), check=True, capture_output=True,
+                         text=True).stdout.split()
+    return float(out[0]), int(out[1]), int(out[2])
+
+
+def compute_times(stream, prefix):
+    """Per task of `prefix`: (start, stop) of its compute on the worker, from Dask's task stream."""
+    return [next((s["start"], s["stop"]) for s in t["startstops"] if s["action"] == "compute")
+            for t in stream.data if t["key"].startswith(prefix)]
+
+
+def sharded(mesh, resolution, shard_bricks, workers):
+    """One voxelize_sharded run; returns its figures and the grid."""
+    with cluster(workers) as c, distributed.Client(c) as client:
+        warm_up(client, mesh)
+        before = load()
+        with distributed.get_task_stream(client) as stream:
+            start = time.perf_counter()
+            grid = voxelize_sharded(mesh, resolution, client=client, shard_bricks=shard_bricks)
+            wall = time.perf_counter() - start
+    spans = compute_times(stream, "_voxelize_shard")
+    computes = [stop - start for start, stop in spans]
+    return dict(wall=wall, shards=len(spans), compute=sum(computes),
+                span=max(s for _, s in spans) - min(s for s, _ in spans),
+                shard_median=statistics.median(computes), load=f"{before}/{load()}"), grid
+
+
+def receive_cost(mesh, resolution, shard_bricks):
+    """Wall seconds per MiB for the client to take one finished shard from a worker (Dask's
+    transfer: serialization, compression, TCP, deserialization) and merge it into another: the
+    part of voxelize_sharded that one client does for every shard."""
+    from oclvox.distributed import _voxelize_shard
+    bricks = oclvox.candidate_bricks(mesh, resolution)
+    with cluster(1) as c, distributed.Client(c) as client:
+        warm_up(client, mesh)
+        [on_worker] = client.scatter([oclvox._as_mesh(mesh)], broadcast=True)
+        first, second = (client.submit(_voxelize_shard, on_worker, resolution,
+                                       bricks[i * shard_bricks:(i + 1) * shard_bricks], None, {})
+                         for i in range(2))
+        distributed.wait([first, second])
+        merged = first.result()
+        start = time.perf_counter()
+        merged.merge(second.result())
+        seconds = time.perf_counter() - start
+        mib = len(pickle.dumps(second.result(), protocol=5)) / 2**20
+    return seconds / mib
+
+
+def batch(mesh, count, resolution, workers, folder):
+    out = folder / f"out{workers}"
+    with cluster(workers) as c, distributed.Client(c) as client:
+        warm_up(client, mesh)
+        before = load()
+        paths = sorted(folder.glob("*.ply"))[:count]
+        with distributed.get_task_stream(client) as stream:
+            start = time.perf_counter()
+            summary = voxelize_many(paths, out, resolution, client=client)
+            wall = time.perf_counter() - start
+    assert summary.ok and len(summary.written) == count, summary
+    spans = compute_times(stream, "_voxelize_file")
+    return dict(wall=wall, compute=sum(stop - start for start, stop in spans),
+                load=f"{before}/{load()}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--mesh", default=str(MESHES / "bunny00.off"))
+    parser.add_argument("--resolution", type=int, default=4096)
+    parser.add_argument("--shard-bricks", type=int,
+                        help="bricks per shard (default: 8 shards, the split voxelize_sharded "
+                             "makes by default on 2 workers; the same for both runs)")
+    parser.add_argument("--batch", type=int, default=50)
+    parser.add_argument("--batch-resolution", type=int, default=256)
+    parser.add_argument("--project", type=int, default=32768)
+    parser.add_argument("--out")
+    args = parser.parse_args()
+    mesh = pathlib.Path(args.mesh)
+    lines = [f"# oclvox on local Dask clusters ({mesh.name})", "",
+             f"{os.cpu_count()} cores; each worker a process with a one-thread PoCL device; "
+             f"load average (1 min) shown as before/after each run.", "", "## Scheduling", ""]
+    overhead(lines)
+
+    # One grid.
+    r = args.resolution
+    candidates = len(oclvox.candidate_bricks(mesh, r))
+    shard_bricks = args.shard_bricks or -(-candidates // 8)
+    alone, _, alone_count = single_process_seconds(mesh, r)
+    runs = {}
+    for w in (1, 2):
+        runs[w], grid = sharded(mesh, r, shard_bricks, w)
+    # The sharded result is the single-process one (checked in full, voxel for voxel).
+    assert grid.count == alone_count and grid.same_voxels(oclvox.voxelize(mesh, r))
+    result_bytes = len(pickle.dumps(grid, protocol=5))
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        grid.save(os.path.join(tmp, "grid.vdb"))
+        vdb_seconds = time.perf_counter() - start
+    receiving = receive_cost(mesh, r, shard_bricks)
+    lines += ["", f"## One grid: {r}^3 surface, shards of {shard_bricks} bricks (64^3)", "",
+              f"- single process, one core, the voxelize call alone: {alone:.2f} s "
+              f"(load {load()})", "",
+              "| workers | wall s | shards | compute s (sum over shards) | compute span s | "
+              "median shard s | speed-up (wall) vs 1 worker | load |",
+              "|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for w, run in runs.items():
+        lines.append(f"| {w} | {run['wall']:.2f} | {run['shards']} | {run['compute']:.2f} | "
+                     f"{run['span']:.2f} | {run['shard_median']:.3f} | "
+                     f"{runs[1]['wall'] / run['wall']:.2f} | {run['load']} |")
+    one = runs[1]
+    per_brick = one["compute"] / candidates
+    per_result_brick = result_bytes / grid.brick_count
+    lines += ["", f"- sharded == single process: {grid.count} voxels set, same voxels",
+              f"- {candidates} candidate bricks, {grid.brick_count} in the result; result "
+              f"{result_bytes / 2**20:.1f} MiB pickled ({per_result_brick / 1024:.1f} KiB per "
+              f"result brick)",
+              f"- compute per candidate brick: {per_brick * 1e3:.2f} ms (1 worker, sum over "
+              f"shards / candidate bricks)",
+              f"- taking a finished shard from a worker and merging it: {receiving * 1e3:.1f} ms "
+              f"per MiB, wall (load {load()})",
+              f"- writing the merged result as one .vdb: {vdb_seconds:.2f} s (load {load()})"]
+
+    # A batch.
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = pathlib.Path(tmp)
+        vertices, faces = oclvox.load_mesh(mesh)
+        rng = np.random.default_rng(50)
+        for i in range(args.batch):
+            oclvox.save_mesh(folder / f"m{i:03d}.ply",
+                             vertices * rng.uniform(0.5, 2, 3) + rng.uniform(-1, 1, 3), faces)
+        batches = {w: batch(mesh, args.batch, args.batch_resolution, w, folder) for w in (1, 2)}
+    lines += ["", f"## A batch: {args.batch} copies at {args.batch_resolution}, .binvox", "",
+              "| workers | wall s | compute s (sum) | per mesh s | speed-up | load |",
+              "|---:|---:|---:|---:|---:|---|"]
+    for w, run in batches.items():
+        lines.append(f"| {w} | {run['wall']:.2f} | {run['compute']:.2f} | "
+                     f"{run['wall'] / args.batch:.3f} | {batches[1]['wall'] / run['wall']:.2f} | "
+                     f"{run['load']} |")
+
+    # The projection.
+    n = args.project
+    big = len(oclvox.candidate_bricks(mesh, n))
+    gib = big * per_result_brick / 2**30
+    compute = big * per_brick / 100
+    receive = gib * 1024 * receiving
+    write = vdb_seconds * big / grid.brick_count
+    lines += ["", f"## Projection: {n}^3 on 100 workers", "",
+              f"- candidate bricks at {n}^3: {big} (oclvox.candidate_bricks; "
+              f"{big / candidates:.0f}x those at {r}^3)",
+              f"- compute: {big} x {per_brick * 1e3:.2f} ms / 100 workers = {compute:.1f} s per "
+              f"worker (one PoCL core each, as measured)",
+              f"- result: {big} x {per_result_brick / 1024:.1f} KiB = {gib:.1f} GiB into the "
+              f"client",
+              f"- client: {gib * 1024:.0f} MiB x {receiving * 1e3:.1f} ms/MiB = {receive:.0f} s "
+              f"of taking and merging shards, one process",
+              f"- one .vdb: {vdb_seconds:.2f} s x {big / grid.brick_count:.0f} = {write:.0f} s "
+              f"(scaled by result bricks from the {r}^3 write)"]
+    report = "\n".join(lines) + "\n"
+    print(report)
+    if args.out:
+        pathlib.Path(args.out).write_text(report)
+
+
+if __name__ == "__main__":
+    main()

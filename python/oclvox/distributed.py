@@ -1,0 +1,449 @@
+"""oclvox on a Dask cluster: one grid too big for one machine, or many meshes.
+
+- ``voxelize_sharded(mesh, resolution, client=...)`` splits the grid's bricks that can hold voxels
+  into shards, runs one task per shard on the workers and merges the sparse results into one
+  VoxelGrid, bit for bit the one ``oclvox.voxelize`` returns.
+- ``sdf_sharded(mesh, resolution, client=...)`` does the same for a narrow-band signed distance
+  field, by slabs of z layers.
+- ``voxelize_many(paths, out_dir, resolution, client=...)`` voxelizes one mesh per task into one
+  file per mesh, skips outputs already written, retries a failed task once and reports failures at
+  the end.
+
+Every worker opens its own OpenCL device (``device=``, default the worker's ``$OCLVOX_DEVICE``,
+else its first GPU, else its first device). Workers need the ``oclvox`` package; for
+``voxelize_many`` they also read the inputs and write the outputs, so those paths must be the same
+on every machine (a shared file system).
+
+Dask is imported only when these functions run, so ``import oclvox`` never needs it. The module is
+also the back end of the CLI's ``oclvox voxelize --workers/--scheduler`` and ``oclvox batch``
+(``python3 -m oclvox.distributed --help``).
+"""
+
+import argparse
+import contextlib
+import dataclasses
+import inspect
+import json
+import logging
+import math
+import os
+import pathlib
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+import oclvox
+
+# The formats oclvox.load_mesh reads; a folder given to mesh_paths is filtered by them (it may
+# hold .mtl files, READMEs, ...).
+MESH_EXTENSIONS = (".obj", ".stl", ".ply", ".off", ".gltf", ".glb", ".3mf")
+
+# voxelize's options that pass through to the workers. `progress` is voxelize_sharded's own,
+# `bricks` is what it chooses, `device` is the workers'.
+_PASSED_OPTIONS = frozenset(inspect.signature(oclvox.voxelize).parameters) - {
+    "vertices", "faces", "resolution", "progress", "device", "bricks"}
+
+
+def _distributed():
+    """dask.distributed, or an ImportError that says how to get it."""
+    try:
+        import distributed
+    except ImportError as error:
+        raise ImportError("oclvox.distributed needs Dask's distributed scheduler: apt install "
+                          "python3-distributed, or pip install 'dask[distributed]'") from error
+    return distributed
+
+
+def _check_options(options):
+    unknown = sorted(set(options) - _PASSED_OPTIONS)
+    if unknown:
+        raise TypeError(f"unknown voxelize option(s): {', '.join(unknown)} (expected some of "
+                        f"{', '.join(sorted(_PASSED_OPTIONS))})")
+
+
+def _report(progress, done, total):
+    """Calls a progress(done, total) callback; False from it cancels, as in oclvox.voxelize."""
+    if progress is not None and progress(done, total) is False:
+        raise oclvox.Cancelled("cancelled by the progress callback")
+
+
+def _collect(client, futures, on_result):
+    """Waits for `futures` (a dict future -> tag), passing each finished one to
+    on_result(future, tag) in the order they finish, and dropping it then so that its result
+    leaves the cluster as soon as it has been used. If on_result raises, the futures not yet
+    finished are cancelled."""
+    distributed = _distributed()
+    pending = dict(futures)
+    futures.clear()
+    try:
+        for future in distributed.as_completed(list(pending)):
+            on_result(future, pending.pop(future))
+    finally:
+        if pending:
+            client.cancel(list(pending))
+
+
+# ---- one grid in shards -------------------------------------------------------------------------
+
+def _voxelize_shard(mesh, resolution, bricks, device, options):
+    """A worker's task: the voxels of the whole grid that lie in `bricks`."""
+    return oclvox.voxelize(mesh, resolution, bricks=bricks, device=device, **options)
+
+
+def shards_of(bricks, shard_bricks):
+    """`bricks` (sorted brick indices) cut into contiguous runs of about `shard_bricks` each, the
+    runs' lengths differing by at most one."""
+    if shard_bricks < 1:
+        raise ValueError(f"shard_bricks must be at least 1, got {shard_bricks}")
+    if len(bricks) == 0:
+        return []
+    return np.array_split(np.asarray(bricks, dtype=np.uint64),
+                          math.ceil(len(bricks) / shard_bricks))
+
+
+def _auto_shard_bricks(brick_count, client):
+    """About four shards per worker: a worker that finishes early takes another, so the run ends
+    at most about a quarter of a worker's share after the work runs out. At least 64 bricks a
+    shard, because every shard also pays for binning the whole mesh and for a task."""
+    workers = max(1, len(client.scheduler_info()["workers"]))
+    return max(64, math.ceil(brick_count / (4 * workers)))
+
+
+def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=None,
+                     progress=None, **options):
+    """Voxelizes one mesh on a Dask cluster; returns the VoxelGrid oclvox.voxelize returns.
+
+    mesh: as for oclvox.voxelize (a path is read here, on the client). options: voxelize's
+    (mode, test, inside, boundary, grid options, brick_size, device_memory, host_memory,
+    reference). The bricks that can hold set voxels (oclvox.candidate_bricks, computed here
+    without a device) are cut into shards of about `shard_bricks` bricks (default: about four
+    shards per worker, at least 64 bricks each); the mesh is sent to
+    every worker once; each shard is one task, oclvox.voxelize(..., bricks=shard), on the device
+    `device` names on that worker (default: the worker's $OCLVOX_DEVICE, else its first GPU, else
+    its first device). The shards' results are merged as they arrive, so the client holds the
+    result and at most one shard's. The result is bit for bit the single-process one: each brick
+    is computed by exactly one shard, by the same code on the same grid.
+
+    Surface, thin and parity solid shards do only their bricks' work. A winding-number solid shard
+    (inside="winding", or "auto" on an open mesh) computes the whole grid and keeps its bricks, so
+    it gains nothing from sharding; run it with oclvox.voxelize or with few shards.
+
+    progress: called as progress(bricks_done, bricks_total) as shards finish; returning False
+    cancels the shards not yet done and raises oclvox.Cancelled.
+    """
+    _check_options(options)
+    # Phase 1: the mesh, read once, and the bricks worth a task.
+    mesh = oclvox._as_mesh(mesh)
+    grid_options = {k: v for k, v in options.items()
+                    if k in inspect.signature(oclvox.candidate_bricks).parameters}
+    candidates = oclvox.candidate_bricks(mesh, resolution, **grid_options)
+    shards = shards_of(candidates, shard_bricks or _auto_shard_bricks(len(candidates), client))
+    if not shards:
+        # No brick can hold a voxel, so any selection gives the empty whole grid; brick 0 alone
+        # costs least (an empty selection would mean every brick).
+        shards = [np.zeros(1, np.uint64)]
+
+    # Phase 2: the mesh to every worker once (a worker keeps it for all its tasks), then one task
+    # per shard.
+    [mesh_on_workers] = client.scatter([mesh], broadcast=True)
+    futures = {client.submit(_voxelize_shard, mesh_on_workers, resolution, shard, device,
+                             options): len(shard)
+               for shard in shards}
+
+    # Phase 3: merge the shards as they finish.
+    merged = []
+    done = [0]
+
+    def merge(future, brick_count):
+        shard = future.result()
+        if merged:
+            merged[0].merge(shard)
+        else:
+            merged.append(shard)
+        done[0] += brick_count
+        _report(progress, done[0], len(candidates))
+
+    _collect(client, futures, merge)
+    return merged[0]
+
+
+# ---- a distance field in layers ------------------------------------------------------------------
+
+_SDF_OPTIONS = frozenset(inspect.signature(oclvox.sdf).parameters) - {
+    "vertices", "faces", "resolution", "device", "layers", "full_grid"}
+
+
+def _sdf_layers(mesh, resolution, layers, device, options):
+    """A worker's task: the whole field's samples in voxel layers layers[0] <= k < layers[1]."""
+    field = oclvox.sdf(mesh, resolution, layers=layers, device=device, **options)
+    return np.array(field.to_numpy(), order="F")
+
+
+def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None, **options):
+    """The signed distance field of one mesh on a Dask cluster; returns the Field oclvox.sdf
+    returns (narrow band), bit for bit.
+
+    options: sdf's (band, inside, grid options, brick_size, reference); full_grid is refused,
+    because jump flooding carries distances across the whole grid. The grid's z layers are cut
+    into slabs of `shard_layers` layers (default: about four slabs per worker, a multiple of
+    brick_size so that no brick of the sign's solid is computed twice); each slab is one task,
+    oclvox.sdf(..., layers=(first, end)), whose samples are the whole field's there. The client
+    copies each slab into the whole (dense) field as it arrives: it needs the memory of the field
+    twice at the end (4 bytes a voxel, once for the slabs, once in the Field). Each slab's sign
+    comes from a solid voxelization of its whole columns of bricks.
+    """
+    if options.get("full_grid"):
+        raise ValueError("sdf_sharded computes narrow-band fields only: full_grid's jump "
+                         "flooding crosses every layer (use oclvox.sdf)")
+    options.pop("full_grid", None)
+    unknown = sorted(set(options) - _SDF_OPTIONS)
+    if unknown:
+        raise TypeError(f"unknown sdf option(s): {', '.join(unknown)}")
+    # Phase 1: the mesh and the whole grid (the one oclvox.sdf fits), without a device.
+    mesh = oclvox._as_mesh(mesh)
+    defaults = inspect.signature(oclvox.sdf).parameters
+    band = options.get("band", defaults["band"].default)
+    options["pad"] = oclvox._field_pad(options.get("pad"), band, options.get("origin"),
+                                       options.get("dims"))
+    origin, voxel_size, dims = oclvox._oclvox.fit_grid(mesh, oclvox._fit(
+        resolution, options.get("voxel_size"), options.get("origin"), options.get("dims"),
+        options["pad"], options.get("cubic", False)))
+    brick = options.get("brick_size", defaults["brick_size"].default)
+    if shard_layers is None:
+        workers = max(1, len(client.scheduler_info()["workers"]))
+        shard_layers = brick * max(1, math.ceil(dims[2] / (4 * workers * brick)))
+    if shard_layers < 1:
+        raise ValueError(f"shard_layers must be at least 1, got {shard_layers}")
+    cuts = list(range(0, dims[2], shard_layers)) + [dims[2]]
+
+    # Phase 2: the mesh to every worker once, one task per slab.
+    [mesh_on_workers] = client.scatter([mesh], broadcast=True)
+    futures = {client.submit(_sdf_layers, mesh_on_workers, resolution, (first, end), device,
+                             options): first
+               for first, end in zip(cuts, cuts[1:])}
+
+    # Phase 3: each slab into its place.
+    values = np.empty(dims, np.float32, order="F")
+
+    def place(future, first):
+        slab = future.result()
+        values[:, :, first:first + slab.shape[2]] = slab
+
+    _collect(client, futures, place)
+    return oclvox.Field(values, origin, voxel_size, band)
+
+
+# ---- many meshes --------------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class BatchSummary:
+    """What voxelize_many did: outputs written by this run, outputs already there (skipped), and
+    the inputs that failed twice, each with its error message."""
+    written: list = dataclasses.field(default_factory=list)
+    skipped: list = dataclasses.field(default_factory=list)
+    failed: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def ok(self):
+        return not self.failed
+
+
+def mesh_paths(source):
+    """The meshes a batch names: a folder's mesh files (not recursive; by extension, see
+    MESH_EXTENSIONS), or a list file's lines (one path each; blank lines and lines starting with
+    # are skipped; relative paths are relative to the list file's folder). Sorted by name."""
+    source = pathlib.Path(source)
+    if source.is_dir():
+        return sorted(p for p in source.iterdir()
+                      if p.is_file() and p.suffix.lower() in MESH_EXTENSIONS)
+    if not source.is_file():
+        raise oclvox.InputError(f"'{source}' is neither a folder of meshes nor a list file")
+    lines = (line.strip() for line in source.read_text().splitlines())
+    return [source.parent / line for line in lines if line and not line.startswith("#")]
+
+
+def _extension(ext):
+    """"binvox" or ".BINVOX" -> ".binvox"."""
+    ext = ext.lower()
+    return ext if ext.startswith(".") else "." + ext
+
+
+def _output_files(output):
+    """The files that make `output` complete: a .npy has its .json sidecar, written after it."""
+    return [output, output.with_name(output.name + ".json")] if output.suffix == ".npy" \
+        else [output]
+
+
+def _check_output_format(out_dir, ext):
+    """Writes a one-voxel grid in format `ext` into out_dir and removes it: an unknown format or a
+    folder that cannot be written is found before any task runs, by the library's own writer."""
+    with tempfile.TemporaryDirectory(dir=out_dir, prefix=".oclvox-probe-") as probe:
+        oclvox.VoxelGrid.from_numpy(np.ones((1, 1, 1), np.uint8)).save(
+            os.path.join(probe, "probe" + ext))
+
+
+def _voxelize_file(path, output, resolution, device, options):
+    """A worker's task: one mesh file into one voxel file (written atomically by the library)."""
+    start = time.perf_counter()
+    grid = oclvox.voxelize(path, resolution, device=device, **options)
+    grid.save(output)
+    return {"voxels": grid.count, "seconds": time.perf_counter() - start}
+
+
+def voxelize_many(paths, out_dir, resolution=256, *, client, ext=".binvox", device=None,
+                  progress=None, **options):
+    """Voxelizes each mesh file into out_dir/<stem><ext>, one Dask task per mesh; returns a
+    BatchSummary (written, skipped, failed {path: message}).
+
+    Resumable: an output that exists is complete, because the library writes every file to a
+    temporary name and renames it when done (a .npy counts when its .json sidecar, written after
+    it, exists too); such inputs are skipped, whatever options made them, so delete an output to
+    redo it. A task that fails is retried once (on any worker); one that fails again is reported
+    in the summary while the others go on. Inputs and out_dir must be the same paths on every
+    worker (a shared file system). options: as for oclvox.voxelize; device: as for
+    voxelize_sharded. progress: called as progress(meshes_done, meshes_total) as tasks finish
+    (failed ones included); returning False cancels the rest and raises oclvox.Cancelled.
+    """
+    _check_options(options)
+    # Phase 1: the outputs, checked before any work.
+    ext = _extension(ext)
+    out_dir = pathlib.Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _check_output_format(out_dir, ext)
+    outputs = {}
+    for path in map(pathlib.Path, paths):
+        output = out_dir / (path.stem + ext)
+        if output in outputs.values():
+            other = next(p for p, o in outputs.items() if o == output)
+            raise oclvox.InputError(f"'{path}' and '{other}' would both be written to '{output}'")
+        outputs[path] = output
+
+    # Phase 2: what is left to do.
+    summary = BatchSummary()
+    todo = {}
+    for path, output in outputs.items():
+        if all(f.exists() for f in _output_files(output)):
+            summary.skipped.append(str(output))
+        else:
+            todo[path] = output
+
+    # Phase 3: one task per mesh, each retried once.
+    futures = {client.submit(_voxelize_file, str(path), str(output), resolution, device, options,
+                             retries=1): path
+               for path, output in todo.items()}
+
+    # Phase 4: collect, failures included.
+    def collect(future, path):
+        if future.status == "finished":
+            summary.written.append(str(todo[path]))
+        else:
+            error = future.exception()
+            summary.failed[str(path)] = f"{type(error).__name__}: {error}"
+        _report(progress, len(summary.written) + len(summary.failed), len(todo))
+
+    _collect(client, futures, collect)
+    summary.written.sort()
+    return summary
+
+
+# ---- command line -------------------------------------------------------------------------------
+
+@contextlib.contextmanager
+def _cluster_client(args):
+    """A Client of the scheduler at --scheduler, or of a local cluster of --workers processes
+    (closed on the way out, its worker processes ended)."""
+    distributed = _distributed()
+    if args.scheduler:
+        with distributed.Client(args.scheduler) as client:
+            yield client
+        return
+    # One thread per worker: a worker is one device, which runs one call at a time. The workers'
+    # own logs (a failed task's traceback) would repeat what the summary says. The scheduler's
+    # HTTP server (the dashboard, with bokeh) on a free port, so that clusters can run side by side.
+    with distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
+            distributed.Client(cluster) as client:
+        yield client
+
+
+def _progress_line(what, quiet):
+    """A progress(done, total) callback drawing one line on stderr (none when quiet or when
+    stderr is not a terminal)."""
+    if quiet or not sys.stderr.isatty():
+        return None
+
+    def draw(done, total):
+        sys.stderr.write(f"\r{what}: {done}/{total}" + ("\n" if done == total else ""))
+        sys.stderr.flush()
+    return draw
+
+
+def _parse_args(argv):
+    parser = argparse.ArgumentParser(
+        prog="python3 -m oclvox.distributed",
+        description="oclvox on a Dask cluster (the back end of `oclvox voxelize --workers/"
+                    "--scheduler` and `oclvox batch`).")
+    commands = parser.add_subparsers(dest="command", required=True)
+    sharded = commands.add_parser("voxelize", help="one mesh, its bricks in shards")
+    sharded.add_argument("input")
+    sharded.add_argument("-o", "--output", required=True)
+    sharded.add_argument("--shard-bricks", type=int,
+                         help="bricks per task (default: about four tasks per worker)")
+    batch = commands.add_parser("batch", help="one output per mesh of a folder or list file")
+    batch.add_argument("input", help="a folder of meshes or a list file (one path a line)")
+    batch.add_argument("-o", "--output", required=True, help="output folder")
+    batch.add_argument("--output-format", default="binvox")
+    for command in (sharded, batch):
+        where = command.add_mutually_exclusive_group()
+        where.add_argument("--scheduler", help="address of a running scheduler, tcp://host:8786")
+        where.add_argument("--workers", type=int, default=1,
+                           help="worker processes of a local cluster (default 1)")
+        command.add_argument("-r", "--resolution", type=int, default=256)
+        command.add_argument("--device", help="OpenCL device selector on the workers (default: "
+                                              "each worker's $OCLVOX_DEVICE, else its first GPU)")
+        command.add_argument("--options", default="{}",
+                             help="oclvox.voxelize's keyword options as a JSON object, e.g. "
+                                  "'{\"mode\": \"solid\", \"pad\": 2}'")
+        command.add_argument("-q", "--quiet", action="store_true")
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    """The command line; returns the exit code (0 done, 1 an error or a failed mesh)."""
+    args = _parse_args(argv)
+    try:
+        options = json.loads(args.options)
+        with _cluster_client(args) as client:
+            start = time.perf_counter()
+            if args.command == "voxelize":
+                grid = voxelize_sharded(args.input, args.resolution, client=client,
+                                        shard_bricks=args.shard_bricks, device=args.device,
+                                        progress=_progress_line("bricks", args.quiet), **options)
+                grid.save(args.output)
+                if not args.quiet:
+                    print(f"{args.output}: {grid.count} voxels set in "
+                          f"{'x'.join(map(str, grid.dims))}, "
+                          f"{time.perf_counter() - start:.2f} s", file=sys.stderr)
+                return 0
+            summary = voxelize_many(mesh_paths(args.input), args.output, args.resolution,
+                                    client=client, ext=args.output_format, device=args.device,
+                                    progress=_progress_line("meshes", args.quiet), **options)
+    except (oclvox.Error, ImportError, OSError, TypeError, ValueError) as error:
+        print(f"oclvox: error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("oclvox: cancelled by SIGINT", file=sys.stderr)
+        return 130
+    for path, message in summary.failed.items():
+        print(f"oclvox: failed: {path}: {message}", file=sys.stderr)
+    if not args.quiet or summary.failed:
+        print(f"{len(summary.written)} written, {len(summary.skipped)} skipped (already there), "
+              f"{len(summary.failed)} failed, {time.perf_counter() - start:.2f} s",
+              file=sys.stderr)
+    return 0 if summary.ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
