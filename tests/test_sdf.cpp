@@ -444,7 +444,7 @@ TEST(Csg, FitGridOfTwoMeshesCoversBoth) {
 
 // Phases' counts map onto one fixed total in proportion to their weights and never go back; a
 // nested run's reports are forwarded.
-TEST(Progress, PhasesShareOneTotalByWeight) {
+TEST(PhasedProgress, PhasesShareOneTotalByWeight) {
     ProgressLog log;
     log.slow = true;  // every report reaches the callback
     detail::ProgressPhases progress(log.callback(), "test run");
@@ -463,7 +463,7 @@ TEST(Progress, PhasesShareOneTotalByWeight) {
     EXPECT_EQ(log.calls, expected);
 }
 
-TEST(Progress, ReportsAreThinnedButTheEndAlwaysArrives) {
+TEST(PhasedProgress, ReportsAreThinnedButTheEndAlwaysArrives) {
     ProgressLog log;
     detail::ProgressPhases progress(log.callback(), "test run");
     const size_t phase = progress.add(1);
@@ -478,7 +478,7 @@ TEST(Progress, ReportsAreThinnedButTheEndAlwaysArrives) {
     EXPECT_FALSE(bool(none.forward(0)));
 }
 
-TEST(Progress, FalseThrowsCancelledButIsReturnedToANestedRun) {
+TEST(PhasedProgress, FalseThrowsCancelledButIsReturnedToANestedRun) {
     ProgressLog log;
     log.slow = true;
     log.cancel_from = 0;
