@@ -172,12 +172,24 @@ else
     fail "explicit grid" "rc=$RC dims=$dims origin=$origin err=$ERR"
 fi
 
-# A terminal gets a progress bar (script(1) gives the command a pseudo-terminal).
+# A terminal gets a progress bar (script(1) gives the command a pseudo-terminal), for every long
+# phase: voxelizing, distance fields, meshing; --quiet silences it.
 if command -v script >/dev/null; then
-    script -qec "'$OCLVOX' voxelize '$MESH' -r 32 -o '$WORK/tty.binvox'" /dev/null \
-        >"$WORK/tty.log" 2>&1
-    grep -q 'voxelizing \[' "$WORK/tty.log" && pass "progress bar on a terminal" ||
-        fail "progress bar on a terminal" "$(cat "$WORK/tty.log")"
+    tty_bars() {  # command line -> the labels of the bars it drew, comma-separated
+        script -qec "$1" /dev/null </dev/null 2>&1 | tr '\r' '\n' |
+            sed -n 's/^\([a-z ]*\) \[[#.]*\].*/\1/p' | sort -u | tr '\n' ,
+    }
+    bars=$(tty_bars "'$OCLVOX' voxelize '$MESH' -r 32 -o '$WORK/tty.binvox'")
+    [ "$bars" = "voxelizing," ] && pass "progress bar on a terminal" ||
+        fail "progress bar on a terminal" "bars: $bars"
+    bars=$(tty_bars "'$OCLVOX' sdf '$MESH' -r 64 -o '$WORK/tty.npy' --mesh '$WORK/tty.obj'")
+    [ "$bars" = "distance field,meshing," ] && pass "sdf --mesh: distance field and meshing bars" ||
+        fail "sdf --mesh progress bars" "bars: $bars"
+    bars=$(tty_bars "'$OCLVOX' csg '$MESH' union '$MESH' -r 48 -o '$WORK/tty_csg.obj'")
+    [ "$bars" = "distance fields,meshing," ] && pass "csg: distance fields and meshing bars" ||
+        fail "csg progress bars" "bars: $bars"
+    bars=$(tty_bars "'$OCLVOX' sdf '$MESH' -r 64 -o '$WORK/tty.npy' --quiet")
+    [ -z "$bars" ] && pass "--quiet draws no progress bar" || fail "--quiet progress bar" "$bars"
 fi
 
 # ---- errors -------------------------------------------------------------------------------------
@@ -762,31 +774,41 @@ expect_failure "--preview not a .png" "$WORK/p.jpg" 'png' \
     voxelize "$MESH" -r 16 -o "$WORK/p.binvox" --preview "$WORK/p.jpg"
 
 # ---- Ctrl-C -------------------------------------------------------------------------------------
-# A run that voxelizes for about 3 s on PoCL, in many small batches, gets one SIGINT after 1 s,
-# sent to its whole process group as a terminal's Ctrl-C is (job control gives the run its own
-# group). It must stop cleanly; a watchdog kills it if it ignores the signal.
-(
-    set -m
-    "$OCLVOX" voxelize "$MESH" -r 2048 --device-memory 1 -o "$WORK/cancel.binvox" \
-        >"$WORK/stdout" 2>"$WORK/stderr" &
-    pid=$!
-    (sleep 30 && kill -KILL -- "-$pid") >/dev/null 2>&1 &
-    watchdog=$!
-    sleep 1
-    kill -INT -- "-$pid"
-    wait "$pid"
-    rc=$?
-    kill -- "-$watchdog" 2>/dev/null
-    exit $rc
-)
-RC=$?
-ERR=$(cat "$WORK/stderr")
-if [ "$RC" -eq 130 ] && grep -q 'cancelled' <<<"$ERR" && [ ! -e "$WORK/cancel.binvox" ] &&
-    [ -z "$(find "$WORK" -name '*cancel*')" ]; then
-    pass "SIGINT cancels: exit 130, 'cancelled', no output"
-else
-    fail "SIGINT cancels" "rc=$RC err=$ERR"
-fi
+# A run that computes for several seconds on PoCL, reporting progress often, gets one SIGINT after
+# 1 s, sent to its whole process group as a terminal's Ctrl-C is (job control gives the run its
+# own group). It must stop through its progress callback (the message says so; the watcher that
+# ends a run still going after 1.5 s prints none), with exit 130 and no output; a watchdog kills
+# it if it ignores the signal.
+sigint_test() {  # name, output, arguments...
+    local name=$1 output=$2
+    shift 2
+    (
+        set -m
+        "$OCLVOX" "$@" >"$WORK/stdout" 2>"$WORK/stderr" &
+        pid=$!
+        (sleep 30 && kill -KILL -- "-$pid") >/dev/null 2>&1 &
+        watchdog=$!
+        sleep 1
+        kill -INT -- "-$pid"
+        wait "$pid"
+        rc=$?
+        kill -- "-$watchdog" 2>/dev/null
+        exit $rc
+    )
+    RC=$?
+    ERR=$(cat "$WORK/stderr")
+    if [ "$RC" -eq 130 ] && grep -q 'cancelled' <<<"$ERR" && [ ! -e "$output" ] &&
+        [ -z "$(find "$WORK" -name "*$(basename "$output")*")" ]; then
+        pass "SIGINT cancels $name: exit 130, 'cancelled', no output"
+    else
+        fail "SIGINT cancels $name" "rc=$RC err=$ERR"
+    fi
+}
+sigint_test voxelize "$WORK/cancel.binvox" \
+    voxelize "$MESH" -r 2048 --device-memory 1 -o "$WORK/cancel.binvox"
+sigint_test sdf "$WORK/cancel_sdf.npy" sdf "$MESH" -r 256 --full -o "$WORK/cancel_sdf.npy"
+sigint_test csg "$WORK/cancel_csg.npy" csg "$MESH" union "$MESH" -r 256 --full \
+    -o "$WORK/cancel_csg.npy"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -363,6 +363,37 @@ TEST(Meshing, DeviceEqualsHostReferenceBitForBit) {
         }
 }
 
+// Progress over the scan, count and emit passes keeps the fields' contract (one fixed total, never
+// back, ending at it), changes no vertex, and a false answer cancels on the device as on the host.
+TEST(Meshing, ProgressReportsEveryPassAndCancels) {
+    const ScalarField field = torus_field();
+    const Mesh expected = marching_cubes(field);
+    for (bool on_device : {true, false})
+        for (bool nets : {false, true}) {
+            auto mesh = [&](const ProgressCallback& progress) {
+                if (nets)
+                    return on_device ? surface_nets(device(), field, 0.0f, progress)
+                                     : surface_nets(field, 0.0f, progress);
+                return on_device ? marching_cubes(device(), field, 0.0f, progress)
+                                 : marching_cubes(field, 0.0f, progress);
+            };
+            const std::string what =
+                std::string(on_device ? "device " : "host ") + (nets ? "surface nets" : "cubes");
+            test::ProgressLog log;
+            log.slow = on_device;  // every kernel slice's report reaches the callback
+            const Mesh got = mesh(log.callback());
+            log.expect_contract(what);
+            if (on_device) EXPECT_GE(log.steps_inside(), 3u) << what;  // scan, count, emit
+            if (!nets) expect_identical(got, expected);
+            for (double at : {0.0, 0.5, 1.0}) {
+                test::ProgressLog cancel;
+                cancel.cancel_from = at;
+                EXPECT_THROW(mesh(cancel.callback()), Cancelled) << what << " at " << at;
+                EXPECT_TRUE(cancel.cancelled) << what << " at " << at;
+            }
+        }
+}
+
 // ---- the same bits on any conformant device ---------------------------------------------------
 // OpenCL 1.2 allows x / y to be off by 2.5 ulp. Vertex positions therefore divide through
 // om_divide, which walks from any estimate to the correctly rounded quotient; these tests hold it

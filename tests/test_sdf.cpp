@@ -508,6 +508,174 @@ TEST(Csg, FitGridOfTwoMeshesCoversBoth) {
     EXPECT_NEAR(g.voxel_size, 4.0 / 40, 1e-12);
 }
 
+// ---- progress and cancellation
+// -----------------------------------------------------------------------
+
+// Phases' counts map onto one fixed total in proportion to their weights and never go back; a
+// nested run's reports are forwarded.
+TEST(PhasedProgress, PhasesShareOneTotalByWeight) {
+    ProgressLog log;
+    log.slow = true;  // every report reaches the callback
+    detail::ProgressPhases progress(log.callback(), "test run");
+    const size_t first = progress.add(1), second = progress.add(3);
+    progress.report(first, 1, 2);                 // half of the first quarter
+    progress.report(second, 1, 4);                // a quarter of the other three
+    progress.report(first, 2, 2);                 // behind what was reported: held
+    EXPECT_TRUE(progress.forward(second)(3, 4));  // a nested run's report
+    progress.finish();
+    const uint64_t total = detail::kPhasedProgressTotal;
+    const std::vector<std::pair<uint64_t, uint64_t>> expected{{total / 8, total},
+                                                              {total * 7 / 16, total},
+                                                              {total * 7 / 16, total},
+                                                              {total * 13 / 16, total},
+                                                              {total, total}};
+    EXPECT_EQ(log.calls, expected);
+}
+
+TEST(PhasedProgress, ReportsAreThinnedButTheEndAlwaysArrives) {
+    ProgressLog log;
+    detail::ProgressPhases progress(log.callback(), "test run");
+    const size_t phase = progress.add(1);
+    for (uint64_t done = 1; done <= 1000; ++done) progress.report(phase, done, 1000);
+    progress.finish();
+    EXPECT_LT(log.calls.size(), 100u);  // 1000 reports in far less than 50 ms each
+    log.expect_contract("thinned");
+
+    detail::ProgressPhases none({}, "no callback");
+    none.report(none.add(1), 1, 2);
+    none.finish();
+    EXPECT_FALSE(bool(none.forward(0)));
+}
+
+TEST(PhasedProgress, FalseThrowsCancelledButIsReturnedToANestedRun) {
+    ProgressLog log;
+    log.slow = true;
+    log.cancel_from = 0;
+    detail::ProgressPhases progress(log.callback(), "test run");
+    const size_t phase = progress.add(1);
+    EXPECT_FALSE(progress.forward(phase)(1, 2));  // the nested run throws its own Cancelled
+    EXPECT_THROW(progress.report(phase, 2, 2), Cancelled);
+    EXPECT_THROW(progress.finish(), Cancelled);
+    EXPECT_EQ(log.calls.size(), 3u);
+}
+
+// A signed full-grid field runs every phase: band, seeds, each jump pass, the sign. With every
+// report let through, the device reports each kernel slice of each of them on one total; the
+// reference reports as it goes. Slicing the kernels changes no value.
+TEST(SdfProgress, EveryPhaseReportsOnOneTotalAndTheFieldIsUnchanged) {
+    const Mesh sphere = icosphere(kCentre, 2.6, 2);
+    const Grid g = offset_grid(24, 0.3, kCentre);
+    SdfOptions o = band(2.0, true);
+    const ScalarField quiet = signed_distance_reference(sphere, g, o);
+
+    ProgressLog log;
+    log.slow = true;
+    o.progress = log.callback();
+    expect_identical(signed_distance(device(), sphere, g, o), quiet);
+    log.expect_contract("device");
+    EXPECT_EQ(log.calls.back().second, detail::kPhasedProgressTotal);
+    EXPECT_GE(log.steps_inside(), detail::jump_steps(g).size());
+
+    ProgressLog reference;
+    o.progress = reference.callback();
+    expect_identical(signed_distance_reference(sphere, g, o), quiet);
+    reference.expect_contract("reference");
+}
+
+// Cancelling at any point stops the run with Cancelled, and nothing is reported after the false
+// answer: at the first report, in the band, in the jump passes, in the sign's solid voxelization
+// (parity and winding number, forwarded) and at the end. Every device report is let through (the
+// device reports once per kernel slice); the reference, which reports per triangle and per slice
+// of voxels, runs at full speed and cancels at the first report that reaches the callback.
+TEST(SdfProgress, FalseAnywhereCancels) {
+    const Mesh sphere = icosphere(kCentre, 2.6, 2);
+    const Grid g = offset_grid(24, 0.3, kCentre);
+    struct Case {
+        bool full;
+        InsideTest inside;
+        double at;              // fraction of the total at which the callback answers false
+        const char* device_by;  // what the device run's Cancelled names
+    };
+    // Narrow band: the band pass is 2/3 of the estimated work, the sign the last third; the sign's
+    // solid voxelization throws its own Cancelled.
+    const std::vector<Case> cases{{false, InsideTest::Parity, 0.0, "signed distance field"},
+                                  {false, InsideTest::Parity, 0.5, "signed distance field"},
+                                  {false, InsideTest::Parity, 0.9, "solid voxelization"},
+                                  {false, InsideTest::Winding, 0.9, "solid voxelization"},
+                                  {true, InsideTest::Parity, 0.5, "signed distance field"},
+                                  {true, InsideTest::Parity, 1.0, "solid voxelization"}};
+    for (const Case& c : cases)
+        for (bool on_device : {true, false}) {
+            SdfOptions o = band(2.0, c.full);
+            o.inside = c.inside;
+            ProgressLog log;
+            log.slow = on_device;
+            log.cancel_from = c.at;
+            o.progress = log.callback();
+            const std::string what = std::string(on_device ? "device" : "reference") +
+                                     (c.full ? " full " : " band ") + to_string(c.inside) + " at " +
+                                     std::to_string(c.at);
+            try {
+                on_device ? signed_distance(device(), sphere, g, o)
+                          : signed_distance_reference(sphere, g, o);
+                ADD_FAILURE() << what << ": not cancelled";
+            } catch (const Cancelled& e) {
+                if (on_device)
+                    EXPECT_NE(std::string(e.what()).find(c.device_by), std::string::npos)
+                        << what << ": " << e.what();
+            }
+            ASSERT_TRUE(log.cancelled) << what;
+            for (size_t i = 0; i + 1 < log.calls.size(); ++i)
+                ASSERT_LT(double(log.calls[i].first), c.at * double(log.calls[i].second))
+                    << what << ": call " << i << " should have cancelled";
+        }
+    SdfOptions o = band(2.0);
+    o.progress = [](uint64_t, uint64_t) { return false; };
+    EXPECT_THROW(unsigned_distance(device(), sphere, g, o), Cancelled);
+    EXPECT_THROW(unsigned_distance_reference(sphere, g, o), Cancelled);
+}
+
+// CSG of two meshes is the CSG of their signed fields, on the device as on the host, with one
+// progress over both fields; a false answer in either field cancels it.
+TEST(CsgProgress, MeshCsgIsTheCsgOfTheFieldsWithOneProgress) {
+    const Mesh a = icosphere(kCentre, 2.0, 2);
+    const Mesh b = box_mesh({kCentre[0] - 0.4, kCentre[1] - 0.3, kCentre[2] - 2.5},
+                            {kCentre[0] + 2.7, kCentre[1] + 0.6, kCentre[2] + 2.5});
+    GridFit fit;
+    fit.resolution = 40;
+    fit.pad = 3;
+    const Grid g = fit_grid(a, b, fit);
+    for (CsgOp op : {CsgOp::Union, CsgOp::Difference}) {
+        SdfOptions o = band(2.0);
+        const ScalarField expected =
+            csg(signed_distance_reference(a, g, o), signed_distance_reference(b, g, o), op);
+        ProgressLog log;
+        log.slow = true;
+        o.progress = log.callback();
+        VoxelizeStats stats;
+        expect_identical(csg(device(), a, b, op, g, o, &stats), expected);
+        log.expect_contract("csg on the device");
+        EXPECT_EQ(stats.triangles_in, a.triangles.size() + b.triangles.size());
+        ProgressLog reference;
+        o.progress = reference.callback();
+        expect_identical(csg_reference(a, b, op, g, o), expected);
+        reference.expect_contract("csg reference");
+    }
+    for (bool on_device : {true, false})
+        for (double at : {0.0, 0.6, 1.0}) {
+            SdfOptions o = band(2.0);
+            ProgressLog log;
+            log.slow = on_device && at > 0;
+            log.cancel_from = at;
+            o.progress = log.callback();
+            EXPECT_THROW(on_device ? csg(device(), a, b, CsgOp::Union, g, o)
+                                   : csg_reference(a, b, CsgOp::Union, g, o),
+                         Cancelled)
+                << on_device << " " << at;
+            EXPECT_TRUE(log.cancelled);
+        }
+}
+
 // ---- files
 // ---------------------------------------------------------------------------------------
 

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <functional>
@@ -12,6 +13,8 @@
 #include <numeric>
 #include <random>
 #include <string>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include "oclvox/oclvox.hpp"
@@ -323,5 +326,46 @@ inline Mesh welded(const Mesh& mesh) {
 inline std::string mesh_path(const std::string& name) {
     return std::string(OCLVOX_MESH_DIR) + "/" + name;
 }
+
+// Records every call of a progress callback and checks the contract of the field functions'
+// callbacks: the total never changes, done never goes back or past it, the last call has done ==
+// total. Optionally answers false (cancels) at the first call with done >= cancel_from * total.
+struct ProgressLog {
+    std::vector<std::pair<uint64_t, uint64_t>> calls;
+    double cancel_from = 2;  // never
+    // Sleep past the library's reporting interval (50 ms) in every call, so that no report is
+    // dropped and each phase's reports reach the callback.
+    bool slow = false;
+    bool cancelled = false;
+
+    ProgressCallback callback() {
+        return [this](uint64_t done, uint64_t total) {
+            calls.push_back({done, total});
+            if (slow) std::this_thread::sleep_for(std::chrono::milliseconds(55));
+            cancelled = double(done) >= cancel_from * double(total);
+            return !cancelled;
+        };
+    }
+
+    void expect_contract(const std::string& what) const {
+        ASSERT_FALSE(calls.empty()) << what << ": never called";
+        for (size_t i = 0; i < calls.size(); ++i) {
+            EXPECT_EQ(calls[i].second, calls[0].second) << what << ": total changed at call " << i;
+            EXPECT_LE(calls[i].first, calls[i].second) << what << ": past the total at call " << i;
+            if (i > 0)
+                EXPECT_GE(calls[i].first, calls[i - 1].first)
+                    << what << ": went back at call " << i;
+        }
+        EXPECT_EQ(calls.back().first, calls.back().second) << what << ": did not end at the total";
+    }
+
+    // How many different values of done lie strictly between 0 and the total.
+    size_t steps_inside() const {
+        std::vector<uint64_t> inside;
+        for (const auto& [done, total] : calls)
+            if (done > 0 && done < total) inside.push_back(done);
+        return size_t(std::unique(inside.begin(), inside.end()) - inside.begin());
+    }
+};
 
 }  // namespace oclvox::test

@@ -62,12 +62,12 @@ int run(const FieldArgs& args) {
         throw UsageError("grid options do not apply to .npy field inputs (their grids are used)");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: both operands as fields on one grid.
-    std::optional<oclvox::ScalarField> a, b;
+    // Phase 2: both operands as fields on one grid, combined.
+    oclvox::ScalarField combined;
     std::optional<oclvox::Device> device;
-    oclvox::VoxelizeStats stats_a, stats_b;
     if (fields_in) {
         record.inputs.resize(2);
+        std::optional<oclvox::ScalarField> a, b;
         timed(record.seconds.load, [&] {
             a = read_field_input(args.input, record.inputs[0]);
             b = read_field_input(args.input_b, record.inputs[1]);
@@ -80,6 +80,7 @@ int run(const FieldArgs& args) {
                 "csg of an occupancy .npy writes a mesh (.obj, .ply, .stl), not a "
                 "distance field");
         record.grid = a->grid;
+        combined = oclvox::csg(*a, *b, op);
         stop_if_interrupted();
         if (mesh_out) device = open_device(args.device, record.seconds.device_open);
     } else {
@@ -97,28 +98,19 @@ int run(const FieldArgs& args) {
                          {input_b.name(), "mesh", mesh_b.triangles.size()}};
         stop_if_interrupted();
         device = open_device(args.device, record.seconds.device_open);
-        timed(record.seconds.compute, [&] {
-            a = signed_distance(device, mesh_a, *record.grid, args, &stats_a);
-            stop_if_interrupted();
-            b = signed_distance(device, mesh_b, *record.grid, args, &stats_b);
-            return 0;
+        oclvox::VoxelizeStats stats;
+        combined = timed(record.seconds.compute, [&] {
+            return csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
         });
         stop_if_interrupted();
-        oclvox::VoxelizeStats stats = stats_a;  // both runs' counts together
-        stats.triangles_in += stats_b.triangles_in;
-        stats.triangles_used += stats_b.triangles_used;
-        stats.work_items += stats_b.work_items;
         record.stats = stats;
     }
 
-    // Phase 3: combine, and mesh if the output is a mesh.
-    const oclvox::ScalarField combined = oclvox::csg(*a, *b, op);
-    a.reset();
-    b.reset();
+    // Phase 3: mesh if the output is a mesh.
     std::optional<oclvox::Mesh> surface;
     if (mesh_out) {
         surface = timed(record.seconds.mesh,
-                        [&] { return extract_surface(device, combined, args.mesher, 0.0f); });
+                        [&] { return extract_surface(device, combined, args, 0.0f); });
         stop_if_interrupted();
     }
 

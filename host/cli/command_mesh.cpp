@@ -1,6 +1,4 @@
 // `oclvox mesh`: the iso-surface of a .npy field, or a mesh remeshed through a voxel field.
-#include <unistd.h>
-
 #include "commands.hpp"
 #include "field_commands.hpp"
 #include "interrupt.hpp"
@@ -86,11 +84,8 @@ int run(const FieldArgs& args) {
         options.inside = oclvox::inside_test_from_string(args.inside);
         oclvox::VoxelizeStats stats;
         field = timed(record.seconds.compute, [&] {
-            ProgressBar bar("voxelizing", "bricks", !args.reporting.quiet && isatty(STDERR_FILENO));
-            options.progress = [&](uint64_t done, uint64_t total) {
-                bar.update(done, total);
-                return !interrupted();
-            };
+            ProgressBar bar("voxelizing", "bricks", args.reporting);
+            options.progress = bar.callback();
             const oclvox::SparseVoxels voxels =
                 device ? device->voxelize(mesh, grid, options, &stats)
                        : oclvox::voxelize_reference(mesh, grid, options, &stats);
@@ -102,7 +97,7 @@ int run(const FieldArgs& args) {
 
     // Phase 3: the surface, the file, the report.
     const oclvox::Mesh surface = timed(record.seconds.mesh, [&] {
-        return extract_surface(device, *field, args.mesher, float(args.iso));
+        return extract_surface(device, *field, args, float(args.iso));
     });
     stop_if_interrupted();
     timed(record.seconds.write, [&] {

@@ -74,8 +74,8 @@ int run(const SdfArgs& args) {
     stop_if_interrupted();
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
-        surface = timed(record.seconds.mesh,
-                        [&] { return extract_surface(device, field, args.mesher, 0.0f); });
+        surface =
+            timed(record.seconds.mesh, [&] { return extract_surface(device, field, args, 0.0f); });
         stop_if_interrupted();
     }
 

@@ -106,11 +106,8 @@ int run(const VoxelizeArgs& args) {
     options.host_budget_bytes = args.tiling.host_mib << 20;
     oclvox::VoxelizeStats stats;
     const oclvox::SparseVoxels voxels = timed(record.seconds.compute, [&] {
-        ProgressBar bar("voxelizing", "bricks", !args.reporting.quiet && isatty(STDERR_FILENO));
-        options.progress = [&](uint64_t done, uint64_t total) {
-            bar.update(done, total);
-            return !interrupted();
-        };
+        ProgressBar bar("voxelizing", "bricks", args.reporting);
+        options.progress = bar.callback();
         return device ? device->voxelize(mesh, grid, options, &stats)
                       : oclvox::voxelize_reference(mesh, grid, options, &stats);
     });

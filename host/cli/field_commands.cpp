@@ -4,6 +4,7 @@
 #include <variant>
 
 #include "file_names.hpp"
+#include "progress_bar.hpp"
 
 namespace oclvox_cli {
 
@@ -71,24 +72,47 @@ oclvox::GridFit field_fit(const FieldArgs& args) {
     return fit;
 }
 
-oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
-                                    const oclvox::Grid& grid, const FieldArgs& args,
-                                    oclvox::VoxelizeStats* stats) {
+namespace {
+
+oclvox::SdfOptions sdf_options(const FieldArgs& args) {
     oclvox::SdfOptions options;
     options.band_voxels = args.band;
     options.full_grid = args.full;
     options.inside = oclvox::inside_test_from_string(args.inside);
+    return options;
+}
+
+}  // namespace
+
+oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
+                                    const oclvox::Grid& grid, const FieldArgs& args,
+                                    oclvox::VoxelizeStats* stats) {
+    oclvox::SdfOptions options = sdf_options(args);
+    ProgressBar bar("distance field", "", args.reporting);
+    options.progress = bar.callback();
     return device ? oclvox::signed_distance(*device, mesh, grid, options, stats)
                   : oclvox::signed_distance_reference(mesh, grid, options, stats);
 }
 
+oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
+                        const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
+                        const FieldArgs& args, oclvox::VoxelizeStats* stats) {
+    oclvox::SdfOptions options = sdf_options(args);
+    ProgressBar bar("distance fields", "", args.reporting);
+    options.progress = bar.callback();
+    return device ? oclvox::csg(*device, a, b, op, grid, options, stats)
+                  : oclvox::csg_reference(a, b, op, grid, options, stats);
+}
+
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
-                             const oclvox::ScalarField& field, const std::string& mesher,
-                             float iso) {
-    if (mesher == "marching-cubes")
-        return device ? oclvox::marching_cubes(*device, field, iso)
-                      : oclvox::marching_cubes(field, iso);
-    return device ? oclvox::surface_nets(*device, field, iso) : oclvox::surface_nets(field, iso);
+                             const oclvox::ScalarField& field, const FieldArgs& args, float iso) {
+    ProgressBar bar("meshing", "", args.reporting);
+    const oclvox::ProgressCallback progress = bar.callback();
+    if (args.mesher == "marching-cubes")
+        return device ? oclvox::marching_cubes(*device, field, iso, progress)
+                      : oclvox::marching_cubes(field, iso, progress);
+    return device ? oclvox::surface_nets(*device, field, iso, progress)
+                  : oclvox::surface_nets(field, iso, progress);
 }
 
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record) {

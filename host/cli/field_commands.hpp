@@ -43,13 +43,18 @@ bool is_mesh_output(const std::string& path, const FileArgs& files);
 // zero level set closes inside it, unless the user places the grid (--pad, --origin or --dims).
 oclvox::GridFit field_fit(const FieldArgs& args);
 
+// The signed distance field of a mesh, and the CSG of two meshes' fields, on the device or the
+// CPU reference, drawing a progress bar and stopping on Ctrl-C.
 oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
                                     const oclvox::Grid& grid, const FieldArgs& args,
                                     oclvox::VoxelizeStats* stats);
+oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
+                        const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
+                        const FieldArgs& args, oclvox::VoxelizeStats* stats);
 
+// The iso-surface by --mesher, with a progress bar, stopping on Ctrl-C.
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
-                             const oclvox::ScalarField& field, const std::string& mesher,
-                             float iso);
+                             const oclvox::ScalarField& field, const FieldArgs& args, float iso);
 
 // A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
 // occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.

@@ -1,9 +1,13 @@
 // Drawing the progress bar: '\r' back to the line start, then the whole line again.
 #include "progress_bar.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <utility>
+
+#include "interrupt.hpp"
 
 namespace oclvox_cli {
 
@@ -11,12 +15,21 @@ namespace {
 constexpr int kBarWidth = 30;
 }
 
-ProgressBar::ProgressBar(std::string label, std::string unit, bool enabled)
-    : label_(std::move(label)), unit_(std::move(unit)), enabled_(enabled) {}
+ProgressBar::ProgressBar(std::string label, std::string unit, const ReportingArgs& reporting)
+    : label_(std::move(label)),
+      unit_(std::move(unit)),
+      enabled_(!reporting.quiet && isatty(STDERR_FILENO)) {}
 
 ProgressBar::~ProgressBar() {
     // "\033[K" clears to the end of the line; every terminal this bar is drawn on understands it.
     if (drawn_) std::fputs("\r\033[K", stderr);
+}
+
+oclvox::ProgressCallback ProgressBar::callback() {
+    return [this](uint64_t done, uint64_t total) {
+        update(done, total);
+        return !interrupted();
+    };
 }
 
 void ProgressBar::update(uint64_t done, uint64_t total) {
@@ -34,9 +47,11 @@ void ProgressBar::update(uint64_t done, uint64_t total) {
     std::fill(bar, bar + filled, '#');
     std::fill(bar + filled, bar + kBarWidth, '.');
     bar[kBarWidth] = '\0';
-    std::fprintf(stderr, "\r%s [%s] %5.1f%%  %llu/%llu %s\033[K", label_.c_str(), bar,
-                 permille / 10.0, (unsigned long long)done, (unsigned long long)total,
-                 unit_.c_str());
+    std::fprintf(stderr, "\r%s [%s] %5.1f%%", label_.c_str(), bar, permille / 10.0);
+    if (!unit_.empty())
+        std::fprintf(stderr, "  %llu/%llu %s", (unsigned long long)done, (unsigned long long)total,
+                     unit_.c_str());
+    std::fputs("\033[K", stderr);
     std::fflush(stderr);
     drawn_ = true;
 }

@@ -1,11 +1,12 @@
 // Constructive solid geometry on distance fields (min / max / max(a, -b)) and on voxel sets
-// (bitwise or / and / and-not, brick by brick), and one grid fitted to two meshes.
+// (bitwise or / and / and-not, brick by brick), and one grid fitted to two meshes. (CSG of two
+// meshes, which computes their fields first, is in sdf.cpp with the other distance-field runs.)
 #include <algorithm>
 #include <cctype>
 #include <cstdint>
 
 #include "file_names.hpp"
-#include "oclvox/sdf.hpp"
+#include "sdf_internal.hpp"
 
 namespace oclvox {
 
@@ -66,24 +67,26 @@ ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op) {
         throw GridError("CSG on a field whose value count (" + std::to_string(a.values.size()) +
                         ", " + std::to_string(b.values.size()) + ") does not match its grid's " +
                         std::to_string(a.grid.voxel_count()) + " voxels");
-    ScalarField out;
-    out.grid = a.grid;
-    out.values.resize(a.values.size());
+    ScalarField out = a;
+    detail::combine_fields(out, b, op);
+    return out;
+}
+
+void detail::combine_fields(ScalarField& a, const ScalarField& b, CsgOp op) {
     for (size_t v = 0; v < a.values.size(); ++v) {
         const float x = a.values[v], y = b.values[v];
         switch (op) {
             case CsgOp::Union:
-                out.values[v] = std::min(x, y);
+                a.values[v] = std::min(x, y);
                 break;
             case CsgOp::Intersection:
-                out.values[v] = std::max(x, y);
+                a.values[v] = std::max(x, y);
                 break;
             case CsgOp::Difference:
-                out.values[v] = std::max(x, -y);
+                a.values[v] = std::max(x, -y);
                 break;
         }
     }
-    return out;
 }
 
 SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b_in, CsgOp op) {

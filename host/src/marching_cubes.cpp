@@ -12,9 +12,9 @@ namespace {
 constexpr int kBrickSize = 32;
 }  // namespace
 
-Mesh marching_cubes(const ScalarField& field, float iso) {
+Mesh marching_cubes(const ScalarField& field, float iso, const ProgressCallback& progress) {
     return detail::mesh_field_reference(field, iso, detail::MeshingMethod::MarchingCubes,
-                                        kBrickSize);
+                                        kBrickSize, progress);
 }
 
 }  // namespace oclvox

@@ -5,11 +5,13 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "kernel_sources.hpp"
 #include "meshing_math.h"
 #include "oclvox/field.hpp"
+#include "progress.hpp"
 
 namespace oclvox::detail {
 
@@ -31,12 +33,21 @@ struct BrickLayout {
     std::vector<uint32_t> base;               // per brick: first slot, or OM_NO_BRICK
     uint32_t slots = 0;                       // samples of the active bricks
 };
-BrickLayout active_bricks(const ScalarField& field, float iso, int brick_size);
+// Reports progress slab of bricks by slab (see ProgressPhases::reporter).
+BrickLayout active_bricks(const ScalarField& field, float iso, int brick_size,
+                          const std::function<void(uint64_t done, uint64_t total)>& report = {});
+
+// The progress phases of both meshers: the search for active bricks, the count pass and the emit
+// pass.
+struct MeshingPhases {
+    size_t scan = 0, count = 0, emit = 0;
+};
+MeshingPhases add_meshing_phases(ProgressPhases& progress);
 
 // The host reference, processing the grid in cubic bricks of `brick_size` samples; the result
 // does not depend on brick_size (>= 1).
-Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod method,
-                          int brick_size);
+Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod method, int brick_size,
+                          const ProgressCallback& progress = {});
 
 // Replaces the per-slot counts by their exclusive prefix sum in global sample order (x fastest
 // over the whole grid, whatever the tiling) and returns the total; throws GridError naming `what`

@@ -2,11 +2,12 @@
 //
 // Phases: find the bricks that can hold surface on the host (as the reference does); upload the
 // field, the brick list and slot bases (and the Marching Cubes table); run the count kernel over
-// the samples of those bricks in launch slices, into their slots; read the counts back and turn
-// them into exclusive prefix sums in global sample order on the host; upload the offsets; run the
-// emit kernel over the same bricks; read the vertex records and triangles back and convert them
-// to world coordinates exactly as the reference does. The kernels run the same per-sample
-// functions as the reference (kernels/meshing_math.h), so the result equals it bit for bit.
+// the samples of those bricks in launch slices (reporting progress between them), into their
+// slots; read the counts back and turn them into exclusive prefix sums in global sample order on
+// the host; upload the offsets; run the emit kernel over the same bricks; read the vertex records
+// and triangles back and convert them to world coordinates exactly as the reference does. The
+// kernels run the same per-sample functions as the reference (kernels/meshing_math.h), so the
+// result equals it bit for bit.
 #include <algorithm>
 #include <limits>
 
@@ -17,27 +18,11 @@ namespace oclvox {
 
 namespace {
 
-// Launch slices bound each enqueue, as in device.cpp.
-constexpr uint32_t kItemsPerLaunch = uint32_t(1) << 22;
 // Bricks of 4^3 samples: the kernels visit every sample of the active bricks, so the finer the
 // bricks the closer that work is to the surface (16^3 bricks visited ~16 samples per surface
 // cell); the host's emptiness check per brick re-reads a one-sample halo, which stays cheap.
 // Measured on bunny00 at 256^3 through PoCL: mesh phase 16^3 ~2.7 s, 8^3 1.8 s, 4^3 0.8-1.2 s.
 constexpr int kBrickSize = 4;
-
-// Runs `kernel` over items [0, n) in slices; `slice_arg` is the index of its (first, count)
-// argument pair.
-void run_over_items(Device::Impl& cl, cl::Kernel& kernel, int slice_arg, uint32_t n) {
-    const size_t group = detail::work_group_size(kernel, cl.device);
-    for (uint32_t first = 0; first < n; first += std::min(kItemsPerLaunch, n - first)) {
-        const uint32_t count = std::min(kItemsPerLaunch, n - first);
-        kernel.setArg(slice_arg, cl_uint(first));
-        kernel.setArg(slice_arg + 1, cl_uint(count));
-        const size_t global = (size_t(count) + group - 1) / group * group;
-        cl.queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global),
-                                      cl::NDRange(group));
-    }
-}
 
 cl::Buffer buffer(Device::Impl& cl, cl_mem_flags flags, size_t bytes) {
     // Zero-length buffers are invalid in OpenCL.
@@ -45,12 +30,17 @@ cl::Buffer buffer(Device::Impl& cl, cl_mem_flags flags, size_t bytes) {
 }
 
 Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
-                    detail::MeshingMethod method) {
+                    detail::MeshingMethod method, const ProgressCallback& callback) {
     const bool nets = method == detail::MeshingMethod::SurfaceNets;
     const char* who = nets ? "surface_nets" : "marching_cubes";
     detail::validate_field(field, iso, who);
+    detail::ProgressPhases progress(callback, who);
+    const detail::MeshingPhases phases = detail::add_meshing_phases(progress);
     const auto& dims = field.grid.dims;
-    if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2) return Mesh{};  // no cells
+    if (dims[0] < 2 || dims[1] < 2 || dims[2] < 2) {  // no cells
+        progress.finish();
+        return Mesh{};
+    }
     Device::Impl& cl = device.impl();
     const uint32_t n = uint32_t(field.values.size());
     if (uint64_t(n) * sizeof(float) > cl.info.max_alloc)
@@ -59,7 +49,8 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
                         " bytes, more than one buffer on " + cl.info.name + " can hold");
 
     // Phase 1: the bricks to visit, one work item per sample of each.
-    const detail::BrickLayout layout = detail::active_bricks(field, iso, kBrickSize);
+    const detail::BrickLayout layout =
+        detail::active_bricks(field, iso, kBrickSize, progress.reporter(phases.scan));
     std::vector<cl_int> bricks;
     for (const auto& origin : layout.origins)
         bricks.insert(bricks.end(), origin.begin(), origin.end());
@@ -100,6 +91,19 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
             table = buffer(cl, CL_MEM_READ_ONLY, table_data.size());
             cl.queue.enqueueWriteBuffer(table, CL_FALSE, 0, table_data.size(), table_data.data());
         }
+        // Runs `kernel` over the items in slices; `slice_arg` is the index of its (first,
+        // count) argument pair.
+        auto run = [&](cl::Kernel& kernel, int slice_arg, size_t phase) {
+            const size_t group = detail::work_group_size(kernel, cl.device);
+            detail::run_sliced(
+                cl.queue, items, group,
+                [&](uint64_t first, uint64_t count) {
+                    kernel.setArg(slice_arg, cl_uint(first));
+                    kernel.setArg(slice_arg + 1, cl_uint(count));
+                    detail::launch(cl.queue, kernel, count, group);
+                },
+                progress.reporter(phase));
+        };
         const int shift = nets ? 0 : 1;
         auto set_common = [&](cl::Kernel& kernel) {
             kernel.setArg(0, values);
@@ -121,7 +125,7 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         set_common(count);
         count.setArg(10 + shift, vertex_offset);
         count.setArg(11 + shift, triangle_offset);
-        run_over_items(cl, count, 7 + shift, uint32_t(items));
+        run(count, 7 + shift, phases.count);
 
         // Phase 4: prefix sums in global sample order on the host.
         std::vector<uint32_t> vertex_counts(slots), triangle_counts(slots);
@@ -156,7 +160,7 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         emit.setArg(12 + shift, vertex_sample);
         emit.setArg(13 + shift, vertex_local);
         emit.setArg(14 + shift, triangles);
-        run_over_items(cl, emit, 7 + shift, uint32_t(items));
+        run(emit, 7 + shift, phases.emit);
 
         // Phase 6: results back, converted like the reference's.
         std::vector<uint32_t> host_sample(vertex_count), host_triangles(3 * size_t(triangle_count));
@@ -172,7 +176,9 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
                                        host_triangles.size() * sizeof(cl_uint),
                                        host_triangles.data());
         cl.queue.finish();
-        return detail::records_to_mesh(field, host_sample, host_local, host_triangles);
+        Mesh mesh = detail::records_to_mesh(field, host_sample, host_local, host_triangles);
+        progress.finish();
+        return mesh;
     } catch (const cl::Error& e) {
         detail::throw_device_error(e, std::string(who) + " on " + cl.info.name);
     }
@@ -180,12 +186,14 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
 
 }  // namespace
 
-Mesh surface_nets(Device& device, const ScalarField& field, float iso) {
-    return mesh_on_device(device, field, iso, detail::MeshingMethod::SurfaceNets);
+Mesh surface_nets(Device& device, const ScalarField& field, float iso,
+                  const ProgressCallback& progress) {
+    return mesh_on_device(device, field, iso, detail::MeshingMethod::SurfaceNets, progress);
 }
 
-Mesh marching_cubes(Device& device, const ScalarField& field, float iso) {
-    return mesh_on_device(device, field, iso, detail::MeshingMethod::MarchingCubes);
+Mesh marching_cubes(Device& device, const ScalarField& field, float iso,
+                    const ProgressCallback& progress) {
+    return mesh_on_device(device, field, iso, detail::MeshingMethod::MarchingCubes, progress);
 }
 
 }  // namespace oclvox

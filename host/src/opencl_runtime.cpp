@@ -109,6 +109,33 @@ void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n,
     queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(global), cl::NDRange(group));
 }
 
+void run_sliced(const cl::CommandQueue& queue, uint64_t n, size_t group,
+                const std::function<void(uint64_t first, uint64_t count)>& enqueue,
+                const std::function<void(uint64_t done, uint64_t total)>& report) {
+    constexpr uint64_t kMaxSlice = uint64_t(1) << 22, kFirstSlice = uint64_t(1) << 12;
+    const uint64_t unit = std::max<uint64_t>(1, group);
+    auto whole_groups = [&](uint64_t items) {
+        return std::clamp(items / unit * unit, unit, std::max(unit, kMaxSlice / unit * unit));
+    };
+    uint64_t slice = whole_groups(report ? kFirstSlice : kMaxSlice);
+    for (uint64_t first = 0; first < n;) {
+        const uint64_t count = std::min(slice, n - first);
+        const auto start = std::chrono::steady_clock::now();
+        enqueue(first, count);
+        first += count;
+        if (!report) continue;
+        queue.finish();
+        const double seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        report(first, n);
+        // Towards kSliceSeconds, by at most 4x per slice so one noisy timing cannot swing it far.
+        if (count == slice) {
+            const double scale = seconds > 0 ? kSliceSeconds / seconds : 4.0;
+            slice = whole_groups(uint64_t(double(slice) * std::clamp(scale, 0.25, 4.0)));
+        }
+    }
+}
+
 void throw_device_error(const cl::Error& error, const std::string& doing) {
     throw DeviceError("OpenCL error while " + doing + ": " + (error.what() ? error.what() : "?") +
                       " returned " + cl_status_name(error.err()));

@@ -5,6 +5,7 @@
 #define CL_HPP_ENABLE_EXCEPTIONS
 #include <CL/opencl.hpp>
 #include <algorithm>
+#include <functional>
 #include <map>
 #include <string>
 
@@ -35,6 +36,17 @@ std::string build_options(cl_device_fp_config single_fp_config);
 
 // Launches `kernel` over at least n items in groups of `group`; kernels skip the padding items.
 void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group);
+
+// Runs items [0, n) through `enqueue(first, count)`, which sets a slice's arguments and enqueues
+// it; slices are multiples of `group` (but the last), at most 2^22 items so no single enqueue is
+// enormous. Without `report` nothing waits between slices. With it, each slice is finished and
+// then reported as report(items done, n), and slices are sized towards kSliceSeconds each,
+// starting small: an item costs microseconds on a CPU device and nanoseconds on a GPU, and a
+// cancel can only take effect between slices. The price is one queue round trip per slice.
+constexpr double kSliceSeconds = 0.1;
+void run_sliced(const cl::CommandQueue& queue, uint64_t n, size_t group,
+                const std::function<void(uint64_t first, uint64_t count)>& enqueue,
+                const std::function<void(uint64_t done, uint64_t total)>& report);
 
 // A read-only buffer holding `data` (written without blocking). Zero-length buffers are invalid
 // in OpenCL, so an empty vector gets a one-element buffer.

@@ -1,6 +1,8 @@
 // Distance fields: the host reference of the band and jump-flooding passes (the same shared math
 // and the same order-independent minima as kernels/sdf.cl, so the device must match it bit for
-// bit), the conversion to world units, and the sign from the solid voxelization.
+// bit), the conversion to world units, the sign from the solid voxelization, and the runs of the
+// public functions (one field, or two combined by CSG) with their progress, on a device or on the
+// host.
 #include <chrono>
 #include <climits>
 #include <cmath>
@@ -29,7 +31,8 @@ size_t voxel_index(const Grid& grid, int i, int j, int k) {
 // The band pass: per voxel the least squared distance below band2 and, for full-grid fields,
 // the lowest triangle index attaining it (what band_distance and band_nearest leave behind).
 void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float>& distance2,
-               std::vector<uint32_t>* nearest) {
+               std::vector<uint32_t>* nearest, ProgressPhases& progress, size_t phase) {
+    const uint64_t items = prepared.first_item.back();
     for (size_t index = 0; index < prepared.triangles.size(); ++index) {
         const OvSdfTriangle& t = prepared.triangles[index];
         for (int bz = t.lo[2] / 4 * 4; bz <= t.hi[2]; bz += 4)
@@ -52,6 +55,7 @@ void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float
                                 }
                             }
                 }
+        progress.report(phase, prepared.first_item[index + 1], items);
     }
 }
 
@@ -59,9 +63,9 @@ void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float
 // known to the voxel itself and to its 26 neighbours `step` voxels away.
 void jump_pass(const SdfTriangles& prepared, const Grid& grid, int step,
                const std::vector<uint32_t>& nearest_in, std::vector<uint32_t>& nearest_out,
-               std::vector<float>& distance2) {
+               std::vector<float>& distance2, ProgressPhases& progress, size_t phase) {
     const int nx = int(grid.dims[0]), ny = int(grid.dims[1]), nz = int(grid.dims[2]);
-    for (int k = 0; k < nz; ++k)
+    for (int k = 0; k < nz; ++k) {
         for (int j = 0; j < ny; ++j)
             for (int i = 0; i < nx; ++i) {
                 const size_t v = voxel_index(grid, i, j, k);
@@ -86,6 +90,8 @@ void jump_pass(const SdfTriangles& prepared, const Grid& grid, int step,
                 nearest_out[v] = best;
                 if (best != kNoTriangle) distance2[v] = best_d2;
             }
+        progress.report(phase, uint64_t(k) + 1, uint64_t(nz));
+    }
 }
 
 }  // namespace
@@ -196,9 +202,79 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_la
     }
 }
 
-}  // namespace detail
+SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
+                         const SdfOptions& options, bool sign) {
+    // Costs in band work items (a triangle and a 4x4x4 block), as measured through PoCL on spot
+    // and the Stanford bunny: the seeds pass about a third of the band pass (it only writes where
+    // the band pass found the minimum); a voxel of a jump pass one to four items (it weighs up to
+    // 27 candidates); the sign, whose cost follows the surface like the band's, about half the
+    // band with the winding number and far less with parity, which is not known before the solid
+    // voxelization picks it.
+    constexpr double kSeedsCost = 0.3, kJumpVoxelCost = 2.0, kSignCost = 0.5;
+    const double items = double(prepared.first_item.back());
+    SdfPhases phases;
+    phases.band = progress.add(items);
+    if (options.full_grid) {
+        phases.seeds = progress.add(kSeedsCost * items);
+        phases.first_jump = progress.add(kJumpVoxelCost * double(grid.voxel_count()));
+        for (size_t pass = 1; pass < jump_steps(grid).size(); ++pass)
+            progress.add(kJumpVoxelCost * double(grid.voxel_count()));
+    }
+    if (sign) phases.sign = progress.add(kSignCost * items);
+    return phases;
+}
+
+std::vector<float> distance2_reference(const SdfTriangles& prepared, const Grid& grid,
+                                       const SdfOptions& options, ProgressPhases& progress,
+                                       const SdfPhases& phases, VoxelizeStats& stats) {
+    // The band; then, for full-grid fields, the jump flood from it. The band pass finds the
+    // seeds as it goes.
+    const auto t = std::chrono::steady_clock::now();
+    std::vector<float> distance2(size_t(grid.voxel_count()), prepared.band2);
+    std::vector<uint32_t> nearest, scratch;
+    if (options.full_grid) nearest.assign(distance2.size(), kNoTriangle);
+    band_pass(prepared, grid, distance2, options.full_grid ? &nearest : nullptr, progress,
+              phases.band);
+    if (options.full_grid && !prepared.triangles.empty()) {
+        scratch.resize(nearest.size());
+        size_t phase = phases.first_jump;
+        for (int step : jump_steps(grid)) {
+            jump_pass(prepared, grid, step, nearest, scratch, distance2, progress, phase++);
+            nearest.swap(scratch);
+        }
+    }
+    stats.seconds_kernels += seconds_since(t);
+    return distance2;
+}
 
 namespace {
+
+// Where a run computes: the distances and the solid that signs them, on a device or both on the
+// host (the reference).
+struct OnDevice {
+    Device& device;
+    std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
+                                 const SdfOptions& options, ProgressPhases& progress,
+                                 const SdfPhases& phases, VoxelizeStats& stats) const {
+        return distance2_device(device, prepared, grid, options, progress, phases, stats);
+    }
+    SparseVoxels solid(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                       VoxelizeStats* stats) const {
+        return device.voxelize(mesh, grid, options, stats);
+    }
+};
+
+struct OnHost {
+    std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
+                                 const SdfOptions& options, ProgressPhases& progress,
+                                 const SdfPhases& phases, VoxelizeStats& stats) const {
+        return distance2_reference(prepared, grid, options, progress, phases, stats);
+    }
+    SparseVoxels solid(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
+                       VoxelizeStats* stats) const {
+        return voxelize_reference(mesh, grid, options, stats);
+    }
+};
 
 // The Solid voxelization that signs a field: of the bricks holding the field's layers only.
 VoxelizeOptions sign_options(const Grid& grid, const SdfOptions& options) {
@@ -206,7 +282,7 @@ VoxelizeOptions sign_options(const Grid& grid, const SdfOptions& options) {
     solid.mode = VoxelizeMode::Solid;
     solid.inside = options.inside;
     solid.brick_size = options.brick_size;
-    const Grid layers = detail::field_grid(grid, options);
+    const Grid layers = field_grid(grid, options);
     if (layers.dims[2] == grid.dims[2]) return solid;
     const SparseVoxels layout(grid, options.brick_size);
     const auto nb = layout.brick_dims();
@@ -218,7 +294,96 @@ VoxelizeOptions sign_options(const Grid& grid, const SdfOptions& options) {
     return solid;
 }
 
+// One field of a run: its mesh, prepared triangles and progress phases.
+struct FieldJob {
+    const Mesh& mesh;
+    SdfTriangles prepared;
+    SdfPhases phases;
+};
+
+// Prepares the mesh's triangles and adds the field's phases; the counts go to stats.
+FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& options, bool sign,
+                    ProgressPhases& progress, VoxelizeStats& stats) {
+    const auto t = std::chrono::steady_clock::now();
+    // Prepared on the whole grid, then cut to the layers (so every sample keeps its bits).
+    FieldJob job{mesh, prepare_sdf_triangles(mesh, grid, options.band_voxels), {}};
+    keep_layers(job.prepared, options);
+    job.phases = add_sdf_phases(progress, job.prepared, field_grid(grid, options), options, sign);
+    stats.triangles_in = mesh.triangles.size();
+    stats.triangles_used = job.prepared.triangles.size();
+    stats.work_items = job.prepared.first_item.back();
+    stats.seconds_binning += seconds_since(t);
+    return job;
+}
+
+// The job's field, signed by the solid voxelization (with options.inside) when `sign` is set;
+// stats add the solid run's timings, its inside test and voxels_set = the inside voxels.
+template <class Backend>
+ScalarField compute_field(const Backend& backend, const FieldJob& job, const Grid& grid,
+                          const SdfOptions& options, bool sign, ProgressPhases& progress,
+                          VoxelizeStats& stats) {
+    const Grid layers = field_grid(grid, options);
+    ScalarField field = distance_field(
+        layers, options, job.prepared,
+        backend.distance2(job.prepared, layers, options, progress, job.phases, stats));
+    if (!sign) return field;
+    VoxelizeOptions solid = sign_options(grid, options);
+    solid.progress = progress.forward(job.phases.sign);
+    VoxelizeStats solid_stats;
+    apply_sign(field, backend.solid(job.mesh, grid, solid, &solid_stats), options.first_layer);
+    stats.seconds_binning += solid_stats.seconds_binning;
+    stats.seconds_upload += solid_stats.seconds_upload;
+    stats.seconds_kernels += solid_stats.seconds_kernels;
+    stats.seconds_download += solid_stats.seconds_download;
+    stats.voxels_set = solid_stats.voxels_set;
+    stats.inside_test = solid_stats.inside_test;
+    stats.inside_test_reason = solid_stats.inside_test_reason;
+    return field;
+}
+
+template <class Backend>
+ScalarField distance_run(const Backend& backend, const Mesh& mesh, const Grid& grid,
+                         const SdfOptions& options, bool sign, VoxelizeStats* stats_out) {
+    validate_sdf(grid, options);
+    ProgressPhases progress(options.progress, sign ? "signed distance field" : "distance field");
+    VoxelizeStats stats;
+    const FieldJob job = plan_field(mesh, grid, options, sign, progress, stats);
+    ScalarField field = compute_field(backend, job, grid, options, sign, progress, stats);
+    progress.finish();
+    if (stats_out) *stats_out = stats;
+    return field;
+}
+
+template <class Backend>
+ScalarField csg_run(const Backend& backend, const Mesh& a, const Mesh& b, CsgOp op,
+                    const Grid& grid, const SdfOptions& options, VoxelizeStats* stats_out) {
+    // Phase 1: both fields' phases, so that progress runs once over both.
+    validate_sdf(grid, options);
+    ProgressPhases progress(options.progress, "CSG");
+    VoxelizeStats stats, stats_b;
+    const FieldJob job_a = plan_field(a, grid, options, true, progress, stats);
+    const FieldJob job_b = plan_field(b, grid, options, true, progress, stats_b);
+
+    // Phase 2: a's field, b's field combined into it.
+    ScalarField field = compute_field(backend, job_a, grid, options, true, progress, stats);
+    combine_fields(field, compute_field(backend, job_b, grid, options, true, progress, stats_b),
+                   op);
+    progress.finish();
+
+    stats.triangles_in += stats_b.triangles_in;
+    stats.triangles_used += stats_b.triangles_used;
+    stats.work_items += stats_b.work_items;
+    stats.seconds_binning += stats_b.seconds_binning;
+    stats.seconds_upload += stats_b.seconds_upload;
+    stats.seconds_kernels += stats_b.seconds_kernels;
+    stats.seconds_download += stats_b.seconds_download;
+    if (stats_out) *stats_out = stats;
+    return field;
+}
+
 }  // namespace
+
+}  // namespace detail
 
 int64_t field_padding(double band_voxels) {
     if (!(band_voxels > 0) || !(band_voxels < double(kMaxGridAxis)))
@@ -227,72 +392,34 @@ int64_t field_padding(double band_voxels) {
     return int64_t(std::ceil(band_voxels)) + 1;
 }
 
-ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& whole_grid,
-                                        const SdfOptions& options, VoxelizeStats* stats_out) {
-    VoxelizeStats stats;
-    // Phase 1: validate and prepare.
-    auto t = std::chrono::steady_clock::now();
-    detail::validate_sdf(whole_grid, options);
-    detail::SdfTriangles prepared =
-        detail::prepare_sdf_triangles(mesh, whole_grid, options.band_voxels);
-    detail::keep_layers(prepared, options);
-    const Grid grid = detail::field_grid(whole_grid, options);
-    stats.triangles_in = mesh.triangles.size();
-    stats.triangles_used = prepared.triangles.size();
-    stats.work_items = prepared.first_item.back();
-    stats.seconds_binning = detail::seconds_since(t);
-
-    // Phase 2: the band; then, for full-grid fields, the jump flood from it.
-    t = std::chrono::steady_clock::now();
-    std::vector<float> distance2(size_t(grid.voxel_count()), prepared.band2);
-    std::vector<uint32_t> nearest, scratch;
-    if (options.full_grid) nearest.assign(distance2.size(), detail::kNoTriangle);
-    detail::band_pass(prepared, grid, distance2, options.full_grid ? &nearest : nullptr);
-    if (options.full_grid) {
-        scratch.resize(nearest.size());
-        for (int step : detail::jump_steps(grid)) {
-            detail::jump_pass(prepared, grid, step, nearest, scratch, distance2);
-            nearest.swap(scratch);
-        }
-    }
-    stats.seconds_kernels = detail::seconds_since(t);
-
-    if (stats_out) *stats_out = stats;
-    return detail::distance_field(grid, options, prepared, distance2);
+ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& grid,
+                              const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::distance_run(detail::OnDevice{device}, mesh, grid, options, false, stats);
 }
 
-ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const SdfOptions& options,
-                                      VoxelizeStats* stats_out) {
-    VoxelizeStats stats, solid_stats;
-    ScalarField field = unsigned_distance_reference(mesh, grid, options, &stats);
-    detail::apply_sign(field,
-                       voxelize_reference(mesh, grid, sign_options(grid, options), &solid_stats),
-                       options.first_layer);
-    stats.seconds_binning += solid_stats.seconds_binning;
-    stats.seconds_kernels += solid_stats.seconds_kernels;
-    stats.voxels_set = solid_stats.voxels_set;
-    stats.inside_test = solid_stats.inside_test;
-    stats.inside_test_reason = solid_stats.inside_test_reason;
-    if (stats_out) *stats_out = stats;
-    return field;
+ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
+                                        const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::distance_run(detail::OnHost{}, mesh, grid, options, false, stats);
 }
 
 ScalarField signed_distance(Device& device, const Mesh& mesh, const Grid& grid,
-                            const SdfOptions& options, VoxelizeStats* stats_out) {
-    VoxelizeStats stats, solid_stats;
-    ScalarField field = unsigned_distance(device, mesh, grid, options, &stats);
-    detail::apply_sign(field,
-                       device.voxelize(mesh, grid, sign_options(grid, options), &solid_stats),
-                       options.first_layer);
-    stats.seconds_binning += solid_stats.seconds_binning;
-    stats.seconds_upload += solid_stats.seconds_upload;
-    stats.seconds_kernels += solid_stats.seconds_kernels;
-    stats.seconds_download += solid_stats.seconds_download;
-    stats.voxels_set = solid_stats.voxels_set;
-    stats.inside_test = solid_stats.inside_test;
-    stats.inside_test_reason = solid_stats.inside_test_reason;
-    if (stats_out) *stats_out = stats;
-    return field;
+                            const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::distance_run(detail::OnDevice{device}, mesh, grid, options, true, stats);
+}
+
+ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const SdfOptions& options,
+                                      VoxelizeStats* stats) {
+    return detail::distance_run(detail::OnHost{}, mesh, grid, options, true, stats);
+}
+
+ScalarField csg(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::csg_run(detail::OnDevice{device}, a, b, op, grid, options, stats);
+}
+
+ScalarField csg_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                          const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::csg_run(detail::OnHost{}, a, b, op, grid, options, stats);
 }
 
 }  // namespace oclvox

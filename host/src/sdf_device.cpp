@@ -1,7 +1,7 @@
-// unsigned_distance on an OpenCL device: the band pass over (triangle, block) work items with
-// atomic minima into a dense buffer of squared distances, and for full-grid fields the nearest-
-// triangle seeds and the jump-flooding passes. Same prepared triangles and shared math as the
-// reference in sdf.cpp, so the result matches it bit for bit.
+// Distances on an OpenCL device: the band pass over (triangle, block) work items with atomic
+// minima into a dense buffer of squared distances, and for full-grid fields the nearest-triangle
+// seeds and the jump-flooding passes. Same prepared triangles and shared math as the reference in
+// sdf.cpp, so the result matches it bit for bit.
 #include <algorithm>
 #include <chrono>
 #include <cstring>
@@ -9,25 +9,13 @@
 #include "opencl_runtime.hpp"
 #include "sdf_internal.hpp"
 
-namespace oclvox {
+namespace oclvox::detail {
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) {
     return std::chrono::duration<double>(Clock::now() - t).count();
-}
-
-// Launches are cut into slices of this many items so no single enqueue is enormous.
-constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
-
-// Runs `kernel` over items [0, n) in slices; argument `base_arg` takes each slice's first item.
-void launch_sliced(const cl::CommandQueue& queue, cl::Kernel& kernel, cl_uint base_arg, uint64_t n,
-                   size_t group) {
-    for (uint64_t base = 0; base < n; base += kItemsPerLaunch) {
-        kernel.setArg(base_arg, cl_ulong(base));
-        detail::launch(queue, kernel, std::min(kItemsPerLaunch, n - base), group);
-    }
 }
 
 uint32_t float_bits(float f) {
@@ -38,19 +26,12 @@ uint32_t float_bits(float f) {
 
 }  // namespace
 
-ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& whole_grid,
-                              const SdfOptions& options, VoxelizeStats* stats_out) {
-    VoxelizeStats stats;
+std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
+                                    const SdfOptions& options, ProgressPhases& progress,
+                                    const SdfPhases& phases, VoxelizeStats& stats) {
     Device::Impl& cl = device.impl();
 
-    // Phase 1: validate and prepare on the host (on the whole grid, then cut to the layers); the
-    // dense buffer must fit one allocation.
-    auto t = Clock::now();
-    detail::validate_sdf(whole_grid, options);
-    detail::SdfTriangles prepared =
-        detail::prepare_sdf_triangles(mesh, whole_grid, options.band_voxels);
-    detail::keep_layers(prepared, options);
-    const Grid grid = detail::field_grid(whole_grid, options);
+    // Phase 1: the dense buffer must fit one allocation.
     const uint64_t voxels = grid.voxel_count();
     if (voxels * sizeof(cl_uint) > cl.info.max_alloc)
         throw GridError("a dense distance field of " + std::to_string(voxels) + " voxels needs " +
@@ -58,26 +39,35 @@ ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& whol
                         " MiB in one buffer, over the device's allocation limit of " +
                         std::to_string(cl.info.max_alloc >> 20) + " MiB: lower the resolution");
     const uint64_t items = prepared.first_item.back();
-    stats.triangles_in = mesh.triangles.size();
-    stats.triangles_used = prepared.triangles.size();
-    stats.work_items = items;
-    stats.seconds_binning = seconds_since(t);
+
+    // Runs `kernel` over n items in slices, its argument `base_arg` taking each slice's first
+    // item, reporting the slices as `phase` when anyone listens.
+    auto run = [&](cl::Kernel& kernel, cl_uint base_arg, uint64_t n, size_t phase) {
+        const size_t group = work_group_size(kernel, cl.device);
+        run_sliced(
+            cl.queue, n, group,
+            [&](uint64_t first, uint64_t count) {
+                kernel.setArg(base_arg, cl_ulong(first));
+                launch(cl.queue, kernel, count, group);
+            },
+            progress.reporter(phase));
+    };
 
     std::vector<float> distance2(size_t(voxels), prepared.band2);
     try {
-        const cl::Program& program = cl.program(detail::kKernel_sdf);
+        const cl::Program& program = cl.program(kKernel_sdf);
 
         // Phase 2: triangles and item offsets up; distances start at the band.
-        t = Clock::now();
-        const cl::Buffer triangles = detail::upload(cl.context, cl.queue, prepared.triangles);
+        auto t = Clock::now();
+        const cl::Buffer triangles = upload(cl.context, cl.queue, prepared.triangles);
         const std::vector<cl_ulong> first_item(prepared.first_item.begin(),
                                                prepared.first_item.end());
-        const cl::Buffer first = detail::upload(cl.context, cl.queue, first_item);
+        const cl::Buffer first = upload(cl.context, cl.queue, first_item);
         cl::Buffer distance(cl.context, CL_MEM_READ_WRITE, size_t(voxels) * sizeof(cl_uint));
         cl.queue.enqueueFillBuffer(distance, cl_uint(float_bits(prepared.band2)), 0,
                                    size_t(voxels) * sizeof(cl_uint));
         cl.queue.finish();
-        stats.seconds_upload = seconds_since(t);
+        stats.seconds_upload += seconds_since(t);
 
         // Phase 3: the band. Both band kernels take the same leading arguments.
         t = Clock::now();
@@ -96,48 +86,46 @@ ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& whol
             return kernel;
         };
         cl::Kernel band = band_kernel("band_distance");
-        launch_sliced(cl.queue, band, 3, items, detail::work_group_size(band, cl.device));
+        run(band, 3, items, phases.band);
 
         // Phase 4: full grid only: seeds, then the jump flood ping-ponging the nearest triangles.
         if (options.full_grid && count > 0) {
             cl::Buffer nearest(cl.context, CL_MEM_READ_WRITE, size_t(voxels) * sizeof(cl_uint));
             cl::Buffer scratch(cl.context, CL_MEM_READ_WRITE, size_t(voxels) * sizeof(cl_uint));
-            cl.queue.enqueueFillBuffer(nearest, cl_uint(detail::kNoTriangle), 0,
+            cl.queue.enqueueFillBuffer(nearest, cl_uint(kNoTriangle), 0,
                                        size_t(voxels) * sizeof(cl_uint));
             cl::Kernel seeds = band_kernel("band_nearest");
             seeds.setArg(10, nearest);
-            launch_sliced(cl.queue, seeds, 3, items, detail::work_group_size(seeds, cl.device));
+            run(seeds, 3, items, phases.seeds);
 
             cl::Kernel jump(program, "jump");
-            const size_t jump_group = detail::work_group_size(jump, cl.device);
             jump.setArg(0, triangles);
             jump.setArg(3, cl_ulong(voxels));
             jump.setArg(5, cl_int(grid.dims[0]));
             jump.setArg(6, cl_int(grid.dims[1]));
             jump.setArg(7, cl_int(grid.dims[2]));
             jump.setArg(9, distance);
-            for (int step : detail::jump_steps(grid)) {
+            size_t phase = phases.first_jump;
+            for (int step : jump_steps(grid)) {
                 jump.setArg(1, nearest);
                 jump.setArg(4, cl_int(step));
                 jump.setArg(8, scratch);
-                launch_sliced(cl.queue, jump, 2, voxels, jump_group);
+                run(jump, 2, voxels, phase++);
                 std::swap(nearest, scratch);
             }
         }
         cl.queue.finish();
-        stats.seconds_kernels = seconds_since(t);
+        stats.seconds_kernels += seconds_since(t);
 
         // Phase 5: the squared distances back (float bits, as the kernels stored them).
         t = Clock::now();
         cl.queue.enqueueReadBuffer(distance, CL_TRUE, 0, size_t(voxels) * sizeof(cl_uint),
                                    distance2.data());
-        stats.seconds_download = seconds_since(t);
+        stats.seconds_download += seconds_since(t);
     } catch (const cl::Error& e) {
-        detail::throw_device_error(e, "computing a distance field on " + cl.info.name);
+        throw_device_error(e, "computing a distance field on " + cl.info.name);
     }
-
-    if (stats_out) *stats_out = stats;
-    return detail::distance_field(grid, options, prepared, distance2);
+    return distance2;
 }
 
-}  // namespace oclvox
+}  // namespace oclvox::detail

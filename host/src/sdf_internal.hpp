@@ -1,6 +1,6 @@
 // What the distance-field reference (sdf.cpp) and the device path (sdf_device.cpp) share: the
-// prepared triangles with their work items, the jump-flooding schedule and the final conversion
-// from squared voxel distances to a field.
+// prepared triangles with their work items, the jump-flooding schedule, the progress phases, the
+// squared distances each side computes and the final conversion from them to a field.
 #pragma once
 
 #include <cstdint>
@@ -8,6 +8,7 @@
 
 #include "kernel_sources.hpp"
 #include "oclvox/sdf.hpp"
+#include "progress.hpp"
 #include "sdf_math.h"
 
 namespace oclvox::detail {
@@ -44,6 +45,28 @@ SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double ba
 // to 1, then 1 again (JFA+1).
 std::vector<int> jump_steps(const Grid& grid);
 
+// The progress phases of one distance field, in the order they run: the band pass, for full-grid
+// fields the nearest-triangle seeds and each jump-flooding pass, for signed fields the sign (the
+// solid voxelization).
+struct SdfPhases {
+    size_t band = 0, seeds = 0, first_jump = 0, sign = 0;
+};
+
+// Adds them to `progress`, weighted by their estimated cost (see sdf.cpp).
+SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
+                         const SdfOptions& options, bool sign);
+
+// The squared distances in voxels of every voxel centre to its nearest prepared triangle, below
+// band2 (else band2), for full-grid fields everywhere; float, as the kernels compute them.
+// Reports the band, seeds and jump phases. The device (sdf_device.cpp) and the host reference
+// (sdf.cpp) return the same values bit for bit; stats get their timings.
+std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
+                                    const SdfOptions& options, ProgressPhases& progress,
+                                    const SdfPhases& phases, VoxelizeStats& stats);
+std::vector<float> distance2_reference(const SdfTriangles& prepared, const Grid& grid,
+                                       const SdfOptions& options, ProgressPhases& progress,
+                                       const SdfPhases& phases, VoxelizeStats& stats);
+
 // World-unit field from squared voxel distances (float bits as produced by the kernels):
 // narrow band values at or beyond band2 become exactly band * voxel_size.
 ScalarField distance_field(const Grid& grid, const SdfOptions& options,
@@ -52,5 +75,8 @@ ScalarField distance_field(const Grid& grid, const SdfOptions& options,
 // Negates the samples whose voxels are set in `inside` (a voxelization of the whole grid; the
 // field covers its layers from first_layer on).
 void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer);
+
+// csg(a, b, op) into a's values (csg.cpp); the grids must already match.
+void combine_fields(ScalarField& a, const ScalarField& b, CsgOp op);
 
 }  // namespace oclvox::detail

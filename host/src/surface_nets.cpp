@@ -12,8 +12,9 @@ namespace {
 constexpr int kBrickSize = 32;
 }  // namespace
 
-Mesh surface_nets(const ScalarField& field, float iso) {
-    return detail::mesh_field_reference(field, iso, detail::MeshingMethod::SurfaceNets, kBrickSize);
+Mesh surface_nets(const ScalarField& field, float iso, const ProgressCallback& progress) {
+    return detail::mesh_field_reference(field, iso, detail::MeshingMethod::SurfaceNets, kBrickSize,
+                                        progress);
 }
 
 }  // namespace oclvox

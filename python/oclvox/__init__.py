@@ -148,12 +148,16 @@ def _field_pad(pad, band, origin, dims):
 
 def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, inside="auto",
         voxel_size=None, origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None,
-        reference=False, layers=None):
+        reference=False, progress=None, layers=None):
     """Signed distance field (negative inside) at voxel centres; returns a Field.
 
     Exact within `band` voxels of the surface, clamped to +-band * voxel_size beyond it, or
     propagated to every voxel with full_grid=True. Grid options as for voxelize, except that
     `pad` defaults to ceil(band) + 1 when neither origin nor dims is given, as on the CLI.
+    progress: called as progress(done, total) as the work goes on (at most about every 0.05 s,
+    and at the end with done == total); done / total is the fraction of the estimated work
+    (total is 1,000,000). Returning False cancels the run, which raises oclvox.Cancelled (an
+    exception it raises is passed on).
     layers=(first, end): only the voxel layers first <= k < end of the whole grid (end 0: to the
     top), bit for bit the whole field's samples there; stacked along z, consecutive ranges give
     the whole field (narrow band only). The sign's solid still does its whole columns' work.
@@ -162,15 +166,18 @@ def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, insi
     pad = _field_pad(pad, band, origin, dims)
     return _oclvox.sdf(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), band=band,
                        full_grid=full_grid, inside=inside, brick_size=brick_size,
-                       device=_selector(device), reference=reference, layers=layers)
+                       device=_selector(device), reference=reference, progress=progress,
+                       layers=layers)
 
 
 def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", voxel_size=None,
-        origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None, reference=False):
+        origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None, reference=False,
+        progress=None):
     """Combines two shapes; op is "union", "intersection" or "difference" (a minus b).
 
     - two meshes: their signed distance fields on one grid fitted around both (grid and SDF
-      options as for sdf), combined by min / max / max(a, -b); returns a Field;
+      options, and progress over both fields, as for sdf), combined by min / max / max(a, -b);
+      returns a Field;
     - two Fields on the same grid: returns a Field;
     - two VoxelGrids on the same grid: a | b, a & b, a & ~b; returns a VoxelGrid.
     """
@@ -186,7 +193,7 @@ def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", v
                                   _fit(resolution, voxel_size, origin, dims, pad, cubic),
                                   band=band, full_grid=full_grid, inside=inside,
                                   brick_size=brick_size, device=_selector(device),
-                                  reference=reference)
+                                  reference=reference, progress=progress)
     raise TypeError("csg takes two meshes, two Fields or two VoxelGrids; got "
                     f"{type(a).__name__} and {type(b).__name__}")
 
@@ -198,12 +205,13 @@ def _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic):
                          "keep their own grid)")
 
 
-def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, reference=False):
+def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, reference=False,
+         progress=None):
     """Triangulates a field's iso-surface; returns (vertices float64 (N, 3), faces int64 (M, 3)).
 
     field: a Field, a .npy field file, or a VoxelGrid (turned into a field with `smoothing`
     box-filter passes). method: "marching-cubes" or "surface-nets". Samples < iso are inside;
-    triangles are wound counter-clockwise seen from outside.
+    triangles are wound counter-clockwise seen from outside. progress: as for sdf.
     """
     if isinstance(field, VoxelGrid):
         field = field.to_field(smoothing=smoothing)
@@ -213,18 +221,22 @@ def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, r
         raise TypeError(f"mesh takes a Field, a VoxelGrid or a .npy path; got "
                         f"{type(field).__name__}")
     surface = _oclvox.mesh(field, iso=iso, method=method, device=_selector(device),
-                           reference=reference)
+                           reference=reference, progress=progress)
     return surface.vertices, surface.faces
 
 
-def _field_mesh(self, method="marching-cubes", iso=0.0, *, device=None, reference=False):
+def _field_mesh(self, method="marching-cubes", iso=0.0, *, device=None, reference=False,
+                progress=None):
     """This field's iso-surface: (vertices, faces), as oclvox.mesh."""
-    return mesh(self, iso=iso, method=method, device=device, reference=reference)
+    return mesh(self, iso=iso, method=method, device=device, reference=reference,
+                progress=progress)
 
 
-def _grid_mesh(self, method="marching-cubes", *, smoothing=1, device=None, reference=False):
+def _grid_mesh(self, method="marching-cubes", *, smoothing=1, device=None, reference=False,
+               progress=None):
     """The surface of these voxels (through a smoothed field): (vertices, faces), as oclvox.mesh."""
-    return mesh(self, method=method, smoothing=smoothing, device=device, reference=reference)
+    return mesh(self, method=method, smoothing=smoothing, device=device, reference=reference,
+                progress=progress)
 
 
 Field.mesh = _field_mesh

@@ -4,7 +4,8 @@
 //
 // Every call that does real work (device or CPU reference) releases the GIL while it runs, so other
 // Python threads go on; device calls take the device's lock so that one device serves one call at a
-// time.
+// time. The long ones (voxelize, sdf, csg of meshes, mesh) take a progress callback, which takes
+// the GIL back only while it runs (ProgressBridge).
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -223,12 +224,11 @@ VoxelGrid voxelize(const oclvox::Mesh& mesh, const oclvox::GridFit& fit,
                    oclvox::VoxelizeOptions options, const py::object& device_selector,
                    bool reference, py::object progress) {
     ProgressBridge bridge(std::move(progress));
-    options.progress = bridge.callback();
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
     VoxelGrid result;
     result.device = device_name(device);
-    try {
-        py::gil_scoped_release release;
+    bridge.run_released([&](oclvox::ProgressCallback callback) {
+        options.progress = std::move(callback);
         const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
         if (device) {
             std::lock_guard<std::mutex> lock(device->in_use);
@@ -236,52 +236,53 @@ VoxelGrid voxelize(const oclvox::Mesh& mesh, const oclvox::GridFit& fit,
         } else {
             result.voxels = oclvox::voxelize_reference(mesh, grid, options, &result.stats);
         }
-    } catch (const oclvox::Cancelled&) {
-        bridge.rethrow_python_error();
-        throw;
-    }
+        return 0;
+    });
     return result;
 }
 
-oclvox::ScalarField signed_distance(const std::shared_ptr<SharedDevice>& device,
-                                    const oclvox::Mesh& mesh, const oclvox::Grid& grid,
-                                    const oclvox::SdfOptions& options,
-                                    oclvox::VoxelizeStats* stats) {
-    if (!device) return oclvox::signed_distance_reference(mesh, grid, options, stats);
-    std::lock_guard<std::mutex> lock(device->in_use);
-    return oclvox::signed_distance(device->device, mesh, grid, options, stats);
-}
-
-Field sdf(const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const oclvox::SdfOptions& options,
-          const py::object& device_selector, bool reference) {
+Field sdf(const oclvox::Mesh& mesh, const oclvox::GridFit& fit, oclvox::SdfOptions options,
+          const py::object& device_selector, bool reference, py::object progress) {
+    ProgressBridge bridge(std::move(progress));
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
     Field result;
     result.device = device_name(device);
     result.band_voxels = options.full_grid ? 0 : options.band_voxels;
-    py::gil_scoped_release release;
-    const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
-    result.field = signed_distance(device, mesh, grid, options, &result.stats);
+    bridge.run_released([&](oclvox::ProgressCallback callback) {
+        options.progress = std::move(callback);
+        const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
+        if (!device) {
+            result.field = oclvox::signed_distance_reference(mesh, grid, options, &result.stats);
+            return 0;
+        }
+        std::lock_guard<std::mutex> lock(device->in_use);
+        result.field = oclvox::signed_distance(device->device, mesh, grid, options, &result.stats);
+        return 0;
+    });
     return result;
 }
 
 Field csg_meshes(const oclvox::Mesh& a, const std::string& op_name, const oclvox::Mesh& b,
-                 const oclvox::GridFit& fit, const oclvox::SdfOptions& options,
-                 const py::object& device_selector, bool reference) {
+                 const oclvox::GridFit& fit, oclvox::SdfOptions options,
+                 const py::object& device_selector, bool reference, py::object progress) {
     const oclvox::CsgOp op = oclvox::csg_op_from_string(op_name);
+    ProgressBridge bridge(std::move(progress));
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
     Field result;
     result.device = device_name(device);
     result.band_voxels = options.full_grid ? 0 : options.band_voxels;
-    py::gil_scoped_release release;
-    // Both fields on one grid around both meshes, as the CLI's csg does.
-    const oclvox::Grid grid = oclvox::fit_grid(a, b, fit);
-    oclvox::VoxelizeStats stats_b;
-    const oclvox::ScalarField field_a = signed_distance(device, a, grid, options, &result.stats);
-    const oclvox::ScalarField field_b = signed_distance(device, b, grid, options, &stats_b);
-    result.field = oclvox::csg(field_a, field_b, op);
-    result.stats.triangles_in += stats_b.triangles_in;
-    result.stats.triangles_used += stats_b.triangles_used;
-    result.stats.work_items += stats_b.work_items;
+    bridge.run_released([&](oclvox::ProgressCallback callback) {
+        options.progress = std::move(callback);
+        // Both fields on one grid around both meshes, as the CLI's csg does.
+        const oclvox::Grid grid = oclvox::fit_grid(a, b, fit);
+        if (!device) {
+            result.field = oclvox::csg_reference(a, b, op, grid, options, &result.stats);
+            return 0;
+        }
+        std::lock_guard<std::mutex> lock(device->in_use);
+        result.field = oclvox::csg(device->device, a, b, op, grid, options, &result.stats);
+        return 0;
+    });
     return result;
 }
 
@@ -303,19 +304,22 @@ VoxelGrid csg_voxels(const VoxelGrid& a, const std::string& op_name, const Voxel
 }
 
 oclvox::Mesh extract_surface(const Field& field, float iso, const std::string& method,
-                             const py::object& device_selector, bool reference) {
+                             const py::object& device_selector, bool reference,
+                             py::object progress) {
     const bool marching_cubes = method == "marching-cubes";
     if (!marching_cubes && method != "surface-nets")
         throw oclvox::GridError("unknown meshing method '" + method +
                                 "' (expected marching-cubes or surface-nets)");
+    ProgressBridge bridge(std::move(progress));
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
-    py::gil_scoped_release release;
-    if (!device)
-        return marching_cubes ? oclvox::marching_cubes(field.field, iso)
-                              : oclvox::surface_nets(field.field, iso);
-    std::lock_guard<std::mutex> lock(device->in_use);
-    return marching_cubes ? oclvox::marching_cubes(device->device, field.field, iso)
-                          : oclvox::surface_nets(device->device, field.field, iso);
+    return bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+        if (!device)
+            return marching_cubes ? oclvox::marching_cubes(field.field, iso, callback)
+                                  : oclvox::surface_nets(field.field, iso, callback);
+        std::lock_guard<std::mutex> lock(device->in_use);
+        return marching_cubes ? oclvox::marching_cubes(device->device, field.field, iso, callback)
+                              : oclvox::surface_nets(device->device, field.field, iso, callback);
+    });
 }
 
 py::list devices() {
@@ -524,25 +528,26 @@ PYBIND11_MODULE(_oclvox, m) {
         "sdf",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, double band, bool full_grid,
            const std::string& inside, int brick_size, py::object device, bool reference,
-           std::optional<std::array<int64_t, 2>> layers) {
+           py::object progress, std::optional<std::array<int64_t, 2>> layers) {
             return sdf(mesh, fit, sdf_options(band, full_grid, inside, brick_size, layers), device,
-                       reference);
+                       reference, std::move(progress));
         },
         "mesh"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a, "device"_a,
-        "reference"_a, "layers"_a = py::none());
+        "reference"_a, "progress"_a, "layers"_a = py::none());
     m.def(
         "csg_meshes",
         [](const oclvox::Mesh& a, const std::string& op, const oclvox::Mesh& b,
            const oclvox::GridFit& fit, double band, bool full_grid, const std::string& inside,
-           int brick_size, py::object device, bool reference) {
+           int brick_size, py::object device, bool reference, py::object progress) {
             return csg_meshes(a, op, b, fit, sdf_options(band, full_grid, inside, brick_size),
-                              device, reference);
+                              device, reference, std::move(progress));
         },
         "a"_a, "op"_a, "b"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a,
-        "device"_a, "reference"_a);
+        "device"_a, "reference"_a, "progress"_a);
     m.def("csg_fields", &csg_fields, "a"_a, "op"_a, "b"_a);
     m.def("csg_voxels", &csg_voxels, "a"_a, "op"_a, "b"_a);
-    m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a);
+    m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a,
+          "progress"_a);
     m.def("devices", &devices);
     m.def("field_padding", &oclvox::field_padding, "band_voxels"_a);
     // The grid a call with this fit works on, without the work: (origin, voxel_size, dims). For

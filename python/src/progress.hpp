@@ -12,18 +12,31 @@ namespace oclvox_python {
 
 class ProgressBridge {
   public:
-    // `callback`: None, or a callable taking (bricks_done, bricks_total); a result that is not
-    // None and is false cancels the run.
+    // `callback`: None, or a callable taking (done, total); a result that is not None and is
+    // false cancels the run.
     explicit ProgressBridge(pybind11::object callback);
 
-    // For VoxelizeOptions::progress. It refers to this bridge, which must outlive the run.
+    // For the options' progress callback. It refers to this bridge, which must outlive the run.
     oclvox::ProgressCallback callback();
 
-    // After a run threw oclvox::Cancelled: if the cancel came from a Python exception (raised by
-    // the callback or by a signal handler such as KeyboardInterrupt), throws that instead.
-    void rethrow_python_error();
+    // Runs work(callback()) with the GIL released. If the run is cancelled by a Python exception
+    // (raised by the callback or by a signal handler such as KeyboardInterrupt), that exception
+    // is raised instead of oclvox.Cancelled.
+    template <typename Work>
+    auto run_released(Work&& work) {
+        try {
+            pybind11::gil_scoped_release release;
+            return work(callback());
+        } catch (const oclvox::Cancelled&) {
+            rethrow_python_error();
+            throw;
+        }
+    }
 
   private:
+    // After a run threw oclvox::Cancelled: throws the Python exception that caused it, if any.
+    void rethrow_python_error();
+
     bool report(uint64_t done, uint64_t total);
 
     pybind11::object callback_;

@@ -49,6 +49,60 @@ def test_exception_in_callback_is_raised(spot):
         oclvox.voxelize(*spot, 64, progress=42)
 
 
+def check_contract(calls):
+    """The field functions' progress: one fixed total, done never back, the last call at the end."""
+    assert calls, "never called"
+    assert len({total for _, total in calls}) == 1
+    assert all(a[0] <= b[0] <= b[1] for a, b in zip(calls, calls[1:]))
+    assert calls[-1][0] == calls[-1][1]
+
+
+@pytest.mark.parametrize("reference", [False, True])
+def test_sdf_progress_and_cancel(spot, reference):
+    calls = []
+    field = oclvox.sdf(*spot, 64, reference=reference,
+                       progress=lambda done, total: calls.append((done, total)))
+    check_contract(calls)
+    # Reporting changes nothing.
+    assert np.array_equal(field.to_numpy(), oclvox.sdf(*spot, 64, reference=reference).to_numpy())
+
+    calls = []
+
+    def stop(done, total):
+        calls.append(done)
+        return False
+
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.sdf(*spot, 64, reference=reference, progress=stop)
+    assert len(calls) == 1  # stopped at the first report
+    with pytest.raises(ZeroDivisionError):
+        oclvox.sdf(*spot, 64, reference=reference, progress=lambda done, total: 1 / 0)
+
+
+def test_csg_and_mesh_progress_and_cancel(spot):
+    calls = []
+    field = oclvox.csg(spot, "difference", spot, 48,
+                       progress=lambda done, total: calls.append((done, total)))
+    check_contract(calls)
+    calls = []
+    field.mesh(progress=lambda done, total: calls.append((done, total)))
+    check_contract(calls)
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.csg(spot, "union", spot, 48, progress=lambda done, total: False)
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.mesh(field, progress=lambda done, total: False)
+
+
+def test_cancel_stops_a_long_sdf_promptly(spot):
+    # A full-grid 256^3 field takes minutes through PoCL; a callback that says stop after 0.5 s
+    # must end it soon after (kernels run in slices of about 0.1 s while a callback is set).
+    start = time.perf_counter()
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.sdf(*spot, 256, full_grid=True,
+                   progress=lambda done, total: time.perf_counter() - start < 0.5)
+    assert time.perf_counter() - start < 2.5
+
+
 def run_while_ticking(spot, resolution):
     """Voxelizes in a worker thread while the main thread ticks; returns (span, ticks)."""
     span = {}

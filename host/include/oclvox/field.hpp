@@ -52,8 +52,11 @@ uint64_t border_samples_inside(const ScalarField& field, float iso = 0.0f);
 // cell face has four sign changes (true for smooth fields sampled finely enough); at such faces
 // the method is inherently non-manifold. Host reference.
 // Both meshing functions throw GridError if values.size() does not match the grid and InputError
-// for a non-finite sample or iso.
-Mesh surface_nets(const ScalarField& field, float iso = 0.0f);
+// for a non-finite sample or iso. `progress` is called as the work goes on, as SdfOptions::progress
+// is (done / total the fraction of the estimated work, total 1,000,000, and once more at the end
+// with done == total); returning false cancels (the run throws Cancelled).
+Mesh surface_nets(const ScalarField& field, float iso = 0.0f,
+                  const ProgressCallback& progress = {});
 
 // Marching Cubes with face ambiguities resolved by the asymptotic decider (Nielson & Hamann
 // 1991), decided from the face's four samples alone so both cells sharing a face agree: the
@@ -63,12 +66,15 @@ Mesh surface_nets(const ScalarField& field, float iso = 0.0f);
 // ambiguous configurations, rare on smooth fields) gets one extra vertex at the mean of its
 // crossings, as in Marching Cubes 33. Body (interior) ambiguities are not resolved (no tunnels),
 // which never opens the surface. The case table is derived programmatically. Host reference.
-Mesh marching_cubes(const ScalarField& field, float iso = 0.0f);
+Mesh marching_cubes(const ScalarField& field, float iso = 0.0f,
+                    const ProgressCallback& progress = {});
 
 // The same meshes computed on an OpenCL device: vertex positions equal to the reference bit for
 // bit, same vertex order, same triangles. Also throws DeviceError on OpenCL failures.
-Mesh surface_nets(Device& device, const ScalarField& field, float iso = 0.0f);
-Mesh marching_cubes(Device& device, const ScalarField& field, float iso = 0.0f);
+Mesh surface_nets(Device& device, const ScalarField& field, float iso = 0.0f,
+                  const ProgressCallback& progress = {});
+Mesh marching_cubes(Device& device, const ScalarField& field, float iso = 0.0f,
+                    const ProgressCallback& progress = {});
 
 // Writes a triangle mesh by extension (case-insensitive): .obj (text, exact shortest decimals),
 // .ply (binary little-endian, double vertices, int indices), .stl (binary, float, facet normals).

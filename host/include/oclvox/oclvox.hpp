@@ -206,8 +206,12 @@ enum class Boundary {
 const char* to_string(Boundary boundary);
 Boundary boundary_from_string(const std::string& name);
 
-// Called after each batch of bricks; return false to cancel (the run throws Cancelled).
-using ProgressCallback = std::function<bool(uint64_t bricks_done, uint64_t bricks_total)>;
+// Progress and cancellation of a long run: called on the calling thread as the work goes on with
+// how much is done of a total that does not change during the run, done never going back; return
+// false to cancel (the run throws Cancelled). Voxelization counts bricks and calls it after each
+// batch; the distance fields (SdfOptions) and meshing (field.hpp) count fractions of a fixed
+// total.
+using ProgressCallback = std::function<bool(uint64_t done, uint64_t total)>;
 
 struct VoxelizeOptions {
     VoxelizeMode mode = VoxelizeMode::Surface;

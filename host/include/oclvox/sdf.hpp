@@ -27,6 +27,13 @@ struct SdfOptions {
     // fields of consecutive layer ranges, computed anywhere, stack into the whole field.
     // Narrow-band fields only: jump flooding (full_grid) crosses layers.
     int64_t first_layer = 0, end_layer = 0;
+    // Called as the work goes on (at most about every 0.05 s, and once more at the end with
+    // done == total); return false to cancel (the run throws Cancelled). A run's phases (the band
+    // pass, each jump-flooding pass, the sign's solid voxelization; both fields of a CSG) count
+    // in different units, so done / total is the fraction of the run's estimated work: total is
+    // always 1,000,000 and done never goes back. On a device, kernels run in slices of about
+    // 0.1 s while a callback is set, so a cancel takes effect within about that long.
+    ProgressCallback progress;
 };
 
 // Margin, in voxels on every side, for a grid fitted to a mesh whose distance field is written or
@@ -92,6 +99,15 @@ SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b, CsgOp op);
 // One grid fitted (as fit_grid(mesh, fit)) to the union of both meshes' boxes, so their fields
 // can be combined.
 Grid fit_grid(const Mesh& a, const Mesh& b, const GridFit& fit);
+
+// CSG of two meshes: csg(signed_distance(a), signed_distance(b), op) on `grid` (usually
+// fit_grid(a, b, fit)), holding two fields at a time rather than three. options.progress sees
+// both fields as one run. stats: a's, with b's triangle and work item counts and timings added.
+// The device result equals csg_reference bit for bit.
+ScalarField csg(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                const SdfOptions& options, VoxelizeStats* stats = nullptr);
+ScalarField csg_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                          const SdfOptions& options, VoxelizeStats* stats = nullptr);
 
 // ---------------------------------------------------------------------------------------------
 // Field files
