@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "host_memory.hpp"
 #include "sdf_internal.hpp"
 
 namespace oclvox {
@@ -89,7 +90,7 @@ void jump_pass(const SdfTriangles& prepared, const Grid& grid, int step,
 
 }  // namespace
 
-void validate_sdf(const Grid& grid, const SdfOptions& options) {
+void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel) {
     validate_grid(grid);
     if (!(options.band_voxels > 0) || !std::isfinite(options.band_voxels) ||
         options.band_voxels > double(kMaxGridAxis))
@@ -100,6 +101,11 @@ void validate_sdf(const Grid& grid, const SdfOptions& options) {
         throw GridError("a dense distance field of " + std::to_string(grid.voxel_count()) +
                         " voxels is over the limit of " + std::to_string(kMaxFieldVoxels) +
                         ": lower the resolution");
+    check_host_memory(
+        grid.voxel_count() * host_bytes_per_voxel, host_budget(options.host_budget_bytes),
+        "a dense distance field of " + std::to_string(grid.dims[0]) + "x" +
+            std::to_string(grid.dims[1]) + "x" + std::to_string(grid.dims[2]) + " voxels (" +
+            std::to_string(host_bytes_per_voxel) + " bytes per voxel with its working copies)");
 }
 
 std::vector<int> jump_steps(const Grid& grid) {
@@ -165,9 +171,10 @@ int64_t field_padding(double band_voxels) {
 ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
                                         const SdfOptions& options, VoxelizeStats* stats_out) {
     VoxelizeStats stats;
-    // Phase 1: validate and prepare.
+    // Phase 1: validate and prepare. The squared distances and the field made from them, and for
+    // full-grid fields two buffers of nearest triangles, are held at once.
     auto t = std::chrono::steady_clock::now();
-    detail::validate_sdf(grid, options);
+    detail::validate_sdf(grid, options, options.full_grid ? 16 : 8);
     const detail::SdfTriangles prepared =
         detail::prepare_sdf_triangles(mesh, grid, options.band_voxels);
     stats.triangles_in = mesh.triangles.size();
@@ -202,6 +209,7 @@ ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const 
     solid.mode = VoxelizeMode::Solid;
     solid.inside = options.inside;
     solid.brick_size = options.brick_size;
+    solid.host_budget_bytes = options.host_budget_bytes;
     detail::apply_sign(field, voxelize_reference(mesh, grid, solid, &solid_stats));
     stats.seconds_binning += solid_stats.seconds_binning;
     stats.seconds_kernels += solid_stats.seconds_kernels;
@@ -220,11 +228,13 @@ ScalarField signed_distance(Device& device, const Mesh& mesh, const Grid& grid,
     solid.mode = VoxelizeMode::Solid;
     solid.inside = options.inside;
     solid.brick_size = options.brick_size;
+    solid.host_budget_bytes = options.host_budget_bytes;
     detail::apply_sign(field, device.voxelize(mesh, grid, solid, &solid_stats));
     stats.seconds_binning += solid_stats.seconds_binning;
     stats.seconds_upload += solid_stats.seconds_upload;
     stats.seconds_kernels += solid_stats.seconds_kernels;
     stats.seconds_download += solid_stats.seconds_download;
+    stats.allocation_retries += solid_stats.allocation_retries;
     stats.voxels_set = solid_stats.voxels_set;
     stats.inside_test = solid_stats.inside_test;
     stats.inside_test_reason = solid_stats.inside_test_reason;

@@ -43,9 +43,12 @@ ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& grid
     VoxelizeStats stats;
     Device::Impl& cl = device.impl();
 
-    // Phase 1: validate and prepare on the host; the dense buffer must fit one allocation.
+    // Phase 1: validate and prepare on the host; the host holds the squared distances and the
+    // field made from them, the device the dense buffer in one allocation. The buffers are
+    // allocated once for the whole field, not per batch, so a device allocation failure is a
+    // DeviceError: there is no smaller batch to retry with.
     auto t = Clock::now();
-    detail::validate_sdf(grid, options);
+    detail::validate_sdf(grid, options, 8);
     const detail::SdfTriangles prepared =
         detail::prepare_sdf_triangles(mesh, grid, options.band_voxels);
     const uint64_t voxels = grid.voxel_count();

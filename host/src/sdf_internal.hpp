@@ -25,8 +25,9 @@ struct SdfTriangles {
 };
 
 // Throws GridError for a band that is not a finite positive number of voxels or a grid whose
-// dense field is too large to hold.
-void validate_sdf(const Grid& grid, const SdfOptions& options);
+// dense field is too large to hold: over 2^32 voxels, or host_bytes_per_voxel bytes per voxel
+// (the field and the caller's working copies of it) over the host memory budget.
+void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel);
 
 // Validates mesh and grid, maps the triangles to voxel units, drops those farther than the band
 // from every voxel centre and computes each one's distance constants (sdf_prepare.cpp).
