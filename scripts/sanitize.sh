@@ -20,8 +20,23 @@ cmake --build build-asan -j"$(nproc)"
 
 # The OpenCL runtime (PoCL and the LLVM it loads) is not instrumented and keeps some allocations
 # for the life of the process; scripts/lsan.supp names those libraries, and only those.
-export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=1"
+# Every report is also written to a file in build-asan/sanitizer-reports/: a report from a process
+# whose failure a test expects (the CLI exiting 1 on bad input, after printing its error) must
+# not pass as that failure.
+reports="$PWD/build-asan/sanitizer-reports"
+rm -rf "$reports" && mkdir -p "$reports"
+export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=1:log_path=$reports/asan"
 export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
-export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-cd build-asan
-ctest --output-on-failure -j"$(nproc)" --timeout 1800 -E '^install_consumer$' "$@"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:log_path=$reports/ubsan"
+status=0
+(cd build-asan && ctest --output-on-failure -j"$(nproc)" --timeout 1800 -E '^install_consumer$' "$@") ||
+    status=$?
+if [ -n "$(ls -A "$reports")" ]; then
+    echo "sanitizer reports (build-asan/sanitizer-reports):"
+    for report in "$reports"/*; do
+        echo "--- $report"
+        cat "$report"
+    done
+    exit 1
+fi
+exit "$status"
