@@ -4,6 +4,7 @@
 // to one, and each retry is counted in VoxelizeStats::allocation_retries.
 #pragma once
 
+#include <algorithm>
 #include <cstdlib>
 #include <string>
 
@@ -60,6 +61,7 @@ class SlotBuffer {
 template <typename RunBatch>
 void run_batches(const cl::CommandQueue& queue, uint64_t total, size_t& slots, VoxelizeStats& stats,
                  const std::string& doing, const char* unit, RunBatch&& run_batch) {
+    slots = std::max<size_t>(slots, 1);  // a batch of none would never finish
     for (uint64_t done = 0; done < total;) {
         try {
             done += run_batch(done, slots);
