@@ -108,6 +108,7 @@ int run(const FieldArgs& args) {
         stats.triangles_in += stats_b.triangles_in;
         stats.triangles_used += stats_b.triangles_used;
         stats.work_items += stats_b.work_items;
+        stats.allocation_retries += stats_b.allocation_retries;
         record.stats = stats;
     }
 
