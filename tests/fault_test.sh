@@ -190,7 +190,7 @@ fi
 "$OCLVOX" voxelize "$MESH" -r 256 --brick-size 128 --reference -q -o "$WORK/device/expected.binvox"
 OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=1 run voxelize "$MESH" -r 256 --brick-size 128 \
     -o "$WORK/device/retried.binvox"
-if [ "$RC" -eq 0 ] && grep -q "batches retried with fewer bricks" "$WORK/stdout" &&
+if [ "$RC" -eq 0 ] && grep -q "batches retried smaller" "$WORK/stdout" &&
     cmp -s "$WORK/device/retried.binvox" "$WORK/device/expected.binvox"; then
     pass "device allocation failure: retried with smaller batches, said so, same voxels"
 else
@@ -198,6 +198,54 @@ else
         "exit $RC, stdout: $(cat "$WORK/stdout"), stderr: ${ERR:0:300}"
 fi
 rm -f "$WORK/device/retried.binvox"
+
+# The solid and the signed distance take the same retries: parity's brick columns (each 512 KiB
+# of bits and 512 KiB of bricks here; all of them fail, half of them fit), the winding number's
+# points (batches over 4 KiB fail) and the parity solid that signs a distance field. Each result
+# must equal the one made without faults (parity: the CPU reference; the winding number and the
+# distances: the device without faults, since both evaluate each voxel alone, whatever the batch).
+retried() {  # name, expected file, result file, command...
+    local name=$1 expected=$2 result=$3
+    shift 3
+    run "$@"
+    if [ "$RC" -eq 0 ] && grep -q "batches retried smaller" "$WORK/stdout" &&
+        cmp -s "$result" "$expected"; then
+        pass "device allocation failure, $name: retried with smaller batches, said so, same result"
+    else
+        fail "device allocation failure, $name: retried with smaller batches, said so, same result" \
+            "exit $RC, stdout: $(cat "$WORK/stdout"), stderr: ${ERR:0:300}"
+    fi
+    rm -f "$result" "$expected" "$expected.json" "$result.json"
+}
+"$OCLVOX" voxelize "$MESH" -r 256 --brick-size 128 --mode solid --reference -q \
+    -o "$WORK/device/expected.binvox"
+OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=1 retried "parity solid" "$WORK/device/expected.binvox" \
+    "$WORK/device/retried.binvox" voxelize "$MESH" -r 256 --brick-size 128 --mode solid \
+    -o "$WORK/device/retried.binvox"
+"$OCLVOX" voxelize "$MESH" -r 128 --mode solid --inside winding -q \
+    -o "$WORK/device/expected.binvox"
+OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0.004 retried "winding-number solid" \
+    "$WORK/device/expected.binvox" "$WORK/device/retried.binvox" voxelize "$MESH" -r 128 \
+    --mode solid --inside winding -o "$WORK/device/retried.binvox"
+"$OCLVOX" sdf "$MESH" -r 128 -q -o "$WORK/device/expected.npy"
+OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0.25 retried "sdf sign" "$WORK/device/expected.npy" \
+    "$WORK/device/retried.npy" sdf "$MESH" -r 128 -o "$WORK/device/retried.npy"
+# csg computes two distance fields: its count is the sum of both (here the same mesh twice on the
+# same grid, so twice the sdf's).
+retries() {  # command... (prints allocation_retries of its --json summary)
+    OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0.1 "$OCLVOX" "$@" --json 2>/dev/null |
+        python3 -c 'import json, sys; print(json.load(sys.stdin)["allocation_retries"])'
+}
+sdf_retries=$(retries sdf "$MESH" -r 96 -o "$WORK/device/one.npy")
+csg_retries=$(retries csg "$MESH" union "$MESH" -r 96 -o "$WORK/device/two.npy")
+if [ -n "$sdf_retries" ] && [ "$sdf_retries" -gt 0 ] && [ "$csg_retries" = $((2 * sdf_retries)) ]; then
+    pass "device allocation failure, csg: both distance fields' retries counted ($csg_retries)"
+else
+    fail "device allocation failure, csg: both distance fields' retries counted" \
+        "sdf: '$sdf_retries', csg: '$csg_retries' (expected twice the sdf's)"
+fi
+rm -f "$WORK/device/"*
+"$OCLVOX" voxelize "$MESH" -r 256 --brick-size 128 --reference -q -o "$WORK/device/expected.binvox"
 
 # Every allocation failing is an OpenCL error in the middle of the run (kernels built, triangles
 # uploaded): a clear error naming it, no output.
@@ -210,6 +258,34 @@ if [ "$RC" -eq 1 ] && grep -q "even for a batch of one brick" <<<"$ERR" &&
 else
     fail "device allocation always failing: exit 1 naming the failure, no output" \
         "exit $RC, left: $(listing "$WORK/device"), stderr: ${ERR:0:300}"
+fi
+
+# Every allocation failing, in the winding number's point batches: the same error, down to one
+# point.
+OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0 run voxelize "$MESH" -r 64 --mode solid --inside winding -q \
+    -o "$WORK/device/out.binvox"
+if [ "$RC" -eq 1 ] && grep -q "even for a batch of one point" <<<"$ERR" &&
+    [ "$(listing "$WORK/device")" = "expected.binvox " ]; then
+    pass "winding-number allocation always failing: retried down to one point, exit 1, no output"
+else
+    fail "winding-number allocation always failing: exit 1 naming the failure, no output" \
+        "exit $RC, left: $(listing "$WORK/device"), stderr: ${ERR:0:300}"
+fi
+
+# ---------------------------------------------------------------------------------------------
+# Host memory: a dense field over the budget (OCLVOX_HOST_MEMORY_MIB) is refused before it is
+# allocated, at once, naming its size and the budget; here 149x260x264 voxels at 8 bytes (78 MiB).
+# ---------------------------------------------------------------------------------------------
+mkdir -p "$WORK/memory"
+start=$(date +%s%N)
+OCLVOX_HOST_MEMORY_MIB=8 run sdf "$MESH" -r 256 --reference -q -o "$WORK/memory/out.npy"
+took_ms=$((($(date +%s%N) - start) / 1000000))
+if [ "$RC" -eq 1 ] && grep -q "needs [0-9]* MiB of host memory, over the host memory budget of 8 MiB" <<<"$ERR" &&
+    [ -z "$(listing "$WORK/memory")" ] && [ "$took_ms" -lt 2000 ]; then
+    pass "dense field over the host budget: exit 1 in $took_ms ms, sizes named, no output"
+else
+    fail "dense field over the host budget: exit 1 at once, sizes named, no output" \
+        "exit $RC after $took_ms ms, left: $(listing "$WORK/memory"), stderr: ${ERR:0:300}"
 fi
 
 echo "fault_test: $passed passed, $failed failed, $skipped skipped"

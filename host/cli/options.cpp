@@ -252,8 +252,10 @@ void add_tiling_options(CLI::App& command, TilingArgs& args) {
         ->capture_default_str()
         ->group("Tiling");
     command
-        .add_option("--host-memory", args.host_mib,
-                    "host memory for the result, in MiB; 0 means half of physical memory")
+        .add_option(
+            "--host-memory", args.host_mib,
+            "host memory for the result, in MiB; 0 means $OCLVOX_HOST_MEMORY_MIB, else half "
+            "of physical memory")
         ->type_name("MIB")
         ->check(CLI::Range(uint64_t(0), uint64_t(1) << 24))
         ->capture_default_str()

@@ -122,10 +122,8 @@ std::string summary_text(const RunRecord& r) {
     else
         text += "device   CPU reference\n";
     if (r.stats && r.stats->allocation_retries)
-        text += format(
-            "memory   device allocations failed; %llu batches retried with fewer "
-            "bricks\n",
-            ull(r.stats->allocation_retries));
+        text += format("memory   device allocations failed; %llu batches retried smaller\n",
+                       ull(r.stats->allocation_retries));
     if (is_voxelize(r) && r.stats) text += format("voxels   %llu set\n", ull(r.stats->voxels_set));
     if (r.mesh_made)
         text += format("mesh     %zu triangles, %zu vertices\n", r.mesh_made->first,

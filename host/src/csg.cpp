@@ -6,6 +6,8 @@
 #include <cstdint>
 
 #include "file_names.hpp"
+#include "host_memory.hpp"
+#include "oclvox/sdf.hpp"
 #include "sdf_internal.hpp"
 
 namespace oclvox {
@@ -67,6 +69,9 @@ ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op) {
         throw GridError("CSG on a field whose value count (" + std::to_string(a.values.size()) +
                         ", " + std::to_string(b.values.size()) + ") does not match its grid's " +
                         std::to_string(a.grid.voxel_count()) + " voxels");
+    detail::check_host_memory(
+        a.values.size() * sizeof(float), detail::default_host_budget(),
+        "the CSG result field of " + std::to_string(a.values.size()) + " samples");
     ScalarField out = a;
     detail::combine_fields(out, b, op);
     return out;

@@ -5,14 +5,13 @@
 // budget: per batch, upload the (triangle, brick) pairs and their work-item offsets, clear the
 // batch's brick bits, run the voxel kernel over all work items, and merge the bits that come
 // back into the sparse result. A batch the device cannot allocate memory for is retried with half
-// as many bricks, down to one.
+// as many bricks, down to one (device_batches.hpp).
 #include <algorithm>
 #include <chrono>
-#include <cstdlib>
-#include <cstring>
 
 #include "binning.hpp"
 #include "brick_selection.hpp"
+#include "device_batches.hpp"
 #include "host_memory.hpp"
 #include "opencl_runtime.hpp"
 #include "prepare.hpp"
@@ -32,25 +31,6 @@ double seconds_since(Clock::time_point t) {
 // single enqueue is enormous (keeps drivers' watchdogs and PoCL's scheduling happy).
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
-
-std::string mib(uint64_t bytes) {
-    return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB";
-}
-
-// Out-of-memory statuses, after which a smaller batch may succeed.
-bool is_allocation_failure(cl_int status) {
-    return status == CL_MEM_OBJECT_ALLOCATION_FAILURE || status == CL_OUT_OF_RESOURCES ||
-           status == CL_OUT_OF_HOST_MEMORY;
-}
-
-// Fault injection for tests/fault_test.sh: OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=N makes every brick
-// bit buffer larger than N MiB fail as the device would when out of memory.
-cl::Buffer bits_buffer(const cl::Context& context, size_t bytes) {
-    static const char* const limit_mib = std::getenv("OCLVOX_FAULT_DEVICE_ALLOCATION_MIB");
-    if (limit_mib && bytes > (std::strtoull(limit_mib, nullptr, 10) << 20))
-        throw cl::Error(CL_MEM_OBJECT_ALLOCATION_FAILURE, "clCreateBuffer (injected fault)");
-    return cl::Buffer(context, CL_MEM_READ_WRITE, bytes);
-}
 
 struct Batch {
     size_t first_brick = 0, brick_count = 0;
@@ -115,7 +95,9 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
         if (options.mode == VoxelizeMode::Filled) {
             VoxelizeOptions surface = options;
             surface.mode = VoxelizeMode::Surface;
-            detail::add_surface(out, voxelize(mesh, grid, surface), stats);
+            VoxelizeStats surface_stats;
+            detail::add_surface(out, voxelize(mesh, grid, surface, &surface_stats), stats);
+            stats.allocation_retries += surface_stats.allocation_retries;
         }
         selection.restrict(out);
         stats.voxels_set = out.count();
@@ -144,19 +126,15 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     // Phase 2: budgets. The sparse result can need every active brick on the host; the device
     // holds one batch of bricks at a time.
     const uint64_t brick_bytes = result.blocks_per_brick() * sizeof(uint64_t);
-    const uint64_t host_budget =
-        options.host_budget_bytes ? options.host_budget_bytes : detail::physical_memory() / 2;
-    if (stats.bricks_active * brick_bytes > host_budget)
-        throw GridError("the result may need " + mib(stats.bricks_active * brick_bytes) +
-                        " of host memory for " + std::to_string(stats.bricks_active) +
-                        " active bricks, over the host budget of " + mib(host_budget) +
-                        ": lower the resolution or raise the budget");
+    detail::check_host_memory(
+        stats.bricks_active * brick_bytes, detail::host_budget(options.host_budget_bytes),
+        "the result of " + std::to_string(stats.bricks_active) + " active bricks");
     const uint64_t device_budget = std::min<uint64_t>(
         {options.device_budget_bytes, cl.info.max_alloc, cl.info.global_memory / 2});
     if (brick_bytes > device_budget)
         throw GridError("one brick of " + std::to_string(brick_size) + "^3 voxels needs " +
-                        mib(brick_bytes) + ", over the device budget of " + mib(device_budget) +
-                        ": use smaller bricks");
+                        detail::mib_text(brick_bytes) + ", over the device budget of " +
+                        detail::mib_text(device_budget) + ": use smaller bricks");
     const size_t max_slots = size_t(std::max<uint64_t>(1, device_budget / brick_bytes));
 
     if (!prepared.triangles.empty()) try {
@@ -188,87 +166,73 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             std::vector<cl_uint> host_bits;
             std::vector<uint64_t> blocks(result.blocks_per_brick());
             size_t slots = std::min(max_slots, binning.bricks.size());
-            cl::Buffer bits;
+            detail::SlotBuffer bits(CL_MEM_READ_WRITE, words_per_brick * sizeof(cl_uint));
 
-            // Phase 4: batches of bricks. On a device allocation failure the same bricks are
-            // retried in batches of half the size; nothing of a failed batch has been merged.
-            for (size_t done = 0; done < binning.bricks.size();) {
-                try {
-                    t = Clock::now();
-                    if (!bits())
-                        bits = bits_buffer(cl.context, slots * words_per_brick * sizeof(cl_uint));
-                    Batch batch = make_batch(binning, prepared, grid, brick_size, done, slots);
-                    const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
-                    batch.pair_first_item.push_back(cl_uint(batch.items));
-                    const size_t bit_words = batch.brick_count * words_per_brick;
-                    const cl::Buffer pair_triangle =
-                        detail::upload(cl.context, cl.queue, batch.pair_triangle);
-                    const cl::Buffer pair_slot =
-                        detail::upload(cl.context, cl.queue, batch.pair_slot);
-                    const cl::Buffer pair_first =
-                        detail::upload(cl.context, cl.queue, batch.pair_first_item);
-                    const cl::Buffer slot_brick =
-                        detail::upload(cl.context, cl.queue, batch.slot_brick);
-                    cl.queue.enqueueFillBuffer(bits, cl_uint(0), 0, bit_words * sizeof(cl_uint));
-                    cl.queue.finish();
-                    stats.seconds_upload += seconds_since(t);
+            // Phase 4: batches of bricks, smaller after a device allocation failure (nothing of
+            // a failed batch has been merged).
+            auto run_batch = [&](size_t done, size_t max_bricks) {
+                t = Clock::now();
+                const cl::Buffer& bit_buffer = bits.get(cl.context, max_bricks);
+                Batch batch = make_batch(binning, prepared, grid, brick_size, done, max_bricks);
+                const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
+                batch.pair_first_item.push_back(cl_uint(batch.items));
+                const size_t bit_words = batch.brick_count * words_per_brick;
+                const cl::Buffer pair_triangle =
+                    detail::upload(cl.context, cl.queue, batch.pair_triangle);
+                const cl::Buffer pair_slot = detail::upload(cl.context, cl.queue, batch.pair_slot);
+                const cl::Buffer pair_first =
+                    detail::upload(cl.context, cl.queue, batch.pair_first_item);
+                const cl::Buffer slot_brick =
+                    detail::upload(cl.context, cl.queue, batch.slot_brick);
+                cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0, bit_words * sizeof(cl_uint));
+                cl.queue.finish();
+                stats.seconds_upload += seconds_since(t);
 
-                    t = Clock::now();
-                    voxelize.setArg(0, setups);
-                    voxelize.setArg(1, ranges);
-                    voxelize.setArg(2, pair_triangle);
-                    voxelize.setArg(3, pair_slot);
-                    voxelize.setArg(4, pair_first);
-                    voxelize.setArg(5, pair_count);
-                    voxelize.setArg(6, slot_brick);
-                    voxelize.setArg(8, cl_uint(batch.items));
-                    voxelize.setArg(9, cl_int(brick_size));
-                    voxelize.setArg(10, cl_int(grid.dims[0]));
-                    voxelize.setArg(11, cl_int(grid.dims[1]));
-                    voxelize.setArg(12, cl_int(grid.dims[2]));
-                    voxelize.setArg(13, bits);
-                    for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
-                        voxelize.setArg(7, cl_uint(base));
-                        const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
-                        detail::launch(cl.queue, voxelize, n, voxelize_group);
-                    }
-                    cl.queue.finish();
-                    stats.seconds_kernels += seconds_since(t);
-                    stats.work_items += batch.items;
-
-                    // Two 32-bit words per block, low word first.
-                    t = Clock::now();
-                    host_bits.resize(bit_words);
-                    cl.queue.enqueueReadBuffer(bits, CL_TRUE, 0, bit_words * sizeof(cl_uint),
-                                               host_bits.data());
-                    for (size_t slot = 0; slot < batch.brick_count; ++slot) {
-                        const cl_uint* words = host_bits.data() + slot * words_per_brick;
-                        for (size_t b = 0; b < blocks.size(); ++b)
-                            blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1]) << 32;
-                        result.merge_brick(binning.bricks[batch.first_brick + slot], blocks.data());
-                    }
-                    stats.seconds_download += seconds_since(t);
-                    ++stats.batches;
-
-                    done += batch.brick_count;
-                    if (options.progress && !options.progress(done, binning.bricks.size()))
-                        throw Cancelled("voxelization cancelled after " + std::to_string(done) +
-                                        " of " + std::to_string(binning.bricks.size()) + " bricks");
-                } catch (const cl::Error& e) {
-                    if (!is_allocation_failure(e.err())) throw;
-                    if (slots == 1)
-                        throw DeviceError("OpenCL error while voxelizing on " + cl.info.name +
-                                          ": " + (e.what() ? e.what() : "?") + " returned " +
-                                          detail::cl_status_name(e.err()) +
-                                          " even for a batch of one brick, after " +
-                                          std::to_string(stats.allocation_retries) +
-                                          " retries with smaller batches");
-                    slots /= 2;
-                    ++stats.allocation_retries;
-                    bits = cl::Buffer();
-                    cl.queue.finish();
+                t = Clock::now();
+                voxelize.setArg(0, setups);
+                voxelize.setArg(1, ranges);
+                voxelize.setArg(2, pair_triangle);
+                voxelize.setArg(3, pair_slot);
+                voxelize.setArg(4, pair_first);
+                voxelize.setArg(5, pair_count);
+                voxelize.setArg(6, slot_brick);
+                voxelize.setArg(8, cl_uint(batch.items));
+                voxelize.setArg(9, cl_int(brick_size));
+                voxelize.setArg(10, cl_int(grid.dims[0]));
+                voxelize.setArg(11, cl_int(grid.dims[1]));
+                voxelize.setArg(12, cl_int(grid.dims[2]));
+                voxelize.setArg(13, bit_buffer);
+                for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
+                    voxelize.setArg(7, cl_uint(base));
+                    const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
+                    detail::launch(cl.queue, voxelize, n, voxelize_group);
                 }
-            }
+                cl.queue.finish();
+                stats.seconds_kernels += seconds_since(t);
+                stats.work_items += batch.items;
+
+                // Two 32-bit words per block, low word first.
+                t = Clock::now();
+                host_bits.resize(bit_words);
+                cl.queue.enqueueReadBuffer(bit_buffer, CL_TRUE, 0, bit_words * sizeof(cl_uint),
+                                           host_bits.data());
+                for (size_t slot = 0; slot < batch.brick_count; ++slot) {
+                    const cl_uint* words = host_bits.data() + slot * words_per_brick;
+                    for (size_t b = 0; b < blocks.size(); ++b)
+                        blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1]) << 32;
+                    result.merge_brick(binning.bricks[batch.first_brick + slot], blocks.data());
+                }
+                stats.seconds_download += seconds_since(t);
+                ++stats.batches;
+
+                const size_t finished = done + batch.brick_count;
+                if (options.progress && !options.progress(finished, binning.bricks.size()))
+                    throw Cancelled("voxelization cancelled after " + std::to_string(finished) +
+                                    " of " + std::to_string(binning.bricks.size()) + " bricks");
+                return batch.brick_count;
+            };
+            detail::run_batches(cl.queue, binning.bricks.size(), slots, stats,
+                                "voxelizing on " + cl.info.name, "brick", run_batch);
         } catch (const cl::Error& e) {
             detail::throw_device_error(e, "voxelizing on " + cl.info.name);
         }

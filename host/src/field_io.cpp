@@ -248,14 +248,20 @@ NpyHeader read_npy_header(const std::string& path, std::ifstream& in) {
     return header;
 }
 
-// What the samples will take in memory, against half the physical memory (the same default
-// budget as the voxelizer's host budget), before anything is allocated.
+// What the samples will take in memory, against the default host memory budget (the voxelizer's
+// when none is given), before anything is allocated. An InputError naming the file, as every
+// failure of read_npy is.
 void check_memory_budget(const std::string& path, uint64_t bytes, const char* what) {
-    const uint64_t budget = detail::physical_memory() / 2;
+    uint64_t budget = 0;
+    try {
+        budget = detail::default_host_budget();
+    } catch (const GridError& e) {
+        bad_npy(path, e.what());
+    }
     if (bytes > budget)
-        bad_npy(path, std::string(what) + " would need " + std::to_string(bytes >> 20) +
-                          " MiB, over the memory budget of " + std::to_string(budget >> 20) +
-                          " MiB (half the physical memory)");
+        bad_npy(path, std::string(what) + " would need " + detail::mib_text(bytes) +
+                          ", over the memory budget of " + detail::mib_text(budget) +
+                          " (OCLVOX_HOST_MEMORY_MIB, default half the physical memory)");
 }
 
 // Grid placement from the sidecar `<path>.json`: origin and voxel_size are required, dims (if

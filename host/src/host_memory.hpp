@@ -1,9 +1,15 @@
-// The host's physical memory, the base of the default host memory budgets.
+// The host memory budget, and the check every allocation whose size comes from the input (a grid's
+// dense field, a sparse result's bricks, a mesher's buffers) makes before it allocates.
 #pragma once
 
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdint>
+#include <cstdlib>
+#include <string>
+
+#include "oclvox/oclvox.hpp"
 
 namespace oclvox::detail {
 
@@ -11,6 +17,42 @@ namespace oclvox::detail {
 inline uint64_t physical_memory() {
     const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
     return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : uint64_t(8) << 30;
+}
+
+// The budget when the caller gives none: $OCLVOX_HOST_MEMORY_MIB MiB if set (for containers whose
+// memory limit is below the machine's, and for tests), else half of the physical memory. Read at
+// every call, so a program may change it between runs. Throws GridError if the variable is not a
+// whole number of MiB in [1, 2^40].
+inline uint64_t default_host_budget() {
+    const char* text = std::getenv("OCLVOX_HOST_MEMORY_MIB");
+    if (!text || !*text) return physical_memory() / 2;
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long long mib = std::strtoull(text, &end, 10);
+    if (*end || errno || text[0] == '-' || mib < 1 || mib > (1ull << 40))
+        throw GridError("OCLVOX_HOST_MEMORY_MIB must be a whole number of MiB in [1, 2^40], got '" +
+                        std::string(text) + "'");
+    return uint64_t(mib) << 20;
+}
+
+// `requested` bytes if non-zero (an option such as VoxelizeOptions::host_budget_bytes), else the
+// default budget.
+inline uint64_t host_budget(uint64_t requested) {
+    return requested ? requested : default_host_budget();
+}
+
+// "12 MiB", rounded up.
+inline std::string mib_text(uint64_t bytes) {
+    return std::to_string(bytes / (1u << 20) + (bytes % (1u << 20) != 0)) + " MiB";
+}
+
+// Throws GridError if `bytes` are over `budget`, naming `what` (e.g. "a dense distance field of
+// 256x256x256 voxels"), both sizes and the remedy; called before anything is allocated for it.
+inline void check_host_memory(uint64_t bytes, uint64_t budget, const std::string& what) {
+    if (bytes > budget)
+        throw GridError(what + " needs " + mib_text(bytes) +
+                        " of host memory, over the host memory budget of " + mib_text(budget) +
+                        ": lower the resolution or raise the budget");
 }
 
 }  // namespace oclvox::detail

@@ -49,6 +49,12 @@ MeshingPhases add_meshing_phases(ProgressPhases& progress);
 Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod method, int brick_size,
                           const ProgressCallback& progress = {});
 
+// Throws GridError naming `who` unless the mesher's host buffers fit the default host memory
+// budget: two counts per slot of the active bricks, and once the counts are known 40 bytes per
+// vertex and 24 per triangle for the records and the mesh made from them (vertices and
+// triangles 0 before then). Called before each of them is allocated.
+void check_meshing_memory(uint64_t slots, uint64_t vertices, uint64_t triangles, const char* who);
+
 // Replaces the per-slot counts by their exclusive prefix sum in global sample order (x fastest
 // over the whole grid, whatever the tiling) and returns the total; throws GridError naming `what`
 // when the total does not fit the 32-bit indices (3 per triangle) of the meshing code.

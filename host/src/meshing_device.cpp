@@ -59,6 +59,7 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         throw GridError(std::string(who) + ": " + std::to_string(layout.origins.size()) +
                         " bricks hold surface, more than 32-bit work item numbers can cover");
     const uint32_t slots = layout.slots;
+    detail::check_meshing_memory(slots, 0, 0, who);
 
     try {
         const cl::Program& program = cl.program(detail::kKernel_meshing);
@@ -139,6 +140,7 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
             detail::exclusive_scan(field, layout, vertex_counts, "vertices");
         const uint32_t triangle_count =
             detail::exclusive_scan(field, layout, triangle_counts, "triangles");
+        detail::check_meshing_memory(slots, vertex_count, triangle_count, who);
         if (slots) {
             cl.queue.enqueueWriteBuffer(vertex_offset, CL_FALSE, 0, slots * sizeof(cl_uint),
                                         vertex_counts.data());

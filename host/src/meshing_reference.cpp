@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <limits>
 
+#include "host_memory.hpp"
 #include "meshing.hpp"
 
 namespace oclvox::detail {
@@ -134,6 +135,18 @@ uint32_t exclusive_scan(const ScalarField& field, const BrickLayout& layout,
     return uint32_t(total);
 }
 
+void check_meshing_memory(uint64_t slots, uint64_t vertices, uint64_t triangles, const char* who) {
+    // Counts: a vertex and a triangle count per slot. Records: the owner sample and 3 floats per
+    // vertex, 3 indices per triangle. Mesh: 3 doubles per vertex, 3 indices per triangle.
+    const uint64_t bytes = slots * 2 * sizeof(uint32_t) +
+                           vertices * (sizeof(uint32_t) + 3 * sizeof(float) + 3 * sizeof(double)) +
+                           triangles * 2 * 3 * sizeof(uint32_t);
+    check_host_memory(bytes, default_host_budget(),
+                      std::string(who) + ": a surface over " + std::to_string(slots) +
+                          " samples with " + std::to_string(vertices) + " vertices and " +
+                          std::to_string(triangles) + " triangles");
+}
+
 Mesh records_to_mesh(const ScalarField& field, const std::vector<uint32_t>& vertex_sample,
                      const std::vector<float>& vertex_local,
                      const std::vector<uint32_t>& triangles) {
@@ -179,6 +192,7 @@ Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod met
     // Phase 1: per-sample counts in the bricks that can hold surface, into their slots.
     const BrickLayout layout =
         active_bricks(field, iso, brick_size, progress.reporter(phases.scan));
+    check_meshing_memory(layout.slots, 0, 0, who);
     std::vector<uint32_t> vertex_offset(layout.slots, 0), triangle_offset(layout.slots, 0);
     const uint32_t* base = layout.base.data();
     std::vector<Brick> active;
@@ -197,6 +211,7 @@ Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod met
     // Phase 2: global slots.
     const uint32_t vertex_count = exclusive_scan(field, layout, vertex_offset, "vertices");
     const uint32_t triangle_count = exclusive_scan(field, layout, triangle_offset, "triangles");
+    check_meshing_memory(layout.slots, vertex_count, triangle_count, who);
 
     // Phase 3: emit.
     std::vector<uint32_t> vertex_sample(vertex_count), triangles(3 * size_t(triangle_count));

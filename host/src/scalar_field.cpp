@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "host_memory.hpp"
 #include "meshing.hpp"
 
 namespace oclvox {
@@ -51,6 +52,13 @@ ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes)
     if (field.grid.voxel_count() > std::numeric_limits<uint32_t>::max())
         throw GridError("a field of " + std::to_string(field.grid.voxel_count()) +
                         " samples is too large to mesh (at most 2^32 - 1)");
+    // The field, and a second copy for the smoothing passes.
+    const uint64_t copies = smoothing_passes > 0 ? 2 : 1;
+    detail::check_host_memory(
+        field.grid.voxel_count() * sizeof(float) * copies, detail::default_host_budget(),
+        "a field of " + std::to_string(field.grid.dims[0]) + "x" +
+            std::to_string(field.grid.dims[1]) + "x" + std::to_string(field.grid.dims[2]) +
+            " samples" + (copies > 1 ? " and its smoothing copy" : ""));
 
     // Phase 2: -0.5 for set voxels, +0.5 elsewhere.
     const int64_t nx = field.grid.dims[0], ny = field.grid.dims[1], nz = field.grid.dims[2];
@@ -60,7 +68,7 @@ ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes)
     });
 
     // Phase 3: the 3x3x3 box filter, as three 3-tap averages along x, y and z.
-    std::vector<float> scratch(field.values.size());
+    std::vector<float> scratch(smoothing_passes > 0 ? field.values.size() : 0);
     const int64_t stride[3] = {1, nx, nx * ny};
     for (int pass = 0; pass < smoothing_passes; ++pass)
         for (int axis = 0; axis < 3; ++axis) {

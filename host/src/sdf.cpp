@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "host_memory.hpp"
 #include "sdf_internal.hpp"
 
 namespace oclvox {
@@ -96,7 +97,7 @@ void jump_pass(const SdfTriangles& prepared, const Grid& grid, int step,
 
 }  // namespace
 
-void validate_sdf(const Grid& grid, const SdfOptions& options) {
+void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel) {
     validate_grid(grid);
     if (!(options.band_voxels > 0) || !std::isfinite(options.band_voxels) ||
         options.band_voxels > double(kMaxGridAxis))
@@ -117,6 +118,12 @@ void validate_sdf(const Grid& grid, const SdfOptions& options) {
         throw GridError("a dense distance field of " + std::to_string(voxels) +
                         " voxels is over the limit of " + std::to_string(kMaxFieldVoxels) +
                         ": lower the resolution");
+    const Grid layers = field_grid(grid, options);
+    check_host_memory(voxels * host_bytes_per_voxel, host_budget(options.host_budget_bytes),
+                      "a dense distance field of " + std::to_string(layers.dims[0]) + "x" +
+                          std::to_string(layers.dims[1]) + "x" + std::to_string(layers.dims[2]) +
+                          " voxels (" + std::to_string(host_bytes_per_voxel) +
+                          " bytes per voxel with its working copies)");
 }
 
 Grid field_grid(const Grid& grid, const SdfOptions& options) {
@@ -253,6 +260,9 @@ namespace {
 // host (the reference).
 struct OnDevice {
     Device& device;
+    // Host bytes per voxel: the squared distances and the field made from them (the flood's
+    // buffers of nearest triangles stay on the device).
+    static uint64_t host_bytes_per_voxel(const SdfOptions&) { return 8; }
     std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
                                  const SdfOptions& options, ProgressPhases& progress,
                                  const SdfPhases& phases, VoxelizeStats& stats) const {
@@ -265,6 +275,10 @@ struct OnDevice {
 };
 
 struct OnHost {
+    // The device's, plus two buffers of nearest triangles for a full-grid flood.
+    static uint64_t host_bytes_per_voxel(const SdfOptions& options) {
+        return options.full_grid ? 16 : 8;
+    }
     std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
                                  const SdfOptions& options, ProgressPhases& progress,
                                  const SdfPhases& phases, VoxelizeStats& stats) const {
@@ -328,6 +342,7 @@ ScalarField compute_field(const Backend& backend, const FieldJob& job, const Gri
         backend.distance2(job.prepared, layers, options, progress, job.phases, stats));
     if (!sign) return field;
     VoxelizeOptions solid = sign_options(grid, options);
+    solid.host_budget_bytes = options.host_budget_bytes;
     solid.progress = progress.forward(job.phases.sign);
     VoxelizeStats solid_stats;
     apply_sign(field, backend.solid(job.mesh, grid, solid, &solid_stats), options.first_layer);
@@ -335,6 +350,7 @@ ScalarField compute_field(const Backend& backend, const FieldJob& job, const Gri
     stats.seconds_upload += solid_stats.seconds_upload;
     stats.seconds_kernels += solid_stats.seconds_kernels;
     stats.seconds_download += solid_stats.seconds_download;
+    stats.allocation_retries += solid_stats.allocation_retries;
     stats.voxels_set = solid_stats.voxels_set;
     stats.inside_test = solid_stats.inside_test;
     stats.inside_test_reason = solid_stats.inside_test_reason;
@@ -344,7 +360,7 @@ ScalarField compute_field(const Backend& backend, const FieldJob& job, const Gri
 template <class Backend>
 ScalarField distance_run(const Backend& backend, const Mesh& mesh, const Grid& grid,
                          const SdfOptions& options, bool sign, VoxelizeStats* stats_out) {
-    validate_sdf(grid, options);
+    validate_sdf(grid, options, backend.host_bytes_per_voxel(options));
     ProgressPhases progress(options.progress, sign ? "signed distance field" : "distance field");
     VoxelizeStats stats;
     const FieldJob job = plan_field(mesh, grid, options, sign, progress, stats);
@@ -358,7 +374,8 @@ template <class Backend>
 ScalarField csg_run(const Backend& backend, const Mesh& a, const Mesh& b, CsgOp op,
                     const Grid& grid, const SdfOptions& options, VoxelizeStats* stats_out) {
     // Phase 1: both fields' phases, so that progress runs once over both.
-    validate_sdf(grid, options);
+    // Two fields at once.
+    validate_sdf(grid, options, 2 * backend.host_bytes_per_voxel(options));
     ProgressPhases progress(options.progress, "CSG");
     VoxelizeStats stats, stats_b;
     const FieldJob job_a = plan_field(a, grid, options, true, progress, stats);
@@ -377,6 +394,7 @@ ScalarField csg_run(const Backend& backend, const Mesh& a, const Mesh& b, CsgOp 
     stats.seconds_upload += stats_b.seconds_upload;
     stats.seconds_kernels += stats_b.seconds_kernels;
     stats.seconds_download += stats_b.seconds_download;
+    stats.allocation_retries += stats_b.allocation_retries;
     if (stats_out) *stats_out = stats;
     return field;
 }

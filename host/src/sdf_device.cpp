@@ -31,7 +31,9 @@ std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared
                                     const SdfPhases& phases, VoxelizeStats& stats) {
     Device::Impl& cl = device.impl();
 
-    // Phase 1: the dense buffer must fit one allocation.
+    // Phase 1: the dense buffer must fit one allocation. It is allocated once for the whole
+    // field, not per batch, so a device allocation failure is a DeviceError: there is no smaller
+    // batch to retry with.
     const uint64_t voxels = grid.voxel_count();
     if (voxels * sizeof(cl_uint) > cl.info.max_alloc)
         throw GridError("a dense distance field of " + std::to_string(voxels) + " voxels needs " +

@@ -26,8 +26,10 @@ struct SdfTriangles {
 };
 
 // Throws GridError for a band that is not a finite positive number of voxels, layers outside the
-// grid (or with full_grid), or a field too large to hold.
-void validate_sdf(const Grid& grid, const SdfOptions& options);
+// grid (or with full_grid), or a field too large to hold: over 2^32 voxels, or
+// host_bytes_per_voxel bytes per voxel (the field and the caller's working copies of it) over the
+// host memory budget.
+void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel);
 
 // The grid of the field a run produces: the whole grid cut to options' layers.
 Grid field_grid(const Grid& grid, const SdfOptions& options);

@@ -20,6 +20,8 @@
 #include <map>
 
 #include "brick_selection.hpp"
+#include "device_batches.hpp"
+#include "host_memory.hpp"
 #include "opencl_runtime.hpp"
 #include "overlap_double.hpp"
 #include "solid_math.h"
@@ -39,10 +41,6 @@ constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
 constexpr uint64_t kWindingItemsPerLaunch = uint64_t(1) << 14;
 // The host reference winding number refuses more triangle evaluations than this.
 constexpr uint64_t kMaxReferenceWindingTerms = uint64_t(1) << 34;
-
-std::string mib(uint64_t bytes) {
-    return std::to_string((bytes + (1u << 20) - 1) >> 20) + " MiB";
-}
 
 // ---- choosing the inside test ----
 
@@ -204,6 +202,15 @@ void merge_column(SparseVoxels& result, const Layout& l, uint64_t column, const 
                            blocks + size_t(row) * l.blocks_per_brick);
 }
 
+// Before anything is allocated for them: the sparse result, which may hold every one of `bricks`
+// bricks, plus `working_bytes` of dense working state, against the host memory budget.
+void check_solid_memory(const SparseVoxels& result, uint64_t bricks, uint64_t working_bytes,
+                        const VoxelizeOptions& options, const std::string& working) {
+    const uint64_t brick_bytes = result.blocks_per_brick() * sizeof(uint64_t);
+    check_host_memory(bricks * brick_bytes + working_bytes, host_budget(options.host_budget_bytes),
+                      "the solid result of " + std::to_string(bricks) + " bricks" + working);
+}
+
 // ---- device helpers ----
 
 uint64_t device_budget(const Device::Impl& cl, const VoxelizeOptions& options) {
@@ -228,25 +235,25 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     stats.bricks_active = bins.columns.size() * uint64_t(l.nbz);
     stats.seconds_binning += seconds_since(t);
     if (bins.columns.empty()) return;
+    check_solid_memory(result, stats.bricks_active, 0, options, "");
 
     const uint64_t budget = device_budget(cl, options);
     if (l.slot_bytes() > budget)
         throw GridError("one brick column of " + std::to_string(l.brick) + "^2 x " +
-                        std::to_string(l.nz) + " voxels needs " + mib(l.slot_bytes()) +
-                        " for parity, over the device budget of " + mib(budget) +
+                        std::to_string(l.nz) + " voxels needs " + mib_text(l.slot_bytes()) +
+                        " for parity, over the device budget of " + mib_text(budget) +
                         ": use smaller bricks");
-    const size_t max_slots =
-        size_t(std::min<uint64_t>(budget / l.slot_bytes(), bins.columns.size()));
+    size_t slots = size_t(std::min<uint64_t>(budget / l.slot_bytes(), bins.columns.size()));
     const size_t column_words = size_t(l.brick) * l.brick * l.words;
     const size_t block_words = 2 * size_t(l.nbz) * l.blocks_per_brick;
 
     const cl::Program& program = cl.program(kKernel_solid);
     t = Clock::now();
     const cl::Buffer tri_buffer = upload(cl.context, cl.queue, triangles);
-    cl::Buffer bits(cl.context, CL_MEM_READ_WRITE, max_slots * column_words * sizeof(cl_uint));
-    cl::Buffer blocks(cl.context, CL_MEM_READ_WRITE, max_slots * block_words * sizeof(cl_uint));
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
+    SlotBuffer bits(CL_MEM_READ_WRITE, column_words * sizeof(cl_uint));
+    SlotBuffer blocks(CL_MEM_READ_WRITE, block_words * sizeof(cl_uint));
 
     cl::Kernel flip(program, "parity_flip"), prefix(program, "parity_prefix"),
         pack(program, "parity_pack");
@@ -256,15 +263,19 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     std::vector<cl_uint> host_words;
     std::vector<uint64_t> host_blocks(block_words / 2);
 
-    for (size_t done = 0; done < bins.columns.size();) {
+    // Batches of brick columns, smaller after a device allocation failure (nothing of a failed
+    // batch has been merged).
+    auto run_batch = [&](size_t done, size_t max_columns) {
         t = Clock::now();
-        Batch batch = make_batch(bins, triangles, l, done, max_slots);
+        const cl::Buffer& bit_buffer = bits.get(cl.context, max_columns);
+        const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
+        Batch batch = make_batch(bins, triangles, l, done, max_columns);
         const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
         const cl::Buffer pair_triangle = upload(cl.context, cl.queue, batch.pair_triangle);
         const cl::Buffer pair_slot = upload(cl.context, cl.queue, batch.pair_slot);
         const cl::Buffer pair_first = upload(cl.context, cl.queue, batch.pair_first_item);
         const cl::Buffer slot_column = upload(cl.context, cl.queue, batch.slot_column);
-        cl.queue.enqueueFillBuffer(bits, cl_uint(0), 0,
+        cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0,
                                    batch.column_count * column_words * sizeof(cl_uint));
         cl.queue.finish();
         stats.seconds_upload += seconds_since(t);
@@ -283,24 +294,24 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         flip.setArg(10, cl_int(l.ny));
         flip.setArg(11, cl_int(l.nz));
         flip.setArg(12, cl_uint(l.words));
-        flip.setArg(13, bits);
+        flip.setArg(13, bit_buffer);
         for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
             flip.setArg(6, cl_uint(base));
             launch(cl.queue, flip, std::min(kItemsPerLaunch, batch.items - base), flip_group);
         }
         const uint64_t columns = uint64_t(batch.column_count) * l.brick * l.brick;
-        prefix.setArg(0, bits);
+        prefix.setArg(0, bit_buffer);
         prefix.setArg(1, cl_uint(columns));
         prefix.setArg(2, cl_uint(l.words));
         launch(cl.queue, prefix, columns, prefix_group);
         const uint64_t pack_items = uint64_t(batch.column_count) * l.nbz * l.blocks_per_brick;
-        pack.setArg(0, bits);
+        pack.setArg(0, bit_buffer);
         pack.setArg(1, cl_uint(batch.column_count));
         pack.setArg(2, cl_int(l.brick));
         pack.setArg(3, cl_int(l.nbz));
         pack.setArg(4, cl_int(l.nz));
         pack.setArg(5, cl_uint(l.words));
-        pack.setArg(6, blocks);
+        pack.setArg(6, block_buffer);
         launch(cl.queue, pack, pack_items, pack_group);
         cl.queue.finish();
         stats.seconds_kernels += seconds_since(t);
@@ -308,7 +319,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
 
         t = Clock::now();
         host_words.resize(batch.column_count * block_words);
-        cl.queue.enqueueReadBuffer(blocks, CL_TRUE, 0, host_words.size() * sizeof(cl_uint),
+        cl.queue.enqueueReadBuffer(block_buffer, CL_TRUE, 0, host_words.size() * sizeof(cl_uint),
                                    host_words.data());
         for (size_t slot = 0; slot < batch.column_count; ++slot) {
             const cl_uint* w = host_words.data() + slot * block_words;
@@ -318,18 +329,22 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         }
         stats.seconds_download += seconds_since(t);
         ++stats.batches;
-        done += batch.column_count;
-        report_progress(options, done * uint64_t(l.nbz), bins.columns.size() * uint64_t(l.nbz));
-    }
+        const size_t finished = done + batch.column_count;
+        report_progress(options, finished * uint64_t(l.nbz), bins.columns.size() * uint64_t(l.nbz));
+        return batch.column_count;
+    };
+    run_batches(cl.queue, bins.columns.size(), slots, stats,
+                "computing the parity solid on " + cl.info.name, "brick column", run_batch);
 }
 
 // The same flips, prefix and packing on the host, one brick column at a time.
 void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxels& result,
-                      VoxelizeStats& stats) {
+                      const VoxelizeOptions& options, VoxelizeStats& stats) {
     const Layout l = make_layout(result);
     const ColumnBins bins = bin_columns(triangles, l, BrickSelection({}, result));
     stats.brick_pairs = bins.pair_triangle.size();
     stats.bricks_active = bins.columns.size() * uint64_t(l.nbz);
+    check_solid_memory(result, stats.bricks_active, 0, options, "");
     std::vector<uint32_t> bits(size_t(l.brick) * l.brick * l.words);
     std::vector<uint64_t> blocks(size_t(l.nbz) * l.blocks_per_brick);
     const int nb = l.brick / 4;
@@ -893,14 +908,18 @@ class WindingEvaluator {
         const size_t count = points.size() / 3;
         w.resize(count);
         error.resize(count);
-        for (size_t done = 0; done < count;) {
-            const size_t n = std::min<size_t>(kPointsPerBatch, count - done);
+        // Batches of points, smaller after a device allocation failure (a failed batch's results
+        // are written again by its retry).
+        auto run_batch = [&](size_t done, size_t max_points) {
+            const size_t n = std::min(max_points, count - done);
             auto t = Clock::now();
-            const std::vector<float> batch(points.begin() + 3 * done,
-                                           points.begin() + 3 * (done + n));
-            const cl::Buffer point_buffer = upload(cl_.context, cl_.queue, batch);
-            cl::Buffer w_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
-            cl::Buffer error_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
+            const cl::Buffer point_buffer =
+                batch_buffer(cl_.context, CL_MEM_READ_ONLY, 3 * n * sizeof(float));
+            cl::Buffer w_buffer = batch_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
+            cl::Buffer error_buffer =
+                batch_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
+            cl_.queue.enqueueWriteBuffer(point_buffer, CL_FALSE, 0, 3 * n * sizeof(float),
+                                         &points[3 * done]);
             cl_.queue.finish();
             stats_.seconds_upload += seconds_since(t);
 
@@ -928,19 +947,34 @@ class WindingEvaluator {
             cl_.queue.enqueueReadBuffer(w_buffer, CL_FALSE, 0, n * sizeof(float), &w[done]);
             cl_.queue.enqueueReadBuffer(error_buffer, CL_TRUE, 0, n * sizeof(float), &error[done]);
             stats_.seconds_download += seconds_since(t);
-            done += n;
-        }
+            return n;
+        };
+        run_batches(cl_.queue, count, points_per_batch_, stats_,
+                    "evaluating winding numbers on " + cl_.info.name, "point", run_batch);
     }
 
   private:
-    static constexpr size_t kPointsPerBatch = size_t(1) << 20;
     Device::Impl& cl_;
     VoxelizeStats& stats_;
     cl::Kernel kernel_;
     cl::Buffer vertices_, nodes_;
     cl_uint node_count_ = 0;
     size_t group_ = 1;
+    size_t points_per_batch_ = size_t(1) << 20;  // the most; less after allocation failures
 };
+
+// Voxels of the box, and bricks of `result` meeting it (all of which the result may hold).
+uint64_t box_voxels(const VoxelBox& box) {
+    uint64_t voxels = 1;
+    for (int k = 0; k < 3; ++k) voxels *= uint64_t(box.hi[k] - box.lo[k] + 1);
+    return voxels;
+}
+uint64_t box_bricks(const SparseVoxels& result, const VoxelBox& box) {
+    const int64_t b = result.brick_size();
+    uint64_t bricks = 1;
+    for (int k = 0; k < 3; ++k) bricks *= uint64_t(box.hi[k] / b - box.lo[k] / b + 1);
+    return bricks;
+}
 
 // Tiles of the winding solid: cubes of 2^level voxels aligned to the box's low corner, clipped
 // to the box. Tiles of the first level hold 2^kTopLevel voxels per axis; tiles are evaluated down
@@ -979,6 +1013,12 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     if (box.empty()) return;
     const int b = result.brick_size();
     const auto nb = result.brick_dims();
+    // The box is held densely: a state byte per voxel, and bits for the inside, the surface, the
+    // fans and their coarser pyramids (under half a byte per voxel).
+    const uint64_t voxels = box_voxels(box);
+    check_solid_memory(
+        result, box_bricks(result, box), voxels + voxels / 2, options,
+        " and the winding number's dense state for " + std::to_string(voxels) + " voxels");
     std::vector<uint64_t> bricks;  // every brick meeting the box
     for (int64_t bz = box.lo[2] / b; bz <= box.hi[2] / b; ++bz)
         for (int64_t by = box.lo[1] / b; by <= box.hi[1] / b; ++by)
@@ -1255,12 +1295,12 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
 }
 
 // Double-precision winding number at every voxel centre of the box, summing every triangle.
-void winding_reference(const Mesh& mesh, SparseVoxels& result) {
+void winding_reference(const Mesh& mesh, SparseVoxels& result, const VoxelizeOptions& options) {
     const Grid& grid = result.grid();
     const VoxelBox box = centre_box(mesh, grid);
     if (box.empty()) return;
-    uint64_t voxels = 1;
-    for (int k = 0; k < 3; ++k) voxels *= uint64_t(box.hi[k] - box.lo[k] + 1);
+    check_solid_memory(result, box_bricks(result, box), 0, options, "");
+    const uint64_t voxels = box_voxels(box);
     if (voxels > kMaxReferenceWindingTerms / std::max<uint64_t>(1, mesh.triangles.size()))
         throw GridError("the CPU reference winding number would sum more than " +
                         std::to_string(kMaxReferenceWindingTerms) +
@@ -1363,9 +1403,9 @@ SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeO
     SparseVoxels result = run_solid(
         mesh, grid, options, stats,
         [&](const std::vector<OvParityTriangle>& triangles, SparseVoxels& out) {
-            parity_reference(triangles, out, stats);
+            parity_reference(triangles, out, options, stats);
         },
-        [&](SparseVoxels& out) { winding_reference(mesh, out); });
+        [&](SparseVoxels& out) { winding_reference(mesh, out, options); });
     stats.seconds_kernels = seconds_since(start);
     return result;
 }

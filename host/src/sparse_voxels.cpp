@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cstring>
 
+#include "host_memory.hpp"
 #include "oclvox/oclvox.hpp"
 
 namespace oclvox {
@@ -196,6 +197,10 @@ std::vector<uint8_t> SparseVoxels::to_dense() const {
                         std::to_string(grid_.dims[1]) + "x" + std::to_string(grid_.dims[2]) +
                         " grid would need " + std::to_string(n >> 30) +
                         " GiB; choose a sparse output or a lower resolution");
+    detail::check_host_memory(n, detail::default_host_budget(),
+                              "a dense copy of this " + std::to_string(grid_.dims[0]) + "x" +
+                                  std::to_string(grid_.dims[1]) + "x" +
+                                  std::to_string(grid_.dims[2]) + " grid");
     std::vector<uint8_t> dense(n, 0);
     const int64_t nx = grid_.dims[0], ny = grid_.dims[1];
     mark_box({0, 0, 0}, grid_.dims, {1, nx, nx * ny}, dense.data());

@@ -34,6 +34,10 @@ struct SdfOptions {
     // always 1,000,000 and done never goes back. On a device, kernels run in slices of about
     // 0.1 s while a callback is set, so a cancel takes effect within about that long.
     ProgressCallback progress;
+    // Host memory for the dense field and its working copies (checked before they are
+    // allocated), and for the solid voxelization that gives the sign. 0: $OCLVOX_HOST_MEMORY_MIB
+    // MiB if set, else half of physical memory.
+    uint64_t host_budget_bytes = 0;
 };
 
 // Margin, in voxels on every side, for a grid fitted to a mesh whose distance field is written or
@@ -64,7 +68,9 @@ int64_t field_padding(double band_voxels);
 // (triangle, 4x4x4 block) items of the band pass) and the seconds_* timings.
 //
 // The device result equals unsigned_distance_reference bit for bit. Throws GridError for bad
-// options or a grid whose dense field does not fit the device, DeviceError on OpenCL failures.
+// options or a grid whose dense field (8 bytes per voxel on the host, 16 for the reference's
+// full grid) does not fit the host memory budget or the device, before allocating it;
+// DeviceError on OpenCL failures.
 ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& grid,
                               const SdfOptions& options, VoxelizeStats* stats = nullptr);
 ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
