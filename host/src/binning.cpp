@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mesh_bounds.hpp"
 #include "overlap_double.hpp"
 
 namespace oclvox::detail {
@@ -149,14 +150,7 @@ std::vector<uint64_t> candidate_bricks(const Mesh& mesh, const Grid& grid,
     validate_mesh(mesh);
     validate_grid(grid);
     std::array<double, 3> lo, hi;
-    lo.fill(HUGE_VAL);
-    hi.fill(-HUGE_VAL);
-    for (const auto& t : mesh.triangles)
-        for (const uint32_t v : t)
-            for (int k = 0; k < 3; ++k) {
-                lo[k] = std::min(lo[k], mesh.positions[v][k]);
-                hi[k] = std::max(hi[k], mesh.positions[v][k]);
-            }
+    detail::used_bounds(mesh, lo, hi);
     int64_t first[3], last[3];
     uint64_t count = 1;
     for (int k = 0; k < 3; ++k) {

@@ -10,12 +10,12 @@ BrickSelection::BrickSelection(const std::vector<uint64_t>& bricks, const Sparse
     : everything_(bricks.empty()), bricks_(bricks) {
     const auto nb = layout.brick_dims();
     const uint64_t column_count = uint64_t(nb[0]) * uint64_t(nb[1]);
-    bricks_total_ = column_count * uint64_t(nb[2]);
+    const uint64_t bricks_total = column_count * uint64_t(nb[2]);
     std::sort(bricks_.begin(), bricks_.end());
     bricks_.erase(std::unique(bricks_.begin(), bricks_.end()), bricks_.end());
-    if (!bricks_.empty() && bricks_.back() >= bricks_total_)
+    if (!bricks_.empty() && bricks_.back() >= bricks_total)
         throw GridError("brick index " + std::to_string(bricks_.back()) +
-                        " is outside the grid, which has " + std::to_string(bricks_total_) +
+                        " is outside the grid, which has " + std::to_string(bricks_total) +
                         " bricks of " + std::to_string(layout.brick_size()) + "^3 voxels");
     columns_.reserve(bricks_.size());
     for (const uint64_t brick : bricks_) columns_.push_back(brick % column_count);

@@ -18,14 +18,12 @@ class BrickSelection {
     bool contains(uint64_t brick) const;
     // Whether any selected brick lies in brick column bx + nbx * by (all heights).
     bool contains_column(uint64_t column) const;
-    uint64_t size() const { return everything_ ? bricks_total_ : uint64_t(bricks_.size()); }
 
     // Drops from `voxels` every brick that is not selected.
     void restrict(SparseVoxels& voxels) const;
 
   private:
     bool everything_;
-    uint64_t bricks_total_;
     std::vector<uint64_t> bricks_;   // sorted, unique
     std::vector<uint64_t> columns_;  // sorted, unique
 };

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 
+#include "mesh_bounds.hpp"
 #include "oclvox/oclvox.hpp"
 
 namespace oclvox {
@@ -12,8 +13,9 @@ std::string dims_text(const std::array<int64_t, 3>& d) {
     return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
 }
 
-// Bounding box of the vertices that triangles use (unused vertices do not widen the grid).
-void used_bounds(const Mesh& mesh, std::array<double, 3>& lo, std::array<double, 3>& hi) {
+}  // namespace
+
+void detail::used_bounds(const Mesh& mesh, std::array<double, 3>& lo, std::array<double, 3>& hi) {
     lo.fill(std::numeric_limits<double>::infinity());
     hi.fill(-std::numeric_limits<double>::infinity());
     for (const auto& t : mesh.triangles)
@@ -23,7 +25,6 @@ void used_bounds(const Mesh& mesh, std::array<double, 3>& lo, std::array<double,
                 hi[k] = std::max(hi[k], mesh.positions[v][k]);
             }
 }
-}  // namespace
 
 void validate_grid(const Grid& grid) {
     if (!(grid.voxel_size > 0) || !std::isfinite(grid.voxel_size))
@@ -43,7 +44,7 @@ Grid fit_grid(const Mesh& mesh, const GridFit& fit) {
     validate_mesh(mesh);
     if (fit.pad < 0 || fit.pad > kMaxGridAxis) throw GridError("padding must be in [0, 2^20]");
     std::array<double, 3> lo, hi;
-    used_bounds(mesh, lo, hi);
+    detail::used_bounds(mesh, lo, hi);
     const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
 
     // Phase 1: the voxel size, from an explicit size or the resolution along the longest axis.
