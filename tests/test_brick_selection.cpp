@@ -1,5 +1,6 @@
-// Brick selections (VoxelizeOptions::bricks) and candidate_bricks: the runs over the shards of a
-// split are pieces of the unrestricted run, exactly, and together are all of it. That is what
+// Brick selections (VoxelizeOptions::bricks), candidate_bricks and selection_triangles: the runs
+// over the shards of a split are pieces of the unrestricted run, exactly, and together are all of
+// it, also when each shard holds only the triangles selection_triangles gives it. That is what
 // lets a grid be computed on several processes or machines and merged.
 #include "test_support.hpp"
 
@@ -36,8 +37,19 @@ const Run kReference = [](const Mesh& m, const Grid& g, const VoxelizeOptions& o
     return voxelize_reference(m, g, o);
 };
 
-// The property: candidate bricks cover the whole result; each shard's result holds exactly the
-// whole result's voxels in the shard's bricks; the shards' results merge into the whole result.
+// The run over one shard, on only the triangles selection_triangles gives it.
+SparseVoxels run_on_its_triangles(const Mesh& m, const Grid& g, const VoxelizeOptions& o,
+                                  const SelectionTriangles& plan, size_t shard, const Run& run) {
+    VoxelizeOptions part = o;
+    part.inside = plan.inside;
+    if (plan.whole_mesh) return run(m, g, part);
+    if (plan.triangles[shard].empty()) return SparseVoxels(g, o.brick_size);
+    return run(submesh(m, plan.triangles[shard]), g, part);
+}
+
+// The property: candidate bricks cover the whole result; each shard's result, on the whole mesh
+// and on its own triangles, holds exactly the whole result's voxels in the shard's bricks; the
+// shards' results merge into the whole result.
 void expect_shards_rebuild_the_whole(const Mesh& m, const Grid& g, const VoxelizeOptions& o,
                                      const Run& run) {
     const SparseVoxels whole = run(m, g, o);
@@ -48,11 +60,18 @@ void expect_shards_rebuild_the_whole(const Mesh& m, const Grid& g, const Voxeliz
         ASSERT_TRUE(std::binary_search(candidates.begin(), candidates.end(), brick))
             << "brick " << brick << " of the result is not a candidate";
 
+    const std::vector<std::vector<uint64_t>> shards = deal(candidates, 3);
+    std::vector<std::vector<uint64_t>> selections = shards;
+    const SelectionTriangles plan = selection_triangles(m, g, o, selections);
     SparseVoxels merged(g, o.brick_size);
-    for (const std::vector<uint64_t>& shard : deal(candidates, 3)) {
+    for (size_t s = 0; s < shards.size(); ++s) {
+        const std::vector<uint64_t>& shard = shards[s];
         VoxelizeOptions restricted = o;
         restricted.bricks = shard;
         const SparseVoxels part = run(m, g, restricted);
+        EXPECT_TRUE(run_on_its_triangles(m, g, restricted, plan, s, run).same_voxels(part))
+            << "shard " << s << " on its " << (plan.whole_mesh ? 0 : plan.triangles[s].size())
+            << " triangles differs from the shard on the whole mesh";
         for (const uint64_t brick : part.brick_indices()) {
             ASSERT_TRUE(std::binary_search(shard.begin(), shard.end(), brick));
             const uint64_t* expected = whole.brick_blocks(brick);
@@ -136,6 +155,124 @@ TEST(BrickSelection, BrickOutsideTheGridIsAnError) {
     o.bricks = {0, 64};  // 4^3 bricks of 8 voxels: 0..63
     EXPECT_THROW(device().voxelize(m, unit_grid(32, 32, 32), o), GridError);
     EXPECT_THROW(voxelize_reference(m, unit_grid(32, 32, 32), o), GridError);
+}
+
+// ---- selection_triangles ----
+
+// Contiguous runs of the candidates, as oclvox.distributed cuts them.
+std::vector<std::vector<uint64_t>> runs_of(const std::vector<uint64_t>& bricks, size_t count) {
+    std::vector<std::vector<uint64_t>> runs(count);
+    for (size_t i = 0; i < bricks.size(); ++i) runs[i * count / bricks.size()].push_back(bricks[i]);
+    return runs;
+}
+
+// Bricks ordered by brick column, then height: runs of them are groups of whole columns, as the
+// parity test reads them (oclvox.distributed orders solid shards so).
+std::vector<uint64_t> column_major(std::vector<uint64_t> bricks, const Grid& g,
+                                   const VoxelizeOptions& o) {
+    const auto nb = SparseVoxels(g, o.brick_size).brick_dims();
+    const uint64_t columns = uint64_t(nb[0]) * uint64_t(nb[1]);
+    std::sort(bricks.begin(), bricks.end(), [&](uint64_t a, uint64_t b) {
+        return std::make_pair(a % columns, a / columns) < std::make_pair(b % columns, b / columns);
+    });
+    return bricks;
+}
+
+// A shard reads about its share of the mesh, not all of it: the point of giving shards their
+// own triangles. Every triangle a shard gets has a voxel range meeting one of its bricks.
+TEST(SelectionTriangles, ShardsGetOnlyTheTrianglesReachingThem) {
+    const Mesh m = load_mesh(mesh_path("spot.obj"));
+    const Grid g = fitted(m, 64);
+    for (VoxelizeMode mode : {VoxelizeMode::Surface, VoxelizeMode::Solid}) {
+        SCOPED_TRACE(to_string(mode));
+        const VoxelizeOptions o = options_for(mode);
+        const auto shards = runs_of(column_major(candidate_bricks(m, g, o), g, o), 8);
+        const SelectionTriangles plan = selection_triangles(m, g, o, shards);
+        ASSERT_FALSE(plan.whole_mesh);
+        if (mode == VoxelizeMode::Solid) EXPECT_EQ(plan.inside, InsideTest::Parity);  // closed
+        size_t total = 0;
+        for (size_t s = 0; s < shards.size(); ++s) {
+            const auto& list = plan.triangles[s];
+            EXPECT_TRUE(std::is_sorted(list.begin(), list.end()));
+            EXPECT_EQ(std::adjacent_find(list.begin(), list.end()), list.end());
+            EXPECT_LT(list.size(), m.triangles.size() / 2) << "shard " << s;
+            total += list.size();
+        }
+        EXPECT_LT(total, 2 * m.triangles.size());
+        // Every triangle of shard 0 reaches (by its voxel range grown by a voxel) a brick of it.
+        const auto nb = SparseVoxels(g, o.brick_size).brick_dims();
+        for (const uint32_t t : plan.triangles[0]) {
+            std::array<double, 3> lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+            for (const uint32_t v : m.triangles[t])
+                for (int k = 0; k < 3; ++k) {
+                    const double x = (m.positions[v][k] - g.origin[k]) / g.voxel_size;
+                    lo[k] = std::min(lo[k], x);
+                    hi[k] = std::max(hi[k], x);
+                }
+            bool reaches = false;
+            for (const uint64_t brick : shards[0]) {
+                const int64_t b[3] = {int64_t(brick % uint64_t(nb[0])),
+                                      int64_t(brick / uint64_t(nb[0]) % uint64_t(nb[1])),
+                                      int64_t(brick / uint64_t(nb[0] * nb[1]))};
+                bool overlaps = true;
+                for (int k = 0; k < 3; ++k) {
+                    // Parity reads whole brick columns: any height below the brick's top.
+                    const bool column_axis = mode == VoxelizeMode::Solid && k == 2;
+                    overlaps = overlaps && hi[k] >= double(b[k] * o.brick_size) - 1 &&
+                               (column_axis || lo[k] <= double((b[k] + 1) * o.brick_size) + 1);
+                }
+                reaches = reaches || overlaps;
+            }
+            EXPECT_TRUE(reaches) << "triangle " << t << " reaches no brick of shard 0";
+        }
+    }
+}
+
+// Parity counts crossings below each voxel centre, so a shard of a grid that cuts the mesh needs
+// the triangles below the grid too, which the surface's binning drops.
+TEST(SelectionTriangles, ParityShardKeepsTrianglesBelowTheGrid) {
+    const Mesh m = box_mesh({1.25, 1.25, -10.25}, {6.25, 6.25, 6.25});
+    const Grid g = unit_grid(16, 16, 16);  // z from 0: the box's bottom lies below it
+    for (VoxelizeMode mode : {VoxelizeMode::Solid, VoxelizeMode::Filled}) {
+        SCOPED_TRACE(to_string(mode));
+        VoxelizeOptions o = options_for(mode);
+        o.bricks = {0};
+        const SparseVoxels expected = voxelize_reference(m, g, o);
+        // Columns (1..5) x (1..5) inside from z = 0 to 5: 150 voxels.
+        if (mode == VoxelizeMode::Solid) ASSERT_EQ(expected.count(), 150u);
+        const SelectionTriangles plan = selection_triangles(m, g, o, {o.bricks});
+        ASSERT_EQ(plan.inside, InsideTest::Parity);
+        // The two triangles of the bottom face, below the grid, are there; in Solid, where only
+        // crossings count, with the top face's two alone (the sides cross no voxel column).
+        size_t bottom = 0;
+        for (const uint32_t t : plan.triangles[0])
+            bottom += m.positions[m.triangles[t][0]][2] == -10.25 &&
+                      m.positions[m.triangles[t][1]][2] == -10.25 &&
+                      m.positions[m.triangles[t][2]][2] == -10.25;
+        EXPECT_EQ(bottom, 2u);
+        EXPECT_EQ(plan.triangles[0].size(), mode == VoxelizeMode::Solid ? 4u : 12u);
+        EXPECT_TRUE(run_on_its_triangles(m, g, o, plan, 0, kReference).same_voxels(expected));
+        EXPECT_TRUE(run_on_its_triangles(m, g, o, plan, 0, kDevice).same_voxels(expected));
+    }
+}
+
+// Auto picks parity for the whole closed mesh; a part of it is open and would pick the winding
+// number, so the plan carries the whole mesh's choice. For an open mesh every shard needs it all.
+TEST(SelectionTriangles, InsideTestIsTheWholeMeshs) {
+    const VoxelizeOptions o = options_for(VoxelizeMode::Solid);
+    const Mesh closed = load_mesh(mesh_path("spot.obj"));
+    const Grid gc = fitted(closed, 32);
+    const SelectionTriangles parity = selection_triangles(closed, gc, o, {{0}, {}});
+    EXPECT_EQ(parity.inside, InsideTest::Parity);
+    EXPECT_FALSE(parity.whole_mesh);
+    EXPECT_EQ(parity.triangles[1].size(), closed.triangles.size());  // empty: every brick
+
+    const Mesh open = load_mesh(mesh_path("stanford-bunny.obj"));
+    const SelectionTriangles winding = selection_triangles(open, fitted(open, 32), o, {{0}});
+    EXPECT_EQ(winding.inside, InsideTest::Winding);
+    EXPECT_TRUE(winding.whole_mesh);
+    EXPECT_TRUE(winding.triangles.empty());
+    EXPECT_THROW(selection_triangles(closed, gc, o, {{1u << 20}}), GridError);
 }
 
 }  // namespace

@@ -1358,4 +1358,26 @@ TEST(ValidateMesh, IgnoresNanInAnUnusedVertex) {
     EXPECT_NO_THROW(oclvox::validate_mesh(mesh));
 }
 
+// Worked by hand: vertices 0..4, triangles A = (0 1 2), B = (2 3 4), C = (4 1 0).
+TEST(Submesh, KeepsTheGivenTrianglesAndOnlyTheirVerticesInOrder) {
+    Mesh mesh;
+    mesh.positions = {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}, {4, 0, 0}};
+    mesh.triangles = {{0, 1, 2}, {2, 3, 4}, {4, 1, 0}};
+    const Mesh part = oclvox::submesh(mesh, {2, 1});  // C, B: vertices 0, 1, 2, 3, 4 all used
+    EXPECT_EQ(part.positions, mesh.positions);
+    EXPECT_EQ(part.triangles, (std::vector<std::array<uint32_t, 3>>{{4, 1, 0}, {2, 3, 4}}));
+    const Mesh b = oclvox::submesh(mesh, {1});  // vertices 2, 3, 4 become 0, 1, 2
+    EXPECT_EQ(b.positions, (std::vector<std::array<double, 3>>{{2, 0, 0}, {3, 0, 0}, {4, 0, 0}}));
+    EXPECT_EQ(b.triangles, (std::vector<std::array<uint32_t, 3>>{{0, 1, 2}}));
+    EXPECT_TRUE(oclvox::submesh(mesh, {}).triangles.empty());
+}
+
+TEST(Submesh, IndexOutOfRangeIsAnInputError) {
+    const Mesh mesh = one_triangle();
+    EXPECT_THROW(oclvox::submesh(mesh, {1}), oclvox::InputError);
+    Mesh broken = one_triangle();
+    broken.triangles[0][2] = 7;
+    EXPECT_THROW(oclvox::submesh(broken, {0}), oclvox::InputError);
+}
+
 }  // namespace

@@ -121,13 +121,20 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
     return out;
 }
 
-std::vector<uint64_t> touched_bricks(const PreparedTriangles& prepared, const Grid& grid,
-                                     int brick_size, uint64_t max_pairs) {
+void for_each_triangle_brick(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
+                             const std::function<void(uint32_t, uint64_t)>& f, uint64_t max_pairs) {
     candidate_pairs(prepared, grid, brick_size, max_pairs);
-    std::vector<uint64_t> bricks;
     for (size_t t = 0; t < prepared.ranges.size(); ++t)
         for_each_brick_of(prepared, t, grid, brick_size,
-                          [&](uint64_t brick) { bricks.push_back(brick); });
+                          [&](uint64_t brick) { f(uint32_t(t), brick); });
+}
+
+std::vector<uint64_t> touched_bricks(const PreparedTriangles& prepared, const Grid& grid,
+                                     int brick_size, uint64_t max_pairs) {
+    std::vector<uint64_t> bricks;
+    for_each_triangle_brick(
+        prepared, grid, brick_size, [&](uint32_t, uint64_t brick) { bricks.push_back(brick); },
+        max_pairs);
     std::sort(bricks.begin(), bricks.end());
     bricks.erase(std::unique(bricks.begin(), bricks.end()), bricks.end());
     return bricks;

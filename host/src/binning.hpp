@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "brick_selection.hpp"
@@ -21,6 +22,12 @@ struct Binning {
 // large (more than max_pairs candidate (triangle, brick) pairs).
 Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
                       const BrickSelection& selection, uint64_t max_pairs = uint64_t(1) << 31);
+
+// Calls f(t, brick) for every prepared triangle t and brick it may touch: the pairs bin_triangles
+// bins without a selection (the same GridError guard).
+void for_each_triangle_brick(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
+                             const std::function<void(uint32_t, uint64_t)>& f,
+                             uint64_t max_pairs = uint64_t(1) << 31);
 
 // The bricks bin_triangles would make active without a selection, sorted, without keeping the
 // pairs (the same GridError guard).

@@ -101,6 +101,42 @@ void validate_mesh(const Mesh& mesh) {
         }
 }
 
+Mesh submesh(const Mesh& mesh, const std::vector<uint32_t>& triangles) {
+    // Phase 1: the vertices used, ascending, found by sorting rather than by a table the size of
+    // the whole mesh.
+    std::vector<uint32_t> used;
+    used.reserve(3 * triangles.size());
+    for (const uint32_t t : triangles) {
+        if (t >= mesh.triangles.size())
+            throw InputError("triangle index " + std::to_string(t) +
+                             " is out of range: the mesh has " +
+                             std::to_string(mesh.triangles.size()) + " triangles");
+        for (const uint32_t v : mesh.triangles[t]) {
+            if (v >= mesh.positions.size())
+                throw InputError("triangle " + std::to_string(t) + " refers to vertex " +
+                                 std::to_string(v) + ", but the mesh has only " +
+                                 std::to_string(mesh.positions.size()) + " vertices");
+            used.push_back(v);
+        }
+    }
+    std::sort(used.begin(), used.end());
+    used.erase(std::unique(used.begin(), used.end()), used.end());
+
+    // Phase 2: the kept vertices and the triangles renumbered to them.
+    Mesh out;
+    out.positions.reserve(used.size());
+    for (const uint32_t v : used) out.positions.push_back(mesh.positions[v]);
+    out.triangles.reserve(triangles.size());
+    for (const uint32_t t : triangles) {
+        std::array<uint32_t, 3> renumbered;
+        for (int i = 0; i < 3; ++i)
+            renumbered[i] = uint32_t(
+                std::lower_bound(used.begin(), used.end(), mesh.triangles[t][i]) - used.begin());
+        out.triangles.push_back(renumbered);
+    }
+    return out;
+}
+
 Mesh load_mesh(const std::string& path) {
     // Phase 1: read the file as it is, with its own vertex numbering, so that problems are
     // reported in the file's terms.

@@ -55,6 +55,7 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
     validate_grid(grid);
     PreparedTriangles out;
     out.triangles.reserve(mesh.triangles.size());
+    out.source.reserve(mesh.triangles.size());
 
     const double inv = 1.0 / grid.voxel_size;
     for (size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -81,6 +82,7 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
         if (misses) continue;
         if (inside_margin) {
             out.triangles.push_back(round_to_anchor(g[0], g[1], g[2]));
+            out.source.push_back(uint32_t(t));
             continue;
         }
 
@@ -92,8 +94,10 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
         }
         if (poly.empty()) continue;
         if (poly.size() < 3) poly.resize(3, poly.back());  // a clipped point or segment
-        for (size_t i = 1; i + 1 < poly.size(); ++i)
+        for (size_t i = 1; i + 1 < poly.size(); ++i) {
             out.triangles.push_back(round_to_anchor(poly[0], poly[i], poly[i + 1]));
+            out.source.push_back(uint32_t(t));
+        }
     }
 
     out.ranges.reserve(out.triangles.size());

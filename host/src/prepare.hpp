@@ -1,6 +1,7 @@
 // Turning a Mesh on a Grid into the triangles the kernels and the reference consume.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "oclvox/oclvox.hpp"
@@ -10,7 +11,8 @@ namespace oclvox::detail {
 
 struct PreparedTriangles {
     std::vector<OvTriangle> triangles;
-    std::vector<OvRange> ranges;  // ov_triangle_range of each triangle
+    std::vector<OvRange> ranges;   // ov_triangle_range of each triangle
+    std::vector<uint32_t> source;  // the mesh triangle each came from (clipping can split one)
 };
 
 // Validates mesh and grid, maps vertices to grid coordinates (voxel units) in double, drops

@@ -4,7 +4,7 @@
 //
 // Assimp is not ours and not hardened: fuzzing found malformed files on which it aborts the
 // process (an ai_assert in its zip reader, from a 1.4 KB .3mf), allocates 3.7 GB (a 616-byte
-// .glb) or leaks. So it runs in a child process under an address-space limit, and hands the
+// .glb) or leaks. So it runs in a child process under a memory limit, and hands the
 // polygons back through a pipe: whatever it does to itself, the caller gets an InputError naming
 // the file, and its own memory is untouched.
 #include <assimp/postprocess.h>
@@ -175,18 +175,23 @@ uint64_t import_memory_limit(const std::string& path) {
 #endif
 #endif
 #if defined(__SANITIZE_ADDRESS__) || defined(OCLVOX_SANITIZED_ADDRESSES)
-// Sanitizers reserve terabytes of address space: no limit in those builds.
-constexpr bool kLimitAddressSpace = false;
+// Sanitizers reserve terabytes of address space before main, so those builds limit the data
+// segment instead (which the sanitizer's allocator also grows), and send the sanitizer's report
+// of a refused allocation where assimp's own messages go: it is the limit working, not a bug.
+#include <sanitizer/common_interface_defs.h>
+constexpr bool kSanitizedAddresses = true;
 #else
-constexpr bool kLimitAddressSpace = true;
+constexpr bool kSanitizedAddresses = false;
 #endif
 
-// The address space this process has mapped (VmSize), or 0 if unknown.
-uint64_t mapped_bytes() {
+// Field `index` of /proc/self/statm (0: all mapped memory, 5: data and stack) in bytes, or 0 if
+// unknown.
+uint64_t mapped_bytes(int index) {
     FILE* statm = std::fopen("/proc/self/statm", "r");
     if (!statm) return 0;
     unsigned long long pages = 0;
-    const bool read = std::fscanf(statm, "%llu", &pages) == 1;
+    bool read = true;
+    for (int i = 0; i <= index && read; ++i) read = std::fscanf(statm, "%llu", &pages) == 1;
     std::fclose(statm);
     return read ? uint64_t(pages) * uint64_t(sysconf(_SC_PAGESIZE)) : 0;
 }
@@ -225,11 +230,14 @@ void write_vector(int fd, const std::vector<T>& v) {
         dup2(null, STDERR_FILENO);
         close(null);
     }
-    if (kLimitAddressSpace) {
-        // On top of what the process has mapped already (libraries, a device runtime's threads).
-        const rlimit limit{mapped_bytes() + memory_limit, mapped_bytes() + memory_limit};
-        setrlimit(RLIMIT_AS, &limit);
-    }
+    // On top of what the process has mapped already (libraries, a device runtime's threads).
+    const int resource = kSanitizedAddresses ? RLIMIT_DATA : RLIMIT_AS;
+    const uint64_t mapped = mapped_bytes(kSanitizedAddresses ? 5 : 0);
+    const rlimit limit{mapped + memory_limit, mapped + memory_limit};
+    setrlimit(resource, &limit);
+#if defined(__SANITIZE_ADDRESS__) || defined(OCLVOX_SANITIZED_ADDRESSES)
+    __sanitizer_set_report_path("stderr");
+#endif
     // The message sent back is the whole InputError message.
     std::string message;
     try {

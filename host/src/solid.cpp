@@ -122,22 +122,26 @@ struct ColumnBins {
     std::vector<uint32_t> pair_triangle;
 };
 
-ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l,
-                       const BrickSelection& selection) {
+// Calls f(column) for every brick column (index bx + nbx * by) where `tri` can flip a grid voxel.
+template <class F>
+void for_each_column_of(const OvParityTriangle& tri, const Layout& l, F&& f) {
     // A crossing at or above the centre of the top voxel flips nothing in the grid.
     const int64_t top_centre = int64_t(l.nz - 1) * OVS_UNITS + OVS_UNITS / 2;
+    if (std::min({tri.v[2], tri.v[5], tri.v[8]}) >= top_centre) return;
+    OvColumnRange r;
+    if (!ovs_column_range(&tri, 0, 0, std::max(l.nx, l.ny), l.nx, l.ny, &r)) return;
+    for (int by = r.lo[1] / l.brick; by <= r.hi[1] / l.brick; ++by)
+        for (int bx = r.lo[0] / l.brick; bx <= r.hi[0] / l.brick; ++bx)
+            f(uint64_t(bx) + uint64_t(l.nbx) * uint64_t(by));
+}
+
+ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l,
+                       const BrickSelection& selection) {
     std::vector<std::pair<uint64_t, uint32_t>> pairs;
-    for (size_t t = 0; t < triangles.size(); ++t) {
-        const OvParityTriangle& tri = triangles[t];
-        if (std::min({tri.v[2], tri.v[5], tri.v[8]}) >= top_centre) continue;
-        OvColumnRange r;
-        if (!ovs_column_range(&tri, 0, 0, std::max(l.nx, l.ny), l.nx, l.ny, &r)) continue;
-        for (int by = r.lo[1] / l.brick; by <= r.hi[1] / l.brick; ++by)
-            for (int bx = r.lo[0] / l.brick; bx <= r.hi[0] / l.brick; ++bx) {
-                const uint64_t column = uint64_t(bx) + uint64_t(l.nbx) * uint64_t(by);
-                if (selection.contains_column(column)) pairs.push_back({column, uint32_t(t)});
-            }
-    }
+    for (size_t t = 0; t < triangles.size(); ++t)
+        for_each_column_of(triangles[t], l, [&](uint64_t column) {
+            if (selection.contains_column(column)) pairs.push_back({column, uint32_t(t)});
+        });
     std::sort(pairs.begin(), pairs.end());
     ColumnBins bins;
     for (size_t p = 0; p < pairs.size(); ++p) {
@@ -1381,6 +1385,21 @@ MeshEdgeReport mesh_edge_report(const Mesh& mesh) {
             ++report.misoriented;
     }
     return report;
+}
+
+InsideTest whole_mesh_inside_test(const Mesh& mesh, const Grid& grid, InsideTest requested) {
+    std::vector<OvParityTriangle> triangles;
+    return choose_inside_test(mesh, requested, parity_triangles(mesh, grid, triangles)).test;
+}
+
+void for_each_parity_column(const Mesh& mesh, const Grid& grid, int brick_size,
+                            const std::function<void(uint32_t, uint64_t)>& f) {
+    std::vector<OvParityTriangle> triangles;
+    if (!parity_triangles(mesh, grid, triangles))
+        throw GridError("parity columns asked for a mesh beyond exact parity arithmetic");
+    const Layout l = make_layout(SparseVoxels(grid, brick_size));
+    for (size_t t = 0; t < triangles.size(); ++t)
+        for_each_column_of(triangles[t], l, [&](uint64_t column) { f(uint32_t(t), column); });
 }
 
 SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,

@@ -2,6 +2,7 @@
 // generalized winding number, on an OpenCL device and as a host reference.
 #pragma once
 
+#include <functional>
 #include <string>
 
 #include "kernel_sources.hpp"
@@ -19,6 +20,16 @@ struct MeshEdgeReport {
     bool closed() const { return boundary == 0 && non_manifold == 0 && misoriented == 0; }
 };
 MeshEdgeReport mesh_edge_report(const Mesh& mesh);
+
+// The inside test a Solid or Filled run of the whole mesh uses: `requested`, or for Auto the
+// choice described below. Throws GridError where that run would (parity forced but impossible).
+InsideTest whole_mesh_inside_test(const Mesh& mesh, const Grid& grid, InsideTest requested);
+
+// Calls f(t, column) for every triangle t and brick column (bx + nbx * by of brick_size bricks)
+// where t can flip a voxel: the pairs the parity test bins. The mesh must fit exact parity
+// arithmetic (whole_mesh_inside_test chose Parity).
+void for_each_parity_column(const Mesh& mesh, const Grid& grid, int brick_size,
+                            const std::function<void(uint32_t, uint64_t)>& f);
 
 // Both return the solid voxels only (no surface), in options.brick_size bricks, and set
 // stats.inside_test and stats.inside_test_reason. Auto picks parity for a closed mesh (every

@@ -11,6 +11,7 @@ on the bit-identical CPU reference with ``reference=True``. Devices are opened o
 GIL is released while work runs. Errors are ``oclvox.Error`` subclasses.
 """
 
+import collections
 import numbers
 import os
 
@@ -29,7 +30,7 @@ from ._oclvox import (
 from . import _oclvox
 
 __all__ = [
-    "load_mesh", "save_mesh", "voxelize", "candidate_bricks", "sdf", "csg", "mesh", "devices", "load_field",
+    "load_mesh", "save_mesh", "voxelize", "candidate_bricks", "selection_triangles", "sdf", "csg", "mesh", "devices", "load_field",
     "Mesh", "VoxelGrid", "Field", "Error", "InputError",
     "GridError", "DeviceError", "KernelBuildError", "OutputError", "Cancelled",
 ]
@@ -136,6 +137,36 @@ def candidate_bricks(vertices, faces=None, resolution=256, *, mode="surface", in
     return _oclvox.candidate_bricks(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic),
                                     mode=mode, inside=inside, boundary=boundary,
                                     brick_size=brick_size)
+
+
+SelectionTriangles = collections.namedtuple("SelectionTriangles", "grid inside triangles")
+SelectionTriangles.__doc__ = """What selection_triangles returns.
+
+grid: the whole run's grid as voxelize's keyword arguments (origin, voxel_size, dims), because a
+part of the mesh would fit a different one. inside: the whole run's inside test ("parity" or
+"winding" for solid and filled, with "auto" resolved on the whole mesh; else the one given).
+triangles: per selection, a sorted uint32 array of triangle indices; None when every selection
+needs the whole mesh (the winding number: every triangle counts in every voxel)."""
+
+
+def selection_triangles(vertices, faces=None, resolution=256, *, selections, mode="surface",
+                        inside="auto", boundary="closed", voxel_size=None, origin=None,
+                        dims=None, pad=0, cubic=False, brick_size=64):
+    """For each brick selection, the triangles that voxelize(..., bricks=selection) reads, so that
+    a machine running that selection needs only them: voxelize(mesh.submesh(plan.triangles[s]),
+    **plan.grid, inside=plan.inside, bricks=selections[s], <the other options>) gives exactly the
+    voxels of voxelize(mesh, ..., bricks=selections[s]); a selection with no triangles has none.
+    One pass over the triangles and the (triangle, brick) pairs the binning makes, on the host.
+    Returns a SelectionTriangles (grid, inside, triangles)."""
+    mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
+    fit = _fit(resolution, voxel_size, origin, dims, pad, cubic)
+    origin, voxel_size, dims = _oclvox.fit_grid(mesh, fit)
+    selections = list(selections)
+    chosen, whole_mesh, triangles = _oclvox.selection_triangles(
+        mesh, fit, mode=mode, inside=inside, boundary=boundary, brick_size=brick_size,
+        selections=selections)
+    return SelectionTriangles(dict(origin=origin, voxel_size=voxel_size, dims=dims), chosen,
+                              None if whole_mesh else triangles)
 
 
 def _field_pad(pad, band, origin, dims):

@@ -88,7 +88,8 @@ def _collect(client, futures, on_result):
 # ---- one grid in shards -------------------------------------------------------------------------
 
 def _voxelize_shard(mesh, resolution, bricks, device, options):
-    """A worker's task: the voxels of the whole grid that lie in `bricks`."""
+    """A worker's task: the voxels of the whole grid that lie in `bricks`, from the whole mesh or
+    from the triangles that reach them (then `options` fix the whole run's grid and inside test)."""
     return oclvox.voxelize(mesh, resolution, bricks=bricks, device=device, **options)
 
 
@@ -106,9 +107,29 @@ def shards_of(bricks, shard_bricks):
 def _auto_shard_bricks(brick_count, client):
     """About four shards per worker: a worker that finishes early takes another, so the run ends
     at most about a quarter of a worker's share after the work runs out. At least 64 bricks a
-    shard, because every shard also pays for binning the whole mesh and for a task."""
+    shard, so that a shard's work outweighs the cost of a task."""
     workers = max(1, len(client.scheduler_info()["workers"]))
     return max(64, math.ceil(brick_count / (4 * workers)))
+
+
+def _plan_shards(mesh, resolution, shard_bricks, client, options):
+    """The candidate bricks, the shards cut from them and oclvox.selection_triangles' plan."""
+    grid_options = {k: v for k, v in options.items()
+                    if k in inspect.signature(oclvox.candidate_bricks).parameters}
+    candidates = oclvox.candidate_bricks(mesh, resolution, **grid_options)
+    if grid_options.get("mode") in ("solid", "filled"):
+        # Parity reads whole brick columns (crossings below a voxel count): shards of whole
+        # columns read each column's triangles in one shard, not in every shard of a z range.
+        dims = oclvox._oclvox.fit_grid(mesh, oclvox._fit(
+            resolution, options.get("voxel_size"), options.get("origin"), options.get("dims"),
+            options.get("pad", 0), options.get("cubic", False)))[2]
+        brick = grid_options.get("brick_size",
+                                 inspect.signature(oclvox.voxelize).parameters["brick_size"].default)
+        columns = math.ceil(dims[0] / brick) * math.ceil(dims[1] / brick)
+        candidates = candidates[np.argsort(candidates % np.uint64(columns), kind="stable")]
+    shards = shards_of(candidates, shard_bricks or _auto_shard_bricks(len(candidates), client))
+    plan = oclvox.selection_triangles(mesh, resolution, selections=shards, **grid_options)
+    return candidates, shards, plan
 
 
 def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=None,
@@ -119,42 +140,56 @@ def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=
     (mode, test, inside, boundary, grid options, brick_size, device_memory, host_memory,
     reference). The bricks that can hold set voxels (oclvox.candidate_bricks, computed here
     without a device) are cut into shards of about `shard_bricks` bricks (default: about four
-    shards per worker, at least 64 bricks each); the mesh is sent to
-    every worker once; each shard is one task, oclvox.voxelize(..., bricks=shard), on the device
-    `device` names on that worker (default: the worker's $OCLVOX_DEVICE, else its first GPU, else
-    its first device). The shards' results are merged as they arrive, so the client holds the
-    result and at most one shard's. The result is bit for bit the single-process one: each brick
-    is computed by exactly one shard, by the same code on the same grid.
+    shards per worker, at least 64 bricks each); each shard is one task,
+    oclvox.voxelize(..., bricks=shard), on the device `device` names on that worker (default: the
+    worker's $OCLVOX_DEVICE, else its first GPU, else its first device). The shards' results are
+    merged as they arrive, so the client holds the result and at most one shard's. The result is
+    bit for bit the single-process one: each brick is computed by exactly one shard, by the same
+    code on the same grid.
 
-    Surface, thin and parity solid shards do only their bricks' work. A winding-number solid shard
-    (inside="winding", or "auto" on an open mesh) computes the whole grid and keeps its bricks, so
-    it gains nothing from sharding; run it with oclvox.voxelize or with few shards.
+    Surface, thin and parity solid (and filled) shards get only the triangles that reach their
+    bricks (oclvox.selection_triangles, one pass over the mesh here), so a shard's work and the
+    data sent to it follow its share of the surface, and a shard with none is no task. A
+    winding-number solid (inside="winding", or "auto" on an open mesh) needs the whole mesh in
+    every shard: the mesh is sent to every worker once, and each shard computes the whole grid
+    and keeps its bricks, so it gains nothing from sharding; run it with oclvox.voxelize or with
+    few shards.
 
     progress: called as progress(bricks_done, bricks_total) as shards finish; returning False
     cancels the shards not yet done and raises oclvox.Cancelled.
     """
     _check_options(options)
-    # Phase 1: the mesh, read once, and the bricks worth a task.
+    # Phase 1: the mesh, read once; the bricks worth a task, in shards, and each shard's triangles.
     mesh = oclvox._as_mesh(mesh)
-    grid_options = {k: v for k, v in options.items()
-                    if k in inspect.signature(oclvox.candidate_bricks).parameters}
-    candidates = oclvox.candidate_bricks(mesh, resolution, **grid_options)
-    shards = shards_of(candidates, shard_bricks or _auto_shard_bricks(len(candidates), client))
-    if not shards:
+    candidates, shards, plan = _plan_shards(mesh, resolution, shard_bricks, client, options)
+
+    # Phase 2: one task per shard that has triangles. A part of the mesh would fit another grid
+    # and could choose another inside test, so its tasks are given the whole run's.
+    tasks = []  # (mesh or its future, options, shard)
+    if plan.triangles is None:
+        [mesh_on_workers] = client.scatter([mesh], broadcast=True)
+        tasks = [(mesh_on_workers, options, shard) for shard in shards]
+    else:
+        part_options = {k: v for k, v in options.items()
+                        if k not in ("voxel_size", "origin", "dims", "pad", "cubic")}
+        part_options.update(plan.grid, inside=plan.inside)
+        parts = [(mesh.submesh(triangles), shard)
+                 for triangles, shard in zip(plan.triangles, shards) if len(triangles)]
+        # Scattered rather than inlined in the tasks: each part goes to one worker, once.
+        futures = client.scatter([part for part, _ in parts], hash=False) if parts else []
+        tasks = [(future, part_options, shard) for future, (_, shard) in zip(futures, parts)]
+        del parts
+    if not tasks:
         # No brick can hold a voxel, so any selection gives the empty whole grid; brick 0 alone
         # costs least (an empty selection would mean every brick).
-        shards = [np.zeros(1, np.uint64)]
-
-    # Phase 2: the mesh to every worker once (a worker keeps it for all its tasks), then one task
-    # per shard.
-    [mesh_on_workers] = client.scatter([mesh], broadcast=True)
-    futures = {client.submit(_voxelize_shard, mesh_on_workers, resolution, shard, device,
-                             options): len(shard)
-               for shard in shards}
+        [mesh_on_worker] = client.scatter([mesh])
+        tasks = [(mesh_on_worker, options, np.zeros(1, np.uint64))]
+    futures = {client.submit(_voxelize_shard, part, resolution, shard, device, part_options):
+               len(shard) if len(candidates) else 0 for part, part_options, shard in tasks}
 
     # Phase 3: merge the shards as they finish.
     merged = []
-    done = [0]
+    done = [len(candidates) - sum(futures.values())]  # shards without triangles: no task
 
     def merge(future, brick_count):
         shard = future.result()

@@ -140,6 +140,25 @@ py::array_t<uint64_t> brick_array(const std::vector<uint64_t>& bricks) {
     return out;
 }
 
+// Triangle indices from any 1-D array-like of integers, each checked against the mesh (a
+// cast to uint32 would wrap out-of-range values onto real triangles).
+std::vector<uint32_t> triangle_list(const py::object& triangles, const oclvox::Mesh& mesh) {
+    const auto array =
+        py::array_t<int64_t, py::array::c_style | py::array::forcecast>::ensure(triangles);
+    if (!array || array.ndim() != 1)
+        throw py::value_error("triangles must be a 1-D sequence of triangle indices");
+    std::vector<uint32_t> out(size_t(array.size()));
+    for (py::ssize_t i = 0; i < array.size(); ++i) {
+        const int64_t t = array.data()[i];
+        if (t < 0 || uint64_t(t) >= mesh.triangles.size())
+            throw py::index_error("triangle index " + std::to_string(t) +
+                                  " is out of range: the mesh has " +
+                                  std::to_string(mesh.triangles.size()) + " triangles");
+        out[size_t(i)] = uint32_t(t);
+    }
+    return out;
+}
+
 oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::string& test,
                                          const std::string& inside, const std::string& boundary,
                                          int brick_size, std::optional<uint64_t> device_mib,
@@ -353,6 +372,16 @@ PYBIND11_MODULE(_oclvox, m) {
             "float64 (N, 3) view of the mesh's own vertices")
         .def_property_readonly("faces", &faces_array, "int64 (M, 3) copy of the triangles")
         .def(
+            "submesh",
+            [](const oclvox::Mesh& mesh, const py::object& triangles) {
+                const std::vector<uint32_t> list = triangle_list(triangles, mesh);
+                py::gil_scoped_release release;
+                return oclvox::submesh(mesh, list);
+            },
+            "triangles"_a,
+            "The mesh of just these triangles (indices, in the order given) and the vertices they "
+            "use (in their order here)")
+        .def(
             "save",
             [](const oclvox::Mesh& mesh, const std::filesystem::path& path) {
                 py::gil_scoped_release release;
@@ -524,6 +553,31 @@ PYBIND11_MODULE(_oclvox, m) {
             return brick_array(bricks);
         },
         "mesh"_a, "fit"_a, "mode"_a, "inside"_a, "boundary"_a, "brick_size"_a);
+    m.def(
+        "selection_triangles",
+        [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const std::string& mode,
+           const std::string& inside, const std::string& boundary, int brick_size,
+           const py::iterable& selections) {
+            const oclvox::VoxelizeOptions options =
+                voxelize_options(mode, "sat", inside, boundary, brick_size, {}, {});
+            std::vector<std::vector<uint64_t>> lists;
+            for (const py::handle selection : selections)
+                lists.push_back(brick_list(py::reinterpret_borrow<py::object>(selection)));
+            oclvox::SelectionTriangles plan;
+            {
+                py::gil_scoped_release release;
+                plan =
+                    oclvox::selection_triangles(mesh, oclvox::fit_grid(mesh, fit), options, lists);
+            }
+            py::list triangles;
+            for (const std::vector<uint32_t>& list : plan.triangles) {
+                py::array_t<uint32_t> array(py::ssize_t(list.size()));
+                std::copy(list.begin(), list.end(), array.mutable_data());
+                triangles.append(array);
+            }
+            return py::make_tuple(oclvox::to_string(plan.inside), plan.whole_mesh, triangles);
+        },
+        "mesh"_a, "fit"_a, "mode"_a, "inside"_a, "boundary"_a, "brick_size"_a, "selections"_a);
     m.def(
         "sdf",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, double band, bool full_grid,

@@ -20,7 +20,7 @@ from conftest import SPOT
 
 distributed = pytest.importorskip("distributed", reason="Dask (python3-distributed) not installed")
 from oclvox.distributed import (  # noqa: E402
-    mesh_paths, sdf_sharded, shards_of, voxelize_many, voxelize_sharded)
+    _plan_shards, mesh_paths, sdf_sharded, shards_of, voxelize_many, voxelize_sharded)
 
 CLI = os.environ.get("OCLVOX_CLI")
 
@@ -75,16 +75,73 @@ def test_sharded_equals_single_process(client, open_spot, resolution, options, s
     single = oclvox.voxelize(open_spot, resolution, **options)
     sharded, tasks = counting_tasks(client, lambda: voxelize_sharded(
         open_spot, resolution, client=client, shard_bricks=shard_bricks, **options))
-    grid_options = {k: v for k, v in options.items() if k != "test"}
-    shards = len(shards_of(oclvox.candidate_bricks(open_spot, resolution, **grid_options),
-                           shard_bricks))
-    assert sum(tasks) == shards >= 3, "too few shards to test sharding"
+    _, shards, plan = _plan_shards(oclvox.Mesh(*open_spot), resolution, shard_bricks, client,
+                                   options)
+    with_triangles = len(shards) if plan.triangles is None else \
+        sum(1 for t in plan.triangles if len(t))
+    assert sum(tasks) == with_triangles >= 3, "too few shards to test sharding"
     assert min(tasks) > 0, "both workers should have taken shards"
     assert single.count > 0
     assert sharded.same_voxels(single)
     assert (sharded.dims, sharded.origin, sharded.voxel_size) == \
         (single.dims, single.origin, single.voxel_size)
     assert np.array_equal(sharded.to_numpy(), single.to_numpy())
+
+
+@pytest.mark.parametrize("options,whole_mesh", [
+    (dict(mode="surface"), False),
+    (dict(mode="filled", inside="parity"), False),
+    (dict(mode="solid", inside="winding"), True),
+])
+def test_shards_are_sent_only_the_triangles_reaching_them(client, monkeypatch, options,
+                                                          whole_mesh):
+    mesh = oclvox.Mesh(*oclvox.load_mesh(SPOT))
+    sent = []
+    scatter = client.scatter
+
+    def recording_scatter(data, **kwargs):
+        sent.extend((part, kwargs.get("broadcast", False)) for part in data)
+        return scatter(data, **kwargs)
+
+    monkeypatch.setattr(client, "scatter", recording_scatter)
+    sharded = voxelize_sharded(mesh, 64, client=client, brick_size=8, shard_bricks=16, **options)
+    monkeypatch.undo()
+    assert sharded.same_voxels(oclvox.voxelize(mesh, 64, brick_size=8, **options))
+    triangles = [len(part.faces) for part, _ in sent]
+    total = len(mesh.faces)
+    if whole_mesh:
+        assert triangles == [total] and sent[0][1], "the winding number needs the whole mesh"
+    else:
+        assert len(sent) >= 8 and not any(broadcast for _, broadcast in sent)
+        assert max(triangles) < total / 3, "a shard was sent far more than its triangles"
+        assert sum(triangles) < 2 * total
+
+
+def test_selection_triangles_parts_give_the_shards_voxels():
+    mesh = oclvox.Mesh(*oclvox.load_mesh(SPOT))
+    options = dict(mode="solid", brick_size=8)
+    shards = shards_of(oclvox.candidate_bricks(mesh, 48, **options), 10)
+    plan = oclvox.selection_triangles(mesh, 48, selections=shards, **options)
+    assert plan.inside == "parity"  # spot is closed; a part alone is open
+    whole = oclvox.voxelize(mesh, 48, **options)
+    merged = None
+    for shard, triangles in zip(shards, plan.triangles):
+        expected = oclvox.voxelize(mesh, 48, bricks=shard, **options)
+        if len(triangles) == 0:
+            assert expected.count == 0
+            continue
+        part = oclvox.voxelize(mesh.submesh(triangles), **plan.grid, inside=plan.inside,
+                               bricks=shard, **options)
+        assert part.same_voxels(expected)
+        if merged is None:
+            merged = part
+        else:
+            merged.merge(part)
+    assert merged.same_voxels(whole)
+    with pytest.raises(IndexError, match="out of range"):
+        mesh.submesh([len(mesh.faces)])
+    with pytest.raises(IndexError):
+        mesh.submesh([-1])
 
 
 def test_sharded_vdb_reads_back_as_single_process(client, tmp_path):

@@ -73,6 +73,11 @@ Mesh load_mesh(const std::string& path);
 // coordinate in a used vertex.
 void validate_mesh(const Mesh& mesh);
 
+// The mesh of just these triangles of `mesh` (in the order given) and the vertices they use (in
+// their order in `mesh`); the work is linear in the triangles kept, whatever the mesh's size.
+// Throws InputError for a triangle index out of range.
+Mesh submesh(const Mesh& mesh, const std::vector<uint32_t>& triangles);
+
 // ---------------------------------------------------------------------------------------------
 // Grids
 // ---------------------------------------------------------------------------------------------
@@ -238,6 +243,28 @@ struct VoxelizeOptions {
 // voxelize for a bad mesh or grid, and GridError if there are more than 2^31 such bricks.
 std::vector<uint64_t> candidate_bricks(const Mesh& mesh, const Grid& grid,
                                        const VoxelizeOptions& options);
+
+// For running one voxelization as several over brick selections (VoxelizeOptions::bricks) on
+// machines that each hold only part of the mesh: which triangles each selection needs.
+struct SelectionTriangles {
+    // The inside test of the whole run: for Solid and Filled, options.inside with Auto resolved on
+    // the whole mesh. Give it to the runs on parts of the mesh, whose own Auto could choose
+    // differently (a part of a closed mesh is open).
+    InsideTest inside = InsideTest::Auto;
+    // Every selection needs the whole mesh (the winding number: every triangle counts in every
+    // voxel); `triangles` is then empty.
+    bool whole_mesh = false;
+    // triangles[s]: the ascending indices of the triangles that the run with
+    // bricks = selections[s] reads. That run on submesh(mesh, triangles[s]), with the same grid
+    // and options and `inside`, gives the same voxels bit for bit; with no triangles it has none.
+    std::vector<std::vector<uint32_t>> triangles;
+};
+// One pass over the triangles' (triangle, brick) pairs, the binning's own: linear in triangles and
+// pairs. An empty selection means every brick, as in VoxelizeOptions::bricks. Throws like voxelize
+// for a bad mesh, grid or brick index.
+SelectionTriangles selection_triangles(const Mesh& mesh, const Grid& grid,
+                                       const VoxelizeOptions& options,
+                                       const std::vector<std::vector<uint64_t>>& selections);
 
 // Timing breakdown and counts of one run (seconds).
 struct VoxelizeStats {
