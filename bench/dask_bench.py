@@ -10,6 +10,7 @@ Measures, each with the load average beside it (other jobs on a shared machine s
   voxelize_sharded on 1 and 2 workers, each a process whose PoCL device has one thread (so that
   1 worker = 1 core): wall time, shards, compute time summed over shards (Dask's task stream),
   result size (pickled, as it travels);
+- a shard's voxelize call on the whole mesh against on the triangles that reach it;
 - a batch: --batch scaled and moved copies of the mesh through voxelize_many on 1 and 2 workers;
 - a projection for --project^3 on 100 workers from the measured per-brick cost and result bytes
   (oclvox.candidate_bricks gives the brick count at that size without voxelizing).
@@ -130,6 +131,47 @@ def receive_cost(mesh, resolution, shard_bricks):
     return seconds / mib
 
 
+# Run in a fresh process on one PoCL thread: one worker's view of a shard.
+SHARD_PREPARATION = """
+import statistics, sys, time
+import numpy as np
+import oclvox
+from oclvox.distributed import shards_of
+mesh = oclvox.Mesh(*oclvox.load_mesh(sys.argv[1]))
+resolution, shard_bricks, sampled = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+oclvox.voxelize(mesh, 64)  # device open, kernels loaded
+start = time.perf_counter()
+shards = shards_of(oclvox.candidate_bricks(mesh, resolution), shard_bricks)
+plan = oclvox.selection_triangles(mesh, resolution, selections=shards)
+planning = time.perf_counter() - start
+whole, part, sizes = [], [], []
+for i in np.linspace(0, len(shards) - 1, sampled).astype(int):
+    start = time.perf_counter()
+    expected = oclvox.voxelize(mesh, resolution, bricks=shards[i])
+    whole.append(time.perf_counter() - start)
+    start = time.perf_counter()
+    got = oclvox.voxelize(mesh.submesh(plan.triangles[i]), **plan.grid, bricks=shards[i])
+    part.append(time.perf_counter() - start)
+    sizes.append(len(plan.triangles[i]))
+    assert got.same_voxels(expected)
+print(len(shards), planning, statistics.median(whole), statistics.median(part),
+      statistics.median(sizes))
+"""
+
+
+def shard_preparation(mesh, resolution, shard_bricks, sampled=5):
+    """A shard's voxelize call on the whole mesh (it prepares every triangle) against on the
+    triangles selection_triangles gives it (submesh included), median over `sampled` shards spread
+    over the grid, in one process on one PoCL thread; plus the client's one planning pass."""
+    out = subprocess.run([sys.executable, "-c", SHARD_PREPARATION, str(mesh), str(resolution),
+                          str(shard_bricks), str(sampled)],
+                         env=dict(os.environ, **ONE_CORE), check=True, capture_output=True,
+                         text=True).stdout.split()
+    shards, planning, whole, part, size = (float(x) for x in out)
+    return dict(shards=int(shards), planning=planning, whole=whole, part=part,
+                triangles=int(size))
+
+
 def batch(mesh, count, resolution, workers, folder):
     out = folder / f"out{workers}"
     with cluster(workers) as c, distributed.Client(c) as client:
@@ -202,6 +244,20 @@ def main():
               f"- taking a finished shard from a worker and merging it: {receiving * 1e3:.1f} ms "
               f"per MiB, wall (load {load()})",
               f"- writing the merged result as one .vdb: {vdb_seconds:.2f} s (load {load()})"]
+
+    # What a shard costs on the whole mesh and on its own triangles.
+    triangles = len(oclvox.load_mesh(mesh)[1])
+    lines += ["", f"## A shard on the whole mesh and on its triangles ({triangles} triangles)",
+              "", "One process on one PoCL thread; the voxelize call of one shard, median of 5 "
+              "shards spread over the grid; planning: candidate_bricks, shards_of and "
+              "selection_triangles for all shards, once, on the client.", "",
+              "| grid | bricks per shard | shards | planning s | shard s, whole mesh | "
+              "shard s, its triangles | its triangles (median) | load |",
+              "|---|---:|---:|---:|---:|---:|---:|---|"]
+    for resolution, bricks in ((1024, 8), (4096, 64), (r, shard_bricks)):
+        run = shard_preparation(mesh, resolution, bricks)
+        lines.append(f"| {resolution}^3 | {bricks} | {run['shards']} | {run['planning']:.3f} | "
+                     f"{run['whole']:.4f} | {run['part']:.4f} | {run['triangles']} | {load()} |")
 
     # A batch.
     with tempfile.TemporaryDirectory() as tmp:

