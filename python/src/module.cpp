@@ -191,37 +191,63 @@ oclvox::SdfOptions sdf_options(double band, bool full_grid, const std::string& i
     return options;
 }
 
-// A VoxelGrid's pickled state: the grid, the brick size and the stored bricks (indices and their
-// words), so a sparse result travels between processes without a dense copy.
+// A VoxelGrid's pickled state: the grid, the brick size and the stored bricks: their indices, a
+// bitmap per brick of its non-zero block words, and those words alone. A sparse result travels
+// between processes without a dense copy, and a surface brick (mostly empty blocks) costs its
+// set blocks, not its 8 bytes per block: about a tenth of the words, on bunny00's bricks.
 py::tuple voxel_grid_state(const VoxelGrid& g) {
     const oclvox::SparseVoxels& v = g.voxels;
     const std::vector<uint64_t> indices = v.brick_indices();
-    py::array_t<uint64_t> words({py::ssize_t(indices.size()), py::ssize_t(v.blocks_per_brick())});
-    for (size_t b = 0; b < indices.size(); ++b)
-        std::copy_n(v.brick_blocks(indices[b]), v.blocks_per_brick(),
-                    words.mutable_data(py::ssize_t(b), 0));
+    const size_t blocks = v.blocks_per_brick(), mask_bytes = (blocks + 7) / 8;
+    py::array_t<uint8_t> masks({py::ssize_t(indices.size()), py::ssize_t(mask_bytes)});
+    std::fill_n(masks.mutable_data(), masks.size(), uint8_t(0));
+    std::vector<uint64_t> words;
+    for (size_t b = 0; b < indices.size(); ++b) {
+        const uint64_t* brick = v.brick_blocks(indices[b]);
+        uint8_t* mask = masks.mutable_data(py::ssize_t(b), 0);
+        for (size_t w = 0; w < blocks; ++w)
+            if (brick[w]) {
+                mask[w / 8] |= uint8_t(1u << (w % 8));
+                words.push_back(brick[w]);
+            }
+    }
     return py::make_tuple(origin_tuple(v.grid()), v.grid().voxel_size, dims_tuple(v.grid()),
-                          v.brick_size(), brick_array(indices), words, g.device);
+                          v.brick_size(), brick_array(indices), masks, brick_array(words),
+                          g.device);
 }
 
 VoxelGrid voxel_grid_from_state(const py::tuple& state) {
-    if (state.size() != 7) throw py::value_error("not a pickled oclvox.VoxelGrid");
+    const char* const kNotAGrid = "not a pickled oclvox.VoxelGrid";
+    if (state.size() != 8) throw py::value_error(kNotAGrid);
     oclvox::Grid grid = grid_base(state[0].cast<std::array<double, 3>>(), state[1].cast<double>());
     grid.dims = state[2].cast<std::array<int64_t, 3>>();
     oclvox::validate_grid(grid);
     VoxelGrid g;
     g.voxels = oclvox::SparseVoxels(grid, state[3].cast<int>());
     const std::vector<uint64_t> indices = brick_list(state[4]);
-    const auto words =
-        py::array_t<uint64_t, py::array::c_style | py::array::forcecast>::ensure(state[5]);
-    const size_t blocks = g.voxels.blocks_per_brick();
-    if (!words || words.ndim() != 2 || size_t(words.shape(0)) != indices.size() ||
-        size_t(words.shape(1)) != blocks)
-        throw py::value_error("not a pickled oclvox.VoxelGrid: brick words do not match");
-    for (size_t b = 0; b < indices.size(); ++b)
-        g.voxels.merge_brick(indices[b], words.data(py::ssize_t(b), 0));
+    const auto masks =
+        py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(state[5]);
+    const std::vector<uint64_t> words = brick_list(state[6]);
+    const size_t blocks = g.voxels.blocks_per_brick(), mask_bytes = (blocks + 7) / 8;
+    if (!masks || masks.ndim() != 2 || size_t(masks.shape(0)) != indices.size() ||
+        size_t(masks.shape(1)) != mask_bytes)
+        throw py::value_error(std::string(kNotAGrid) + ": brick masks do not match");
+    std::vector<uint64_t> brick(blocks);
+    size_t next = 0;
+    for (size_t b = 0; b < indices.size(); ++b) {
+        const uint8_t* mask = masks.data(py::ssize_t(b), 0);
+        for (size_t w = 0; w < blocks; ++w) {
+            const bool set = mask[w / 8] >> (w % 8) & 1;
+            if (set && next == words.size())
+                throw py::value_error(std::string(kNotAGrid) + ": fewer words than masks");
+            brick[w] = set ? words[next++] : 0;
+        }
+        g.voxels.merge_brick(indices[b], brick.data());
+    }
+    if (next != words.size())
+        throw py::value_error(std::string(kNotAGrid) + ": more words than masks");
     g.stats.voxels_set = g.voxels.count();
-    g.device = state[6].cast<std::string>();
+    g.device = state[7].cast<std::string>();
     return g;
 }
 

@@ -46,13 +46,32 @@ def test_brick_outside_the_grid_is_an_error(spot):
 def test_voxel_grid_pickles_sparsely(spot):
     grid = oclvox.voxelize(spot, 48, brick_size=16)
     data = pickle.dumps(grid)
-    # The bricks travel, not the dense grid.
-    assert len(data) < grid.brick_count * 16**3 // 8 + 4096
+    # The set 4^3 blocks travel (a word each) and a bit per block of the stored bricks, not the
+    # dense grid and not the bricks' empty blocks. Blocks counted here from the dense array.
+    dense = grid.to_numpy()
+    padded = np.pad(dense, [(0, -n % 4) for n in dense.shape])
+    set_blocks = np.count_nonzero(padded.reshape(
+        padded.shape[0] // 4, 4, padded.shape[1] // 4, 4, padded.shape[2] // 4, 4).any(
+            axis=(1, 3, 5)))
+    mask_bytes = grid.brick_count * (16 // 4)**3 // 8
+    assert set_blocks * 8 + mask_bytes < len(data) < set_blocks * 8 + mask_bytes + 4096
+    assert len(data) < grid.brick_count * 16**3 // 8 / 2  # under half of the bricks' bits
     back = pickle.loads(data)
     assert back.same_voxels(grid)
     assert (back.origin, back.voxel_size, back.dims, back.brick_size) == \
         (grid.origin, grid.voxel_size, grid.dims, grid.brick_size)
     assert np.array_equal(back.to_numpy(), grid.to_numpy())
+
+
+def test_damaged_voxel_grid_state_is_refused(spot):
+    state = oclvox.voxelize(spot, 32, brick_size=8).__getstate__()
+    for bad in (state[:6] + (state[6][:-1],) + state[7:],   # a word missing
+                state[:6] + (np.append(state[6], 1),) + state[7:],  # one too many
+                state[:5] + (state[5][:, :-1],) + state[6:],  # masks of the wrong width
+                state[:7]):
+        empty = oclvox.VoxelGrid.__new__(oclvox.VoxelGrid)
+        with pytest.raises(ValueError, match="not a pickled oclvox.VoxelGrid"):
+            empty.__setstate__(bad)
 
 
 def test_mesh_pickles_exactly(spot):
