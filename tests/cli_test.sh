@@ -173,17 +173,17 @@ else
 fi
 
 # A terminal gets a progress bar (script(1) gives the command a pseudo-terminal), for every long
-# phase: voxelizing, distance fields, meshing; --quiet silences it.
+# phase: voxelizing, writing, distance fields, meshing; --quiet silences it.
 if command -v script >/dev/null; then
     tty_bars() {  # command line -> the labels of the bars it drew, comma-separated
         script -qec "$1" /dev/null </dev/null 2>&1 | tr '\r' '\n' |
             sed -n 's/^\([a-z ]*\) \[[#.]*\].*/\1/p' | sort -u | tr '\n' ,
     }
     bars=$(tty_bars "'$OCLVOX' voxelize '$MESH' -r 32 -o '$WORK/tty.binvox'")
-    [ "$bars" = "voxelizing," ] && pass "progress bar on a terminal" ||
+    [ "$bars" = "voxelizing,writing," ] && pass "progress bars on a terminal" ||
         fail "progress bar on a terminal" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' sdf '$MESH' -r 64 -o '$WORK/tty.npy' --mesh '$WORK/tty.obj'")
-    [ "$bars" = "distance field,meshing," ] && pass "sdf --mesh: distance field and meshing bars" ||
+    [ "$bars" = "distance field,meshing,writing," ] && pass "sdf --mesh: distance field, meshing and writing bars" ||
         fail "sdf --mesh progress bars" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' csg '$MESH' union '$MESH' -r 48 -o '$WORK/tty_csg.obj'")
     [ "$bars" = "distance fields,meshing," ] && pass "csg: distance fields and meshing bars" ||

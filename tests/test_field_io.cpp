@@ -6,6 +6,8 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -263,6 +265,52 @@ TEST_F(FieldIo, OutputPathIsCheckedBeforeWork) {
     EXPECT_NO_THROW(check_output_path(path("new.obj"), {path("in.obj")}));
     EXPECT_NO_THROW(check_output_path(path("in.obj"), {path("other.obj")}));  // overwriting
     EXPECT_EQ(entries(), (std::vector<std::string>{"a_dir.obj", "hard.obj", "in.obj", "link.obj"}));
+}
+
+// The distance to a sphere of radius 5 voxels on a 20^3 grid: a field with a band.
+ScalarField sphere_field() {
+    ScalarField field;
+    field.grid.dims = {20, 20, 20};
+    field.values.resize(field.grid.voxel_count());
+    for (int64_t k = 0; k < 20; ++k)
+        for (int64_t j = 0; j < 20; ++j)
+            for (int64_t i = 0; i < 20; ++i)
+                field.values[size_t(i + 20 * (j + 20 * k))] =
+                    float(std::hypot(i - 9.5, j - 9.5, k - 9.5) - 5.0);
+    return field;
+}
+
+// write_field's progress: monotone, ending at total before the file takes its name; false from
+// the callback (first call or last) is Cancelled with nothing left in the folder.
+TEST_F(FieldIo, WriteProgressEndsBeforeTheFileAppearsAndCancelLeavesNothing) {
+    const ScalarField field = sphere_field();
+    for (const char* name : {"f.npy", "f.vdb"}) {
+        SCOPED_TRACE(name);
+        std::vector<std::pair<uint64_t, uint64_t>> calls;
+        bool file_before_last = true;
+        write_field(path(name), field, 3.0, [&](uint64_t done, uint64_t total) {
+            calls.push_back({done, total});
+            if (done == total) file_before_last = fs::exists(path(name));
+            return true;
+        });
+        ASSERT_FALSE(calls.empty());
+        EXPECT_EQ(calls.back().first, calls.back().second);
+        EXPECT_FALSE(file_before_last);
+        for (size_t i = 1; i < calls.size(); ++i) EXPECT_LE(calls[i - 1].first, calls[i].first);
+        EXPECT_TRUE(fs::exists(path(name)));
+    }
+    const std::vector<std::string> written = entries();
+    for (const char* name : {"g.npy", "g.vdb"})
+        for (const bool at_end : {false, true}) {
+            SCOPED_TRACE(std::string(name) + (at_end ? " at the end" : " at once"));
+            EXPECT_THROW(write_field(path(name), field, 3.0,
+                                     [&](uint64_t done, uint64_t total) {
+                                         return at_end ? done != total : false;
+                                     }),
+                         Cancelled);
+            EXPECT_EQ(entries(), written);
+        }
+    EXPECT_EQ(std::get<ScalarField>(read_npy(path("f.npy"))).values, field.values);
 }
 
 TEST_F(FieldIo, AtomicWriterErrorsNameTheTargetNotTheTemporaryFile) {

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -19,6 +20,7 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "atomic_file.hpp"
@@ -893,14 +895,88 @@ TEST_F(WriterTest, StreamedNpyAndBinvoxEqualTheDenseDefinitionForAnySlabAndBrick
         // 1 byte: one layer per slab; 3000: a few layers, not a multiple of 4; default: one slab.
         for (uint64_t slab : {uint64_t(1), uint64_t(3000), oclvox::detail::kSlabBytes}) {
             SCOPED_TRACE("brick " + std::to_string(brick) + ", slab " + std::to_string(slab));
-            oclvox::detail::write_npy(path("s.npy"), voxels, slab);
+            oclvox::detail::ProgressPhases none({}, "writing");
+            oclvox::detail::write_npy(path("s.npy"), voxels, none, slab);
             const std::string npy_file = read_bytes(path("s.npy"));
             const Npy parsed = read_npy(npy_file);
             EXPECT_EQ(npy_file.substr(parsed.data_offset), npy);
-            oclvox::detail::write_binvox(path("s.binvox"), voxels, slab);
+            oclvox::detail::write_binvox(path("s.binvox"), voxels, none, slab);
             EXPECT_EQ(after(read_bytes(path("s.binvox")), "data\n"), binvox);
         }
     }
+}
+
+// ---- progress ----
+
+// Every format: the counts never go back, the total is fixed, the last call has done == total and
+// comes before the file takes its name (the callback looks for it), and the file is complete.
+TEST_F(WriterTest, ProgressEndsAtTotalBeforeTheFileAppears) {
+    const SparseVoxels voxels = mixed_voxels(12);
+    for (const char* name : {"p.vdb", "p.binvox", "p.npy", "p.vox", "p.obj", "p.ply", "p.stl"}) {
+        SCOPED_TRACE(name);
+        std::vector<std::pair<uint64_t, uint64_t>> calls;
+        bool file_before_last = true;
+        oclvox::write_voxels(path(name), voxels, [&](uint64_t done, uint64_t total) {
+            calls.push_back({done, total});
+            if (done == total) file_before_last = fs::exists(path(name));
+            return true;
+        });
+        ASSERT_FALSE(calls.empty());
+        EXPECT_EQ(calls.back().first, calls.back().second);
+        EXPECT_FALSE(file_before_last) << "the file existed before the last progress call";
+        for (size_t i = 1; i < calls.size(); ++i) {
+            EXPECT_EQ(calls[i].second, calls[0].second);
+            EXPECT_LE(calls[i - 1].first, calls[i].first);
+        }
+        EXPECT_TRUE(fs::exists(path(name)));
+    }
+    const std::string npy = read_bytes(path("p.npy"));
+    EXPECT_EQ(npy.substr(read_npy(npy).data_offset), npy_data_by_definition(voxels));
+}
+
+// A slab at a time: with one layer per slab and calls spaced past the reporting interval, every
+// slab is reported, in order.
+TEST_F(WriterTest, StreamedWritersReportEverySlab) {
+    const SparseVoxels voxels = mixed_voxels(12);
+    std::vector<uint64_t> done_per_call;
+    oclvox::detail::ProgressPhases progress(
+        [&](uint64_t done, uint64_t) {
+            done_per_call.push_back(done);
+            std::this_thread::sleep_for(std::chrono::milliseconds(60));
+            return true;
+        },
+        "writing");
+    oclvox::detail::write_npy(path("s.npy"), voxels, progress, 1);
+    // One report per z layer (the first passes at once, the others after the sleep), plus the
+    // last.
+    EXPECT_EQ(done_per_call.size(), size_t(voxels.grid().dims[2]) + 1);
+    EXPECT_TRUE(std::is_sorted(done_per_call.begin(), done_per_call.end()));
+    EXPECT_EQ(done_per_call.back(), oclvox::detail::kPhasedProgressTotal);
+}
+
+// False from the callback, early or at the very end: Cancelled, and neither the file nor a
+// temporary is left; a previous file of that name is kept as it was.
+TEST_F(WriterTest, CancelledWriteLeavesNoFileAndKeepsThePreviousOne) {
+    const SparseVoxels voxels = mixed_voxels(12);
+    for (const char* name : {"c.vdb", "c.binvox", "c.npy", "c.vox", "c.obj", "c.ply"}) {
+        SCOPED_TRACE(name);
+        for (const bool at_end : {false, true}) {
+            fs::remove_all(path(name));
+            EXPECT_THROW(oclvox::write_voxels(path(name), voxels,
+                                              [&](uint64_t done, uint64_t total) {
+                                                  return at_end ? done != total : false;
+                                              }),
+                         oclvox::Cancelled);
+            EXPECT_TRUE(entries().empty()) << "left: " << (entries().empty() ? "" : entries()[0]);
+        }
+    }
+    oclvox::write_voxels(path("keep.binvox"), voxels);
+    const std::string before = read_bytes(path("keep.binvox"));
+    EXPECT_THROW(oclvox::write_voxels(path("keep.binvox"), mixed_voxels(4),
+                                      [](uint64_t, uint64_t) { return false; }),
+                 oclvox::Cancelled);
+    EXPECT_EQ(read_bytes(path("keep.binvox")), before);
+    EXPECT_EQ(entries(), std::vector<std::string>{"keep.binvox"});
 }
 
 TEST_F(WriterTest, NpyReadsBackThroughNumpy) {

@@ -119,7 +119,8 @@ int run(const FieldArgs& args) {
         if (surface)
             oclvox::write_mesh(output.path(), *surface);
         else
-            oclvox::write_field(output.path(), combined, fields_in || args.full ? 0.0 : args.band);
+            write_field_output(output.path(), combined, fields_in || args.full ? 0.0 : args.band,
+                               args);
         output.finish();
         return 0;
     });

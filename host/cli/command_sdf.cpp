@@ -81,7 +81,7 @@ int run(const SdfArgs& args) {
 
     // Phase 4: the files, then the report.
     timed(record.seconds.write, [&] {
-        oclvox::write_field(output.path(), field, args.full ? 0.0 : args.band);
+        write_field_output(output.path(), field, args.full ? 0.0 : args.band, args);
         if (surface) oclvox::write_mesh(args.mesh_output, *surface);
         if (!args.preview.empty()) write_preview(args.preview, field, 0.0f);
         output.finish();

@@ -115,7 +115,8 @@ int run(const VoxelizeArgs& args) {
 
     // Phase 5: the files, then the report.
     timed(record.seconds.write, [&] {
-        oclvox::write_voxels(output.path(), voxels);
+        ProgressBar bar("writing", "", args.reporting);
+        oclvox::write_voxels(output.path(), voxels, bar.callback());
         if (!args.preview.empty()) write_preview(args.preview, voxels);
         output.finish();
         return 0;

@@ -115,6 +115,12 @@ oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
                   : oclvox::surface_nets(field, iso, progress);
 }
 
+void write_field_output(const std::string& path, const oclvox::ScalarField& field,
+                        double band_voxels, const FieldArgs& args) {
+    ProgressBar bar("writing", "", args.reporting);
+    oclvox::write_field(path, field, band_voxels, bar.callback());
+}
+
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record) {
     if (path == "-")
         throw UsageError("a .npy field has a .json sidecar file, so it cannot be read from stdin");

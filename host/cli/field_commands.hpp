@@ -58,6 +58,10 @@ oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
 
 // A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
 // occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
+// write_field with a "writing" progress bar (and Ctrl-C checked through it).
+void write_field_output(const std::string& path, const oclvox::ScalarField& field,
+                        double band_voxels, const FieldArgs& args);
+
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record);
 
 // The settings every field command reports.

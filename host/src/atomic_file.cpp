@@ -110,6 +110,8 @@ void write_file_atomically(const std::string& path,
         write(stream);
     } catch (const OutputError&) {
         throw;
+    } catch (const Cancelled&) {  // a progress callback said stop: not a failure to write
+        throw;
     } catch (const std::exception& e) {
         throw OutputError("cannot write " + path + ": " + e.what());
     }

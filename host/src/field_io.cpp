@@ -43,8 +43,10 @@ double inferred_band(const ScalarField& field) {
     return double(largest) / field.grid.voxel_size;
 }
 
-void write_npy_field(const std::string& path, const ScalarField& field, double band_voxels) {
+void write_npy_field(const std::string& path, const ScalarField& field, double band_voxels,
+                     detail::ProgressPhases& progress) {
     // The samples as little-endian float32, converted a chunk at a time so the copy stays small.
+    const size_t samples = progress.add(1);
     auto write_samples = [&](std::ostream& out) {
         constexpr size_t kChunk = size_t(1) << 16;
         std::vector<char> bytes(kChunk * 4);
@@ -52,7 +54,9 @@ void write_npy_field(const std::string& path, const ScalarField& field, double b
             const size_t n = std::min(kChunk, field.values.size() - first);
             for (size_t v = 0; v < n; ++v) detail::store_le(&bytes[v * 4], field.values[first + v]);
             out.write(bytes.data(), std::streamsize(n * 4));
+            progress.report(samples, first + n, field.values.size());
         }
+        progress.finish();
     };
     nlohmann::json sidecar = detail::npy_sidecar(path, field.grid);
     sidecar["dtype"] = "float32, distance in world units";
@@ -408,12 +412,14 @@ std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path
 
 }  // namespace
 
-void write_field(const std::string& path, const ScalarField& field, double band_voxels) {
+void write_field(const std::string& path, const ScalarField& field, double band_voxels,
+                 const ProgressCallback& progress) {
     check_field(field, path);
     if (!(band_voxels > 0)) band_voxels = inferred_band(field);
     const std::string extension = detail::lowercase_extension(path);
-    if (extension == ".npy") return write_npy_field(path, field, band_voxels);
-    if (extension == ".vdb") return detail::write_field_vdb(path, field, band_voxels);
+    detail::ProgressPhases phases(progress, "writing " + path);
+    if (extension == ".npy") return write_npy_field(path, field, band_voxels, phases);
+    if (extension == ".vdb") return detail::write_field_vdb(path, field, band_voxels, phases);
     throw OutputError("cannot write field " + path + ": unknown extension '" + extension +
                       "' (expected .npy or .vdb)");
 }

@@ -4,10 +4,12 @@
 #include <string>
 
 #include "oclvox/field.hpp"
+#include "progress.hpp"
 
 namespace oclvox::detail {
 
 // A level-set FloatGrid named "sdf" (see write_field in oclvox/sdf.hpp). Throws OutputError.
-void write_field_vdb(const std::string& path, const ScalarField& field, double band_voxels);
+void write_field_vdb(const std::string& path, const ScalarField& field, double band_voxels,
+                     ProgressPhases& progress);
 
 }  // namespace oclvox::detail

@@ -28,10 +28,12 @@ void place_vdb_grid(openvdb::GridBase& vdb, const Grid& grid, const std::string&
                                       int(grid.dims[0]), int(grid.dims[1]), int(grid.dims[2]))));
 }
 
-void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb) {
+void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb,
+                    const std::function<void()>& before_rename) {
     write_file_atomically(path, [&](std::ostream& out) {
         openvdb::io::Stream stream(out);
         stream.write(openvdb::GridCPtrVec{vdb});
+        if (before_rename) before_rename();
     });
 }
 

@@ -5,6 +5,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <functional>
 #include <string>
 
 #include "oclvox/oclvox.hpp"
@@ -23,7 +24,9 @@ openvdb::math::Transform::Ptr voxel_centre_transform(const Grid& grid);
 void place_vdb_grid(openvdb::GridBase& vdb, const Grid& grid, const std::string& name,
                     openvdb::GridClass grid_class);
 
-// Writes one grid as a .vdb file through a temporary file renamed into place (OutputError).
-void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb);
+// Writes one grid as a .vdb file through a temporary file renamed into place (OutputError), calling
+// before_rename (if set) once the bytes are written: a throw there leaves no file.
+void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb,
+                    const std::function<void()>& before_rename = {});
 
 }  // namespace oclvox::detail

@@ -124,7 +124,8 @@ class RunWriter {
 
 }  // namespace
 
-void write_binvox(const std::string& path, const SparseVoxels& voxels, uint64_t slab_bytes) {
+void write_binvox(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress,
+                  uint64_t slab_bytes) {
     const Grid& grid = voxels.grid();
     const int64_t dim = std::max({grid.dims[0], grid.dims[1], grid.dims[2]});
     if (dim > kMaxBinvoxDim)
@@ -133,6 +134,7 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, uint64_t 
                           std::to_string(kMaxBinvoxDim) +
                           "^3 this writer allows; use .vdb, .vox, .obj or .ply for large grids");
 
+    const size_t planes = progress.add(1);
     write_file_atomically(path, [&](std::ostream& out) {
         // Phase 1: header, with enough digits that the numbers read back exactly.
         out << "#binvox 1\n";
@@ -188,9 +190,11 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, uint64_t 
                 }
                 runs.add(0, uint64_t(dim - nz) * uint64_t(dim));
             }
+            progress.report(planes, uint64_t(x0 + depth), uint64_t(nx));
         }
         runs.add(0, uint64_t(dim - nx) * uint64_t(dim) * uint64_t(dim));
         runs.finish();
+        progress.finish();
     });
 }
 

@@ -89,8 +89,9 @@ std::vector<ExposedFace> exposed_faces(const SparseVoxels& voxels, const BrickLa
 }
 
 // Calls `visit(layer)` for each voxel layer with an exposed face, in z order, working a brick
-// layer at a time.
+// layer at a time, and reports each brick layer done as phase `phase` of `progress`.
 void for_each_layer_mesh(const std::string& path, const SparseVoxels& voxels,
+                         ProgressPhases& progress, size_t phase,
                          const std::function<void(const LayerMesh&)>& visit) {
     const auto& dims = voxels.grid().dims;
     const uint64_t points_x = uint64_t(dims[0]) + 1, points_y = uint64_t(dims[1]) + 1;
@@ -150,6 +151,7 @@ void for_each_layer_mesh(const std::string& path, const SparseVoxels& voxels,
         for (const auto& [key, vertex] : vertex_of_point)
             if (int64_t(key / (points_x * points_y)) == top) carried.emplace(key, vertex);
         first = end;
+        progress.report(phase, first, bricks.size());
     }
 }
 
@@ -159,11 +161,13 @@ double world_coordinate(const Grid& grid, int axis, int64_t lattice) {
 
 }  // namespace
 
-void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels) {
+void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels,
+                         ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
+    const size_t pass = progress.add(1);
     write_file_atomically(path, [&](std::ostream& out) {
         out << "# oclvox: exposed faces of " << voxels.count() << " voxels\n";
-        for_each_layer_mesh(path, voxels, [&](const LayerMesh& layer) {
+        for_each_layer_mesh(path, voxels, progress, pass, [&](const LayerMesh& layer) {
             for (const auto& p : layer.new_points) {
                 out << 'v';
                 for (int axis = 0; axis < 3; ++axis) {
@@ -176,13 +180,18 @@ void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels) {
                 out << "f " << quad[0] + 1 << ' ' << quad[1] + 1 << ' ' << quad[2] + 1 << ' '
                     << quad[3] + 1 << '\n';
         });
+        progress.finish();
     });
 }
 
-void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels) {
+void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
+                         ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
+    // Three passes over the layers: counting (the header comes first), vertices, faces.
+    const size_t counting = progress.add(1), vertex_pass = progress.add(1),
+                 face_pass = progress.add(1);
     uint64_t vertices = 0, quads = 0;
-    for_each_layer_mesh(path, voxels, [&](const LayerMesh& layer) {
+    for_each_layer_mesh(path, voxels, progress, counting, [&](const LayerMesh& layer) {
         vertices += layer.new_points.size();
         quads += layer.quads.size();
     });
@@ -195,25 +204,29 @@ void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels) {
             << "element face " << quads << '\n'
             << "property list uchar int vertex_indices\n"
             << "end_header\n";
-        for_each_layer_mesh(path, voxels, [&](const LayerMesh& layer) {
+        for_each_layer_mesh(path, voxels, progress, vertex_pass, [&](const LayerMesh& layer) {
             for (const auto& p : layer.new_points)
                 for (int axis = 0; axis < 3; ++axis)
                     write_le(out, world_coordinate(grid, axis, p[axis]));
         });
-        for_each_layer_mesh(path, voxels, [&](const LayerMesh& layer) {
+        for_each_layer_mesh(path, voxels, progress, face_pass, [&](const LayerMesh& layer) {
             for (const auto& quad : layer.quads) {
                 out.put(char(4));
                 for (uint32_t index : quad) write_le(out, int32_t(index));
             }
         });
+        progress.finish();
     });
 }
 
-// STL goes through the shared mesh writer, so unlike OBJ and PLY it holds the whole mesh.
-void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels) {
+// STL goes through the shared mesh writer, so unlike OBJ and PLY it holds the whole mesh; the
+// progress covers building it, and ends before the (shorter) write.
+void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
+                         ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
+    const size_t pass = progress.add(1);
     Mesh mesh;
-    for_each_layer_mesh(path, voxels, [&](const LayerMesh& layer) {
+    for_each_layer_mesh(path, voxels, progress, pass, [&](const LayerMesh& layer) {
         for (const auto& p : layer.new_points)
             mesh.positions.push_back({world_coordinate(grid, 0, p[0]),
                                       world_coordinate(grid, 1, p[1]),
@@ -223,6 +236,7 @@ void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels) {
             mesh.triangles.push_back({q[0], q[2], q[3]});
         }
     });
+    progress.finish();
     write_mesh(path, mesh);
 }
 

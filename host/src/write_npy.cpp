@@ -17,9 +17,11 @@
 
 namespace oclvox::detail {
 
-void write_npy(const std::string& path, const SparseVoxels& voxels, uint64_t slab_bytes) {
+void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress,
+               uint64_t slab_bytes) {
     const Grid& grid = voxels.grid();
     check_dense_size(path, grid.voxel_count(), "a .npy");
+    const size_t layers = progress.add(1);
     auto write_layers = [&](std::ostream& out) {
         const int64_t nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
         const int64_t layer = nx * ny;
@@ -30,7 +32,9 @@ void write_npy(const std::string& path, const SparseVoxels& voxels, uint64_t sla
             std::fill(slab.begin(), slab.end(), uint8_t(0));
             voxels.mark_box({0, 0, z}, {nx, ny, z + depth}, {1, nx, layer}, slab.data());
             out.write(reinterpret_cast<const char*>(slab.data()), std::streamsize(layer * depth));
+            progress.report(layers, uint64_t(z + depth), uint64_t(nz));
         }
+        progress.finish();
     };
     nlohmann::json sidecar = npy_sidecar(path, grid);
     sidecar["dtype"] = "uint8, 1 = voxel set, 0 = empty";

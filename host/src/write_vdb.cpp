@@ -19,15 +19,21 @@
 
 namespace oclvox::detail {
 
-void write_vdb(const std::string& path, const SparseVoxels& voxels) {
+void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress) {
     openvdb::initialize();
     openvdb::BoolGrid::Ptr vdb = openvdb::BoolGrid::create(false);
     place_vdb_grid(*vdb, voxels.grid(), "occupancy", openvdb::GRID_UNKNOWN);
 
+    // The tree and the file cost about the same; the file has no progress of its own.
+    const size_t tree = progress.add(1), file = progress.add(1);
+
     // Phase 1: every set voxel becomes an active true voxel, block by block.
     openvdb::tree::ValueAccessor<openvdb::BoolTree> access(vdb->tree());
     const BrickLayout layout(voxels);
-    for (const uint64_t index : voxels.brick_indices()) {
+    const std::vector<uint64_t> bricks = voxels.brick_indices();
+    for (size_t b = 0; b < bricks.size(); ++b) {
+        const uint64_t index = bricks[b];
+        progress.report(tree, b, bricks.size());
         const uint64_t* blocks = voxels.brick_blocks(index);
         for (size_t w = 0; w < layout.blocks_per_brick(); ++w) {
             uint64_t mask = blocks[w];
@@ -48,7 +54,8 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels) {
 
     // Phase 2: full leaves become tiles, then the file.
     vdb->tree().prune();
-    write_vdb_file(path, vdb);
+    progress.report(file, 0, 1);
+    write_vdb_file(path, vdb, [&] { progress.finish(); });
 }
 
 }  // namespace oclvox::detail

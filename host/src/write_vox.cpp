@@ -239,7 +239,7 @@ void write_tile_voxels(std::ostream& out, const std::vector<TileBlock>& blocks) 
 
 }  // namespace
 
-void write_vox(const std::string& path, const SparseVoxels& voxels) {
+void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
 
     // Phase 1: the tiles with set voxels and their counts. An empty grid still gets one (empty)
@@ -277,21 +277,25 @@ void write_vox(const std::string& path, const SparseVoxels& voxels) {
                           " voxels exceed the 2 GiB a .vox file can hold; write .vdb instead");
 
     // Phase 3: magic, version, MAIN, PACK, the models tile by tile, then the scene graph.
+    const size_t models = progress.add(1);
     write_file_atomically(path, [&](std::ostream& out) {
         out.write("VOX ", 4);
         write_i32(out, kVersion);
         write_chunk_header(out, "MAIN", 0, main_children);
         write_chunk_header(out, "PACK", 4, 0);
         write_i32(out, int32_t(tiles.size()));
-        for (const Tile& tile : tiles) {
+        for (size_t m = 0; m < tiles.size(); ++m) {
+            const Tile& tile = tiles[m];
             const auto size = tile_size(grid, tile);
             write_chunk_header(out, "SIZE", 12, 0);
             for (int a = 0; a < 3; ++a) write_i32(out, int32_t(size[a]));
             write_chunk_header(out, "XYZI", 4 + 4 * tile.voxels, 0);
             write_i32(out, int32_t(tile.voxels));
             write_tile_voxels(out, walker.blocks(tile));
+            progress.report(models, m + 1, tiles.size());
         }
         out << graph_bytes;
+        progress.finish();
     });
 }
 

@@ -11,7 +11,8 @@ constexpr const char* kSupportedExtensions = ".vdb, .binvox, .npy, .vox, .obj, .
 
 }  // namespace
 
-void write_voxels(const std::string& path, const SparseVoxels& voxels) {
+void write_voxels(const std::string& path, const SparseVoxels& voxels,
+                  const ProgressCallback& progress) {
     // A default-constructed or zero-sized result has no grid to describe; every format needs one.
     if (voxels.grid().voxel_count() == 0)
         throw OutputError("cannot write " + path + ": the voxel grid is empty (dimensions " +
@@ -20,13 +21,14 @@ void write_voxels(const std::string& path, const SparseVoxels& voxels) {
                           std::to_string(voxels.grid().dims[2]) + ")");
 
     const std::string extension = detail::lowercase_extension(path);
-    if (extension == ".vdb") return detail::write_vdb(path, voxels);
-    if (extension == ".binvox") return detail::write_binvox(path, voxels);
-    if (extension == ".npy") return detail::write_npy(path, voxels);
-    if (extension == ".vox") return detail::write_vox(path, voxels);
-    if (extension == ".obj") return detail::write_cube_mesh_obj(path, voxels);
-    if (extension == ".ply") return detail::write_cube_mesh_ply(path, voxels);
-    if (extension == ".stl") return detail::write_cube_mesh_stl(path, voxels);
+    detail::ProgressPhases phases(progress, "writing " + path);
+    if (extension == ".vdb") return detail::write_vdb(path, voxels, phases);
+    if (extension == ".binvox") return detail::write_binvox(path, voxels, phases);
+    if (extension == ".npy") return detail::write_npy(path, voxels, phases);
+    if (extension == ".vox") return detail::write_vox(path, voxels, phases);
+    if (extension == ".obj") return detail::write_cube_mesh_obj(path, voxels, phases);
+    if (extension == ".ply") return detail::write_cube_mesh_ply(path, voxels, phases);
+    if (extension == ".stl") return detail::write_cube_mesh_stl(path, voxels, phases);
 
     const std::string what = extension.empty() ? "the file name has no extension"
                                                : "unknown extension '" + extension + "'";

@@ -481,11 +481,15 @@ PYBIND11_MODULE(_oclvox, m) {
             "smoothing"_a)
         .def(
             "save",
-            [](const VoxelGrid& g, const std::filesystem::path& path) {
-                py::gil_scoped_release release;
-                oclvox::write_voxels(path.string(), g.voxels);
+            [](const VoxelGrid& g, const std::filesystem::path& path, py::object progress) {
+                ProgressBridge bridge(std::move(progress));
+                bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                    oclvox::write_voxels(path.string(), g.voxels, callback);
+                });
             },
-            "path"_a)
+            "path"_a, "progress"_a = py::none(),
+            "Writes by extension (.vdb .binvox .npy .vox .obj .ply .stl); progress(done, total) "
+            "as for sdf, False cancelling with no file left")
         .def_static(
             "from_numpy",
             [](py::handle occupancy, std::array<double, 3> origin, double voxel_size,
@@ -528,11 +532,15 @@ PYBIND11_MODULE(_oclvox, m) {
              })
         .def(
             "save",
-            [](const Field& f, const std::filesystem::path& path) {
-                py::gil_scoped_release release;
-                oclvox::write_field(path.string(), f.field, f.band_voxels);
+            [](const Field& f, const std::filesystem::path& path, py::object progress) {
+                ProgressBridge bridge(std::move(progress));
+                bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                    oclvox::write_field(path.string(), f.field, f.band_voxels, callback);
+                });
             },
-            "path"_a);
+            "path"_a, "progress"_a = py::none(),
+            "Writes .npy (+ .json) or .vdb; progress(done, total) as for sdf, False cancelling "
+            "with no file left");
 
     m.def(
         "load_mesh",

@@ -93,6 +93,24 @@ def test_csg_and_mesh_progress_and_cancel(spot):
         oclvox.mesh(field, progress=lambda done, total: False)
 
 
+def test_save_progress_and_cancel(spot, tmp_path):
+    grid = oclvox.voxelize(*spot, 96)
+    calls = []
+    grid.save(tmp_path / "a.npy", progress=lambda done, total: calls.append((done, total)))
+    assert calls and calls[-1][0] == calls[-1][1]
+    assert all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+    assert np.array_equal(np.load(tmp_path / "a.npy"), grid.to_numpy())
+    with pytest.raises(oclvox.Cancelled):
+        grid.save(tmp_path / "b.vdb", progress=lambda done, total: False)
+
+    def fail(done, total):
+        raise KeyError("from the callback")
+
+    with pytest.raises(KeyError, match="from the callback"):
+        grid.save(tmp_path / "c.binvox", progress=fail)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npy", "a.npy.json"]
+
+
 def test_cancel_stops_a_long_sdf_promptly(spot):
     # A full-grid 256^3 field takes minutes through PoCL; a callback that says stop after 0.5 s
     # must end it soon after (kernels run in slices of about 0.1 s while a callback is set).

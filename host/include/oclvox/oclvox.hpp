@@ -338,7 +338,11 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
 // ---------------------------------------------------------------------------------------------
 // Writes by extension: .binvox, .npy (+ .json sidecar), .vox (MagicaVoxel), .obj / .ply (cube
 // faces that are exposed). Writes to a temporary file in the same folder, then renames it.
-void write_voxels(const std::string& path, const SparseVoxels& voxels);
+// `progress` counts the fraction of the writing done, out of a fixed total, as SdfOptions's does;
+// its last call (done == total) comes before the file takes its name, and false from any call
+// throws Cancelled and leaves no file.
+void write_voxels(const std::string& path, const SparseVoxels& voxels,
+                  const ProgressCallback& progress = {});
 
 // Checks before any work that `path` can be written as an output: its folder exists and a file
 // can be created there, and it is neither a directory nor the same file (by file-system identity,

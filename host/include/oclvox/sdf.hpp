@@ -127,7 +127,10 @@ ScalarField csg_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& gr
 //        band * voxel_size; only samples with |value| < background are stored.
 // band_voxels <= 0 takes the band as the largest |value| / voxel_size, which is the band of a
 // narrow-band field. Written to a temporary file and renamed into place; throws OutputError.
-void write_field(const std::string& path, const ScalarField& field, double band_voxels = 0);
+// `progress` as for write_voxels: the fraction written, the last call before the file takes its
+// name, false throwing Cancelled and leaving no file.
+void write_field(const std::string& path, const ScalarField& field, double band_voxels = 0,
+                 const ProgressCallback& progress = {});
 
 // Reads a .npy file with its JSON sidecar `<path>.json`: a field (float32 or float64, as
 // write_field writes) or an occupancy (uint8 or bool, 0 or 1, as write_voxels writes), 3-D, in
