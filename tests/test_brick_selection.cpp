@@ -2,6 +2,7 @@
 // over the shards of a split are pieces of the unrestricted run, exactly, and together are all of
 // it, also when each shard holds only the triangles selection_triangles gives it. That is what
 // lets a grid be computed on several processes or machines and merged.
+#include "binning.hpp"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -155,6 +156,17 @@ TEST(BrickSelection, BrickOutsideTheGridIsAnError) {
     o.bricks = {0, 64};  // 4^3 bricks of 8 voxels: 0..63
     EXPECT_THROW(device().voxelize(m, unit_grid(32, 32, 32), o), GridError);
     EXPECT_THROW(voxelize_reference(m, unit_grid(32, 32, 32), o), GridError);
+}
+
+// Binning divides voxel indices by the brick size with a multiply and a shift: exact for every
+// index a grid axis can have and every allowed brick size, checked against division.
+TEST(BrickDivider, EqualsDivisionForEveryIndexAndBrickSize) {
+    for (int size = 4; size <= 1024; size += 4) {
+        const detail::BrickDivider divide(size);
+        for (uint32_t index = 0; index < uint32_t(kMaxGridAxis); ++index)
+            if (divide(index) != index / uint32_t(size))
+                FAIL() << index << " / " << size << " gave " << divide(index);
+    }
 }
 
 // ---- selection_triangles ----

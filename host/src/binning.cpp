@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <unordered_map>
 
 #include "mesh_bounds.hpp"
 #include "overlap_double.hpp"
@@ -24,13 +25,13 @@ struct BrickRange {
 };
 
 // Bricks overlapped by the triangle's voxel range clipped to the grid; false if it misses the grid.
-bool brick_range(const OvRange& r, const Grid& grid, int brick_size, BrickRange& out) {
+bool brick_range(const OvRange& r, const Grid& grid, const BrickDivider& brick, BrickRange& out) {
     for (int k = 0; k < 3; ++k) {
         const int64_t lo = std::max<int64_t>(r.lo[k], 0);
         const int64_t hi = std::min<int64_t>(r.hi[k], grid.dims[k] - 1);
         if (lo > hi) return false;
-        out.lo[k] = lo / brick_size;
-        out.hi[k] = hi / brick_size;
+        out.lo[k] = brick(uint32_t(lo));
+        out.hi[k] = brick(uint32_t(hi));
     }
     return true;
 }
@@ -48,9 +49,9 @@ double cull_margin(const OvTriangle& t) {
 // grown by cull_margin proves it misses.
 template <class F>
 void for_each_brick_of(const PreparedTriangles& prepared, size_t t, const Grid& grid,
-                       int brick_size, F&& f) {
+                       int brick_size, const BrickDivider& divider, F&& f) {
     BrickRange b;
-    if (!brick_range(prepared.ranges[t], grid, brick_size, b)) return;
+    if (!brick_range(prepared.ranges[t], grid, divider, b)) return;
     const int64_t nbx = (grid.dims[0] + brick_size - 1) / brick_size;
     const int64_t nby = (grid.dims[1] + brick_size - 1) / brick_size;
     const bool cull = b.count() > 1;
@@ -79,9 +80,10 @@ void for_each_brick_of(const PreparedTriangles& prepared, size_t t, const Grid& 
 uint64_t candidate_pairs(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
                          uint64_t max_pairs) {
     uint64_t candidates = 0;
+    const BrickDivider brick(brick_size);
     for (const OvRange& r : prepared.ranges) {
         BrickRange b;
-        if (brick_range(r, grid, brick_size, b)) candidates += b.count();
+        if (brick_range(r, grid, brick, b)) candidates += b.count();
     }
     if (candidates > max_pairs)
         throw GridError("binning would examine " + std::to_string(candidates) +
@@ -101,31 +103,56 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
     // triangles.
     std::vector<std::pair<uint64_t, uint32_t>> pairs;
     pairs.reserve(selection.everything() ? candidates : 0);
+    const BrickDivider divider(brick_size);
     for (size_t t = 0; t < prepared.ranges.size(); ++t)
-        for_each_brick_of(prepared, t, grid, brick_size, [&](uint64_t brick) {
+        for_each_brick_of(prepared, t, grid, brick_size, divider, [&](uint64_t brick) {
             if (selection.contains(brick)) pairs.emplace_back(brick, uint32_t(t));
         });
 
-    // Phase 3: group by brick (sorted, so every run is deterministic).
-    std::sort(pairs.begin(), pairs.end());
-    Binning out;
-    out.pair_triangle.reserve(pairs.size());
+    // Phase 3: group by brick in ascending brick order, triangles ascending within a brick: the
+    // order sorting the pairs would give, so every run is deterministic. The pairs come in
+    // ascending triangle order, so a stable counting sort over the few distinct bricks gives it
+    // in linear time. Consecutive pairs mostly share a brick (meshes are stored coherently), so
+    // the last brick's slot is remembered before the map is asked.
+    std::unordered_map<uint64_t, uint32_t> slot_of_brick;
+    std::vector<uint32_t> slot_of_pair(pairs.size());
+    uint64_t last_brick = 0;
+    uint32_t last_slot = 0;
     for (size_t i = 0; i < pairs.size(); ++i) {
-        if (i == 0 || pairs[i].first != pairs[i - 1].first) {
-            out.bricks.push_back(pairs[i].first);
-            out.brick_first_pair.push_back(i);
+        if (i == 0 || pairs[i].first != last_brick) {
+            last_brick = pairs[i].first;
+            last_slot =
+                slot_of_brick.try_emplace(last_brick, uint32_t(slot_of_brick.size())).first->second;
         }
-        out.pair_triangle.push_back(pairs[i].second);
+        slot_of_pair[i] = last_slot;
     }
-    out.brick_first_pair.push_back(pairs.size());
+    Binning out;
+    out.bricks.reserve(slot_of_brick.size());
+    for (const auto& brick_slot : slot_of_brick) out.bricks.push_back(brick_slot.first);
+    std::sort(out.bricks.begin(), out.bricks.end());
+    // Slots were numbered by first appearance; renumber them by brick order, then count.
+    std::vector<uint32_t> rank(slot_of_brick.size());
+    for (size_t b = 0; b < out.bricks.size(); ++b) rank[slot_of_brick[out.bricks[b]]] = uint32_t(b);
+    out.brick_first_pair.assign(out.bricks.size() + 1, 0);
+    for (uint32_t& slot : slot_of_pair) {
+        slot = rank[slot];
+        ++out.brick_first_pair[slot + 1];
+    }
+    for (size_t b = 0; b < out.bricks.size(); ++b)
+        out.brick_first_pair[b + 1] += out.brick_first_pair[b];
+    out.pair_triangle.resize(pairs.size());
+    std::vector<uint64_t> next(out.brick_first_pair.begin(), out.brick_first_pair.end() - 1);
+    for (size_t i = 0; i < pairs.size(); ++i)
+        out.pair_triangle[next[slot_of_pair[i]]++] = pairs[i].second;
     return out;
 }
 
 void for_each_triangle_brick(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
                              const std::function<void(uint32_t, uint64_t)>& f, uint64_t max_pairs) {
     candidate_pairs(prepared, grid, brick_size, max_pairs);
+    const BrickDivider divider(brick_size);
     for (size_t t = 0; t < prepared.ranges.size(); ++t)
-        for_each_brick_of(prepared, t, grid, brick_size,
+        for_each_brick_of(prepared, t, grid, brick_size, divider,
                           [&](uint64_t brick) { f(uint32_t(t), brick); });
 }
 

@@ -10,6 +10,18 @@
 
 namespace oclvox::detail {
 
+// Voxel index / brick size for indices below 2^20 (kMaxGridAxis) and brick sizes up to 1024, as a
+// multiply and a shift: ceil(2^40 / size) overestimates 2^40 / size by less than 1, which moves
+// x / size by less than x / 2^40 < 2^-20, while a quotient below the next whole number is at
+// least 1 / size >= 2^-10 below it; so the floor is exact. Division was most of the per-triangle
+// cost of binning (tested exhaustively).
+struct BrickDivider {
+    explicit BrickDivider(int size)
+        : multiplier(((uint64_t(1) << 40) + uint64_t(size) - 1) / uint64_t(size)) {}
+    uint32_t operator()(uint32_t index) const { return uint32_t((index * multiplier) >> 40); }
+    uint64_t multiplier;
+};
+
 // Active bricks (those at least one triangle may touch) in ascending linear index, and for each
 // the triangles binned to it: pair_triangle[brick_first_pair[b] .. brick_first_pair[b+1]).
 struct Binning {
