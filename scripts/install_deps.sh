@@ -7,7 +7,7 @@ set -euo pipefail
 packages=(
   cmake g++ make python3 time libpng-dev
   ocl-icd-opencl-dev opencl-c-headers opencl-clhpp-headers pocl-opencl-icd clinfo
-  libtinyobjloader-dev libassimp-dev nlohmann-json3-dev libcli11-dev
+  libassimp-dev nlohmann-json3-dev libcli11-dev
   libopenvdb-dev libboost-iostreams-dev
   python3-openvdb python3-numpy
   libgtest-dev libgmock-dev
