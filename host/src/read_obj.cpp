@@ -53,7 +53,11 @@ Polygons read_obj(const std::string& path) {
     size_t face_number = 0;
     size_t at = 0;
     for (size_t line_number = 1; at < text.size(); ++line_number) {
-        const size_t line_end = std::min(text.find_first_of("\r\n", at), text.size());
+        // A plain scan: string_view::find_first_of calls memchr on the two-character set once
+        // per character of the text, which was a fifth of the load.
+        size_t line_end = at;
+        while (line_end < text.size() && text[line_end] != '\n' && text[line_end] != '\r')
+            ++line_end;
         TextCursor line(path, text.substr(at, line_end - at), '#', line_number);
         const std::string_view keyword = line.word_on_line();
         if (keyword == "v") {
