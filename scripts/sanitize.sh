@@ -66,12 +66,22 @@ export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:log_path=$reports/ubsan
 status=0
 (cd build-asan && ctest --output-on-failure -j"$(nproc)" --timeout 1800 -E "$exclude" "$@") ||
     status=$?
+# LeakSanitizer's own tracer can crash while it stops a process's threads at exit ("Tracer caught
+# signal 11 ... LeakSanitizer has encountered a fatal error", seen once in a CI run whose tests all
+# passed): that process's leaks went unchecked, which is printed, but it is not a finding.
+findings=0
 if [ -n "$(ls -A "$reports")" ]; then
     echo "sanitizer reports (build-asan/sanitizer-reports):"
     for report in "$reports"/*; do
         echo "--- $report"
         cat "$report"
+        if grep -q "LeakSanitizer has encountered a fatal error" "$report" &&
+            ! grep -qE "ERROR: (AddressSanitizer|LeakSanitizer: detected)|runtime error" "$report"; then
+            echo "(the leak checker itself failed in this process: its leaks went unchecked)"
+        else
+            findings=1
+        fi
     done
-    exit 1
 fi
+[ "$findings" = 0 ] || exit 1
 exit "$status"
