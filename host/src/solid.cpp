@@ -579,14 +579,25 @@ class BoxBits {
             for (int64_t y = lo[1]; y <= hi[1]; ++y)
                 for (int64_t x = lo[0]; x <= hi[0]; ++x) set(x, y, z);
     }
-    // The cells of this box grouped into 2x2x2 parents: a parent is set if any child is.
+    // The cells of this box grouped into 2x2x2 parents: a parent is set if any child is. Visits
+    // the set cells only: these boxes hold surfaces, a few percent of their cells.
     BoxBits coarser() const {
         BoxBits up((n_[0] + 1) / 2, (n_[1] + 1) / 2, (n_[2] + 1) / 2);
-        for (int64_t z = 0; z < n_[2]; ++z)
-            for (int64_t y = 0; y < n_[1]; ++y)
-                for (int64_t x = 0; x < n_[0]; ++x)
-                    if (get(x, y, z)) up.set(x / 2, y / 2, z / 2);
+        const uint64_t nx = uint64_t(n_[0]), ny = uint64_t(n_[1]);
+        for (size_t w = 0; w < words_.size(); ++w)
+            for (uint64_t bits = words_[w]; bits; bits &= bits - 1) {
+                const uint64_t i = uint64_t(w) * 64 + uint64_t(__builtin_ctzll(bits));
+                up.set(int64_t(i % nx / 2), int64_t(i / nx % ny / 2), int64_t(i / nx / ny / 2));
+            }
         return up;
+    }
+    // Cells [first, first + count) in index order as the low bits of a word; count in [1, 64].
+    uint64_t bits_at(uint64_t first, int count) const {
+        const uint64_t word = first >> 6;
+        const int shift = int(first & 63);
+        uint64_t bits = words_[word] >> shift;
+        if (shift + count > 64) bits |= words_[word + 1] << (64 - shift);
+        return count == 64 ? bits : bits & ((uint64_t(1) << count) - 1);
     }
 
     uint64_t index(int64_t x, int64_t y, int64_t z) const {
@@ -1268,29 +1279,39 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         if (std::fabs(w[u]) > 0.5f) inside.set(unsettled[u]);
     report_progress(options, 3 * bricks.size() / kSteps, bricks.size());
 
-    // Phase 5.
+    // Phase 5, a row of up to 64 voxels at a time: each 4-voxel group of a row is a nibble of
+    // one block word.
     t = Clock::now();
     std::vector<uint64_t> blocks(result.blocks_per_brick());
-    const int nbb = b / 4;
+    const int64_t nbb = b / 4;
     for (uint64_t index : bricks) {
-        const int64_t at[3] = {int64_t(index % uint64_t(nb[0])),
-                               int64_t(index / uint64_t(nb[0]) % uint64_t(nb[1])),
-                               int64_t(index / uint64_t(nb[0]) / uint64_t(nb[1]))};
+        const int64_t at[3] = {int64_t(index % uint64_t(nb[0])) * b,
+                               int64_t(index / uint64_t(nb[0]) % uint64_t(nb[1])) * b,
+                               int64_t(index / uint64_t(nb[0]) / uint64_t(nb[1])) * b};
+        int64_t lo[3], hi[3];  // the brick-local voxels inside the box
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::max<int64_t>(box.lo[k] - at[k], 0);
+            hi[k] = std::min<int64_t>(box.hi[k] - at[k], b - 1);
+        }
         std::fill(blocks.begin(), blocks.end(), 0);
         bool any = false;
-        for (int z = 0; z < b; ++z)
-            for (int y = 0; y < b; ++y)
-                for (int x = 0; x < b; ++x) {
-                    const int64_t g[3] = {at[0] * b + x, at[1] * b + y, at[2] * b + z};
-                    bool in_box = true;
-                    for (int k = 0; k < 3; ++k)
-                        in_box = in_box && g[k] >= box.lo[k] && g[k] <= box.hi[k];
-                    if (!in_box ||
-                        !inside.get(g[0] - box.lo[0], g[1] - box.lo[1], g[2] - box.lo[2]))
-                        continue;
-                    blocks[size_t(x / 4 + nbb * (y / 4 + nbb * (z / 4)))] |=
-                        uint64_t(1) << ((x & 3) + 4 * ((y & 3) + 4 * (z & 3)));
-                    any = true;
+        for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (int64_t x0 = lo[0] & ~int64_t(63); x0 <= hi[0]; x0 += 64) {
+                    const int64_t from = std::max(x0, lo[0]), to = std::min(x0 + 63, hi[0]);
+                    uint64_t row =
+                        inside.bits_at(inside.index(at[0] + from - box.lo[0], at[1] + y - box.lo[1],
+                                                    at[2] + z - box.lo[2]),
+                                       int(to - from + 1))
+                        << (from - x0);
+                    const size_t first_block = size_t(x0 / 4 + nbb * (y / 4 + nbb * (z / 4)));
+                    const int shift = int(4 * ((y & 3) + 4 * (z & 3)));
+                    while (row) {
+                        const int group = __builtin_ctzll(row) / 4;
+                        blocks[first_block + size_t(group)] |= (row >> (4 * group) & 15) << shift;
+                        row &= ~(uint64_t(15) << (4 * group));
+                        any = true;
+                    }
                 }
         if (any) result.merge_brick(index, blocks.data());
     }

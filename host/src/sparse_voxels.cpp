@@ -83,7 +83,8 @@ void SparseVoxels::set(int64_t i, int64_t j, int64_t k) {
 uint64_t SparseVoxels::count() const {
     uint64_t n = 0;
     for (const auto& [index, blocks] : bricks_)
-        for (uint64_t w : blocks) n += uint64_t(__builtin_popcountll(w));
+        for (uint64_t w : blocks)
+            if (w) n += uint64_t(__builtin_popcountll(w));  // most words of a surface are 0
     return n;
 }
 
