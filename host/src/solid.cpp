@@ -14,6 +14,10 @@
 // exactly, in double, at every voxel.
 #include "solid.hpp"
 
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -604,9 +608,22 @@ class BoxBits {
         return uint64_t(x) + uint64_t(n_[0]) * (uint64_t(y) + uint64_t(n_[1]) * uint64_t(z));
     }
 
+    // Prepares rank(); call it after the last set().
+    void index_ranks() {
+        ranks_.assign(words_.size() + 1, 0);
+        for (size_t w = 0; w < words_.size(); ++w)
+            ranks_[w + 1] = ranks_[w] + uint64_t(__builtin_popcountll(words_[w]));
+    }
+    // The number of set cells before cell i.
+    uint64_t rank(uint64_t i) const {
+        const uint64_t below = words_[i >> 6] & ((uint64_t(1) << (i & 63)) - 1);
+        return ranks_[i >> 6] + uint64_t(__builtin_popcountll(below));
+    }
+
   private:
     int64_t n_[3];
     std::vector<uint64_t> words_;
+    std::vector<uint64_t> ranks_;  // set cells before each word
 };
 
 // The voxels of the box (box-relative) whose closed boxes the surface touches, and the triangles
@@ -614,12 +631,22 @@ class BoxBits {
 struct SurfaceVoxels {
     BoxBits bits;
     std::vector<std::pair<uint64_t, uint32_t>> voxel_triangle;  // sorted by voxel index
+    // The pairs of the k-th set voxel (in index order) are [first_pair[k], first_pair[k + 1]).
+    std::vector<size_t> first_pair;
+
+    // The pairs of voxel i, as a range of voxel_triangle: a lookup, not a search.
+    std::pair<size_t, size_t> pairs_of(uint64_t i) const {
+        if (!bits.get(i)) return {0, 0};
+        const uint64_t k = bits.rank(i);
+        return {first_pair[k], first_pair[k + 1]};
+    }
 };
 
 // Marks the voxels of [lo, hi] (box-relative, inclusive) that triangle t touches, recursing from
 // the triangle's voxel range into halves.
 void mark_surface(const std::array<double, 9>& t, uint32_t id, const VoxelBox& box,
-                  const int64_t* lo, const int64_t* hi, SurfaceVoxels& out) {
+                  const BoxBits& cells, const int64_t* lo, const int64_t* hi,
+                  std::vector<std::pair<uint64_t, uint32_t>>& out) {
     Vec3d box_lo, box_hi;
     for (int k = 0; k < 3; ++k) {
         box_lo[k] = double(box.lo[k] + lo[k]);
@@ -632,40 +659,56 @@ void mark_surface(const std::array<double, 9>& t, uint32_t id, const VoxelBox& b
     for (int k = 1; k < 3; ++k)
         if (hi[k] - lo[k] > hi[axis] - lo[axis]) axis = k;
     if (hi[axis] == lo[axis]) {
-        out.bits.set(lo[0], lo[1], lo[2]);
-        out.voxel_triangle.push_back({out.bits.index(lo[0], lo[1], lo[2]), id});
+        out.push_back({cells.index(lo[0], lo[1], lo[2]), id});
         return;
     }
     const int64_t mid = lo[axis] + (hi[axis] - lo[axis]) / 2;
     int64_t split_hi[3] = {hi[0], hi[1], hi[2]}, split_lo[3] = {lo[0], lo[1], lo[2]};
     split_hi[axis] = mid;
     split_lo[axis] = mid + 1;
-    mark_surface(t, id, box, lo, split_hi, out);
-    mark_surface(t, id, box, split_lo, hi, out);
+    mark_surface(t, id, box, cells, lo, split_hi, out);
+    mark_surface(t, id, box, cells, split_lo, hi, out);
 }
 
 SurfaceVoxels surface_voxels(const std::vector<std::array<double, 9>>& tri, const VoxelBox& box) {
     SurfaceVoxels out{
         BoxBits(box.hi[0] - box.lo[0] + 1, box.hi[1] - box.lo[1] + 1, box.hi[2] - box.lo[2] + 1),
+        {},
         {}};
-    for (size_t i = 0; i < tri.size(); ++i) {
-        const auto& t = tri[i];
-        int64_t lo[3], hi[3];
-        bool empty = false;
-        for (int k = 0; k < 3; ++k) {
-            const double mn = std::min({t[k], t[3 + k], t[6 + k]});
-            const double mx = std::max({t[k], t[3 + k], t[6 + k]});
-            // Voxel i's closed box is [i, i + 1]; clamped first so huge coordinates stay exact.
-            const double below = double(box.lo[k]) - 2, above = double(box.hi[k]) + 2;
-            lo[k] = std::max<int64_t>(
-                0, int64_t(std::floor(std::clamp(mn, below, above))) - 1 - box.lo[k]);
-            hi[k] = std::min<int64_t>(
-                out.bits.dim(k) - 1, int64_t(std::floor(std::clamp(mx, below, above))) - box.lo[k]);
-            empty = empty || lo[k] > hi[k];
+    // Triangles are independent, so they are marked in parallel, each thread into a list of its
+    // own; sorting the pairs afterwards makes the result the same for any number of threads.
+    tbb::enumerable_thread_specific<std::vector<std::pair<uint64_t, uint32_t>>> lists;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, tri.size(), 64), [&](const auto& range) {
+        auto& list = lists.local();
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+            const auto& t = tri[i];
+            int64_t lo[3], hi[3];
+            bool empty = false;
+            for (int k = 0; k < 3; ++k) {
+                const double mn = std::min({t[k], t[3 + k], t[6 + k]});
+                const double mx = std::max({t[k], t[3 + k], t[6 + k]});
+                // Voxel i's closed box is [i, i + 1]; clamped first so huge coordinates stay exact.
+                const double below = double(box.lo[k]) - 2, above = double(box.hi[k]) + 2;
+                lo[k] = std::max<int64_t>(
+                    0, int64_t(std::floor(std::clamp(mn, below, above))) - 1 - box.lo[k]);
+                hi[k] = std::min<int64_t>(
+                    out.bits.dim(k) - 1,
+                    int64_t(std::floor(std::clamp(mx, below, above))) - box.lo[k]);
+                empty = empty || lo[k] > hi[k];
+            }
+            if (!empty) mark_surface(t, uint32_t(i), box, out.bits, lo, hi, list);
         }
-        if (!empty) mark_surface(t, uint32_t(i), box, lo, hi, out);
-    }
-    std::sort(out.voxel_triangle.begin(), out.voxel_triangle.end());
+    });
+    for (const auto& list : lists)
+        out.voxel_triangle.insert(out.voxel_triangle.end(), list.begin(), list.end());
+    tbb::parallel_sort(out.voxel_triangle.begin(), out.voxel_triangle.end());
+    for (size_t p = 0; p < out.voxel_triangle.size(); ++p)
+        if (p == 0 || out.voxel_triangle[p].first != out.voxel_triangle[p - 1].first) {
+            out.bits.set(out.voxel_triangle[p].first);
+            out.first_pair.push_back(p);
+        }
+    out.first_pair.push_back(out.voxel_triangle.size());
+    out.bits.index_ranks();
     return out;
 }
 
@@ -1157,11 +1200,6 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         v[1] = int64_t(i / uint64_t(n[0]) % uint64_t(n[1]));
         v[2] = int64_t(i / uint64_t(n[0]) / uint64_t(n[1]));
     };
-    auto triangles_of = [&](uint64_t i) {
-        return std::equal_range(surface.voxel_triangle.begin(), surface.voxel_triangle.end(),
-                                std::pair<uint64_t, uint32_t>{i, 0},
-                                [](const auto& a, const auto& b) { return a.first < b.first; });
-    };
     const uint64_t step[3] = {1, uint64_t(n[0]), uint64_t(n[0]) * uint64_t(n[1])};
     // Whether no triangle (mesh or fan) meets the segment from the centre of voxel i one step up
     // `axis`: any that does touches one of the two voxels.
@@ -1171,9 +1209,9 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         const Vec3d p{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
                       double(box.lo[2] + v[2]) + 0.5};
         for (uint64_t end : {i, i + step[axis]}) {
-            const auto range = triangles_of(end);
-            for (auto it = range.first; it != range.second; ++it)
-                if (may_cross(tri[it->second], p, axis)) return false;
+            const auto [first, last] = surface.pairs_of(end);
+            for (size_t pair = first; pair < last; ++pair)
+                if (may_cross(tri[surface.voxel_triangle[pair].second], p, axis)) return false;
         }
         return true;
     };
