@@ -82,11 +82,10 @@ int run(const FieldArgs& args) {
         record.grid = a->grid;
         combined = oclvox::csg(*a, *b, op);
         stop_if_interrupted();
-        if (mesh_out) device = DeviceOpening(args.device, record.seconds.device_open).get();
+        if (mesh_out) device = open_device(args.device, record.seconds.device_open);
     } else {
         const MeshInput input_a(args.input, args.input == "-" ? args.files.input_format : "");
         const MeshInput input_b(args.input_b, args.input_b == "-" ? args.files.input_format : "");
-        DeviceOpening device_opening(args.device, record.seconds.device_open);  // while loading
         oclvox::Mesh mesh_a, mesh_b;
         timed(record.seconds.load, [&] {
             mesh_a = load_mesh_input(input_a);
@@ -98,7 +97,7 @@ int run(const FieldArgs& args) {
         record.inputs = {{input_a.name(), "mesh", mesh_a.triangles.size()},
                          {input_b.name(), "mesh", mesh_b.triangles.size()}};
         stop_if_interrupted();
-        device = device_opening.get();
+        device = open_device(args.device, record.seconds.device_open);
         oclvox::VoxelizeStats stats;
         combined = timed(record.seconds.compute, [&] {
             return csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);

@@ -63,14 +63,13 @@ int run(const FieldArgs& args) {
 
     // Phase 2: the field, read or made from the mesh's solid voxels.
     std::optional<oclvox::ScalarField> field;
-    DeviceOpening device_opening(args.device, record.seconds.device_open);  // while loading
     std::optional<oclvox::Device> device;
     if (field_in) {
         record.inputs.resize(1);
         field = timed(record.seconds.load,
                       [&] { return read_field_input(args.input, record.inputs[0]); });
         stop_if_interrupted();
-        device = device_opening.get();
+        device = open_device(args.device, record.seconds.device_open);
     } else {
         const MeshInput input(args.input, args.files.input_format);
         const oclvox::Mesh mesh =
@@ -79,7 +78,7 @@ int run(const FieldArgs& args) {
             timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
         record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};
         stop_if_interrupted();
-        device = device_opening.get();
+        device = open_device(args.device, record.seconds.device_open);
         oclvox::VoxelizeOptions options;
         options.mode = oclvox::VoxelizeMode::Solid;
         options.inside = oclvox::inside_test_from_string(args.inside);

@@ -59,14 +59,13 @@ int run(const SdfArgs& args) {
     check_reporting(args.reporting, {args.input}, {args.output, args.mesh_output, args.preview});
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the mesh, its grid, the device (opening while the mesh loads).
-    DeviceOpening device_opening(args.device, record.seconds.device_open);
+    // Phase 2: the mesh, its grid, the device.
     const MeshInput input(args.input, args.files.input_format);
     const oclvox::Mesh mesh = timed(record.seconds.load, [&] { return load_mesh_input(input); });
     const oclvox::Grid grid =
         timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, field_fit(args)); });
     stop_if_interrupted();
-    std::optional<oclvox::Device> device = device_opening.get();
+    std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
     // Phase 3: the distances, then the mesh of their zero level set if asked for.
     oclvox::VoxelizeStats stats;

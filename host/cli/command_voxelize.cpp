@@ -85,8 +85,7 @@ int run(const VoxelizeArgs& args) {
     check_reporting(args.reporting, {args.input}, {args.output, args.preview});
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the mesh and the grid around it, while the device opens.
-    DeviceOpening device_opening(args.device, record.seconds.device_open);
+    // Phase 2: the mesh and the grid around it.
     const MeshInput input(args.input, args.files.input_format);
     const oclvox::Mesh mesh = timed(record.seconds.load, [&] { return load_mesh_input(input); });
     const oclvox::Grid grid =
@@ -94,7 +93,7 @@ int run(const VoxelizeArgs& args) {
     stop_if_interrupted();
 
     // Phase 3: the device.
-    std::optional<oclvox::Device> device = device_opening.get();
+    std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
     // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
     oclvox::VoxelizeOptions options;

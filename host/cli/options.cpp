@@ -219,11 +219,10 @@ void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& 
         ->group(group);
 }
 
-DeviceOpening::DeviceOpening(const DeviceArgs& args, double& seconds) {
-    if (args.reference) return;
-    device_ = std::async(std::launch::async, [selector = args.selector, &seconds] {
-        std::optional<oclvox::Device> device;
-        device.emplace(timed(seconds, [&] { return oclvox::Device::open(selector); }));
+std::optional<oclvox::Device> open_device(const DeviceArgs& args, double& seconds) {
+    std::optional<oclvox::Device> device;
+    if (!args.reference) {
+        device.emplace(timed(seconds, [&] { return oclvox::Device::open(args.selector); }));
         device->on_kernel_compile([](const oclvox::Device::KernelCompile& c) {
             if (!c.finished)
                 std::fprintf(stderr,
@@ -234,12 +233,7 @@ DeviceOpening::DeviceOpening(const DeviceArgs& args, double& seconds) {
                 std::fprintf(stderr, "compiled kernels '%s' in %.1f s\n", c.program.c_str(),
                              c.seconds);
         });
-        return device;
-    });
-}
-
-std::optional<oclvox::Device> DeviceOpening::get() {
-    std::optional<oclvox::Device> device = device_.valid() ? device_.get() : std::nullopt;
+    }
     stop_if_interrupted();
     return device;
 }

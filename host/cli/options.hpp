@@ -4,7 +4,6 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
-#include <future>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -51,20 +50,10 @@ struct DeviceArgs {
     bool reference = false;
 };
 void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& group);
-// The device, unless the CPU reference was asked for, opened on a thread from construction on,
-// so the driver's start-up (a quarter of a second for a GPU driver) overlaps reading the input.
-// get() waits for it and rethrows what opening it threw; the destructor waits too. `seconds`
-// receives the time opening took. Kernels are built (or loaded from the disk cache) when first
-// used; a build, which only the first run on a device pays, is announced on stderr because it
-// can take tens of seconds.
-class DeviceOpening {
-  public:
-    DeviceOpening(const DeviceArgs& args, double& seconds);
-    std::optional<oclvox::Device> get();
-
-  private:
-    std::future<std::optional<oclvox::Device>> device_;
-};
+// The device, unless the CPU reference was asked for. Kernels are built (or loaded from the disk
+// cache) when first used; a build, which only the first run on a device pays, is announced on
+// stderr because it can take tens of seconds.
+std::optional<oclvox::Device> open_device(const DeviceArgs& args, double& seconds);
 
 // --brick-size, --device-memory, --host-memory.
 struct TilingArgs {
