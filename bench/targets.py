@@ -46,14 +46,13 @@ GPU_CASES = [
 
 
 def run_once(command):
-    """Runs one process; returns (wall seconds, peak RSS in MB, exit status, stderr tail)."""
+    """Runs one process; returns (wall seconds, peak RSS in MB, exit status, its stderr)."""
     start = time.perf_counter()
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     stderr = process.stderr.read()
     _, status, usage = os.wait4(process.pid, 0)
     wall = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    return wall, usage.ru_maxrss / 1024.0, process.returncode, stderr.decode(errors="replace")[-400:]
+    return wall, usage.ru_maxrss / 1024.0, os.waitstatus_to_exitcode(status), stderr.decode(errors="replace")
 
 
 def measure(oclvox, meshes, case, repeat, scratch):
@@ -64,9 +63,10 @@ def measure(oclvox, meshes, case, repeat, scratch):
         "-o", output, "--quiet", "--stats-json", stats]
     runs = []
     for _ in range(repeat):
-        wall, rss, code, tail = run_once(command)
+        wall, rss, code, stderr = run_once(command)
         if code != 0:
-            return {"name": name, "error": "exit %d: %s" % (code, tail.strip().splitlines()[-1:])}
+            last_line = (stderr.strip().splitlines() or [""])[-1]
+            return {"error": "exit %d: %s" % (code, last_line)}
         with open(stats) as handle:
             runs.append((wall, rss, json.load(handle)))
         for leftover in (output, output + ".json"):
@@ -75,8 +75,6 @@ def measure(oclvox, meshes, case, repeat, scratch):
     runs.sort(key=lambda run: run[0])
     median_run = runs[len(runs) // 2]
     return {
-        "name": name,
-        "command": " ".join(["oclvox"] + command[1:-4]),
         "walls": [run[0] for run in runs],
         "peak_rss_mb": max(run[1] for run in runs),
         "seconds": median_run[2].get("seconds", {}),

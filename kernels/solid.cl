@@ -82,30 +82,6 @@ __kernel void parity_pack(__global const uint* bits, uint slots, int brick_size,
     blocks[2 * (brick * nb * nb * nb + block) + 1] = hi;
 }
 
-// atan2(y, x) to within 2e-7 radians: atan on [0, 1] as a minimax polynomial in its square
-// (fitted here, degree 7), folded to the octant and quadrant without branches, so work-items
-// vectorize. The library atan2 was half of the winding kernel's time on CPU devices, and each
-// angle's error reaches w divided by 2 pi, far inside the evaluation's tolerance (kTileRounding).
-// Signs follow atan2: copysign on y (so +-0 give +-pi when x is negative), pi when x is -0.
-static float winding_atan2(float y, float x) {
-    float ax = fabs(x), ay = fabs(y);
-    float hi = fmax(ax, ay), lo = fmin(ax, ay);
-    float t = hi > 0.0f ? lo / hi : 0.0f;
-    float s = t * t;
-    float r = -0.00405456498f;
-    r = r * s + 0.0218629558f;
-    r = r * s - 0.0559123345f;
-    r = r * s + 0.0964219868f;
-    r = r * s - 0.139086306f;
-    r = r * s + 0.199465662f;
-    r = r * s - 0.333298594f;
-    r = r * s + 0.999999344f;
-    r *= t;
-    r = ay > ax ? M_PI_2_F - r : r;
-    r = signbit(x) ? M_PI_F - r : r;
-    return copysign(r, y);
-}
-
 // Signed solid angle of triangle (a, b, c) seen from the origin (Van Oosterom & Strackee 1983):
 // tan(omega / 2) = det[a b c] / (|a||b||c| + (a.b)|c| + (b.c)|a| + (c.a)|b|). Positive when the
 // origin lies behind the triangle (opposite its normal (b - a) x (c - a)), so a closed,
@@ -114,7 +90,7 @@ static float solid_angle(float3 a, float3 b, float3 c) {
     float det = dot(a, cross(b, c));
     float la = length(a), lb = length(b), lc = length(c);
     float den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
-    return 2.0f * winding_atan2(det, den);
+    return 2.0f * ovs_atan2(det, den);
 }
 
 // Generalized winding number w at points (x, y, z in voxel units relative to the grid origin),

@@ -236,6 +236,29 @@ TEST(Solid, ParityDecidesCentresJustOffSlantedFaces) {
 
 // The wide integers of solid_math.h against the compiler's 128-bit integers: edge functions
 // exactly, and 192-bit products modulo 2^128 with the right sign.
+// The winding kernel's arctangent (solid_math.h) against the library's atan2 in double, over
+// every direction on a fine circle at magnitudes from 1e-30 to 1e30, and the signed zeros.
+TEST(Solid, WindingArctangentIsWithin4e7RadiansOfAtan2) {
+    double worst = 0;
+    for (int step = 0; step < 100000; ++step) {
+        const double angle = -M_PI + 2 * M_PI * (step + 0.5) / 100000;
+        for (double magnitude : {1e-30, 1e-3, 1.0, 7.5, 1e30}) {
+            const float y = float(magnitude * std::sin(angle)),
+                        x = float(magnitude * std::cos(angle));
+            worst = std::max(worst, std::fabs(double(detail::ovs_atan2(y, x)) -
+                                              std::atan2(double(y), double(x))));
+        }
+    }
+    EXPECT_LT(worst, 4e-7);  // measured: 2.98e-7
+    std::printf("largest error %.3g rad\n", worst);
+    for (float y : {0.0f, -0.0f})
+        for (float x : {1.0f, -1.0f, 0.0f, -0.0f})
+            EXPECT_EQ(detail::ovs_atan2(y, x), float(std::atan2(double(y), double(x))))
+                << "atan2(" << y << ", " << x << ")";
+    EXPECT_EQ(detail::ovs_atan2(2.0f, 0.0f), float(M_PI / 2));
+    EXPECT_EQ(detail::ovs_atan2(-2.0f, 0.0f), float(-M_PI / 2));
+}
+
 TEST(Solid, ParityWideIntegersAreExact) {
     __extension__ typedef __int128 int128;
     std::mt19937_64 rng(7);
