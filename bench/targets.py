@@ -31,6 +31,7 @@ CPU_CASES = [
     ("winding-scan-512-vdb", "stanford-bunny.obj",
      ["voxelize", "-r", "512", "--mode", "solid", "--inside", "winding"], "vdb", 15, None, None),
     ("sdf-bunny00-512-vdb", "bunny00.off", ["sdf", "-r", "512", "--band", "3"], "vdb", None, None, None),
+    ("sdf-bunny00-2048-vdb", "bunny00.off", ["sdf", "-r", "2048", "--band", "3"], "vdb", None, 4096, None),
 ]
 GPU_CASES = [
     ("surface-bunny-1024-binvox", "stanford-bunny.obj", ["voxelize", "-r", "1024"], "binvox", 0.3, None, 0.5),
@@ -42,6 +43,7 @@ GPU_CASES = [
     ("winding-scan-512-vdb", "stanford-bunny.obj",
      ["voxelize", "-r", "512", "--mode", "solid", "--inside", "winding"], "vdb", 1.0, None, None),
     ("sdf-bunny00-512-vdb", "bunny00.off", ["sdf", "-r", "512", "--band", "3"], "vdb", None, None, None),
+    ("sdf-bunny00-2048-vdb", "bunny00.off", ["sdf", "-r", "2048", "--band", "3"], "vdb", None, 4096, None),
 ]
 
 

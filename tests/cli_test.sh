@@ -282,6 +282,37 @@ run sdf "$MESH" -r 24 -o "$WORK/sdf.vdb" --quiet
 [ "$RC" -eq 0 ] && [ -s "$WORK/sdf.vdb" ] && [ -z "$OUT" ] && pass "sdf to .vdb" ||
     fail "sdf to .vdb" "rc=$RC err=$ERR"
 
+# A narrow band is computed sparse, a full grid dense: two separate paths that must agree exactly
+# within the band, and the sparse .vdb (read by OpenVDB's own Python module) must hold exactly the
+# band's samples of the .npy.
+"$OCLVOX" sdf "$MESH" -r 24 --full -q -o "$WORK/sdf_full.npy"
+vdb_python=python3  # Debian's python3-openvdb lives in the system Python
+/usr/bin/python3 -c "import numpy, pyopenvdb" 2>/dev/null && vdb_python=/usr/bin/python3
+verdict=$("$vdb_python" - "$WORK/sdf.npy" "$WORK/sdf_full.npy" "$WORK/sdf.vdb" <<'EOF_PY' 2>&1
+import json, sys
+import numpy as np
+narrow, full = np.load(sys.argv[1]), np.load(sys.argv[2])
+background = json.load(open(sys.argv[1] + ".json"))["background"]
+band = np.abs(narrow) < np.float32(background)
+assert band.any() and np.array_equal(narrow[band], full[band]), "band samples differ"
+assert np.all(np.abs(narrow[~band]) == np.float32(background)), "off-band samples"
+try:
+    import pyopenvdb as vdb
+except ImportError:
+    print("ok (no pyopenvdb)")
+    sys.exit(0)
+grid = vdb.read(sys.argv[3], "sdf")
+dense = np.zeros(narrow.shape, np.float32)
+grid.copyToArray(dense, ijk=(0, 0, 0))
+assert grid.activeVoxelCount() == band.sum(), (grid.activeVoxelCount(), band.sum())
+assert np.array_equal(dense[band], narrow[band]), "vdb band values"
+print("ok")
+EOF_PY
+)
+[[ "$verdict" == ok* ]] &&
+    pass "sdf: sparse narrow band equals the dense full grid in the band; .vdb holds exactly it ($verdict)" ||
+    fail "sdf: sparse narrow band vs dense full grid" "$verdict"
+
 run sdf "$MESH" -r 32 --reference -o "$WORK/sdf_mesh.npy" --mesh "$WORK/sdf_mesh.obj"
 faces=$(obj_faces "$WORK/sdf_mesh.obj")
 if [ "$RC" -eq 0 ] && [ "$faces" -gt 100 ] && grep -qE 'mesh +[0-9]+ triangles' <<<"$OUT"; then

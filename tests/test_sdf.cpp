@@ -803,5 +803,228 @@ TEST(FieldFiles, UnknownExtensionIsAnOutputError) {
     EXPECT_THROW(write_field(temp_path("field.txt"), sample_field()), OutputError);
 }
 
+// ---- sparse narrow-band fields ----------------------------------------------------------------
+
+// The meshes of the sparse tests: a closed sphere off the origin (parity sign), the closed scan
+// (parity) and open random triangles (winding-number sign, leaves at the grid's faces).
+struct SparseCase {
+    const char* name;
+    Mesh mesh;
+    Grid grid;
+};
+
+std::vector<SparseCase> sparse_cases() {
+    std::vector<SparseCase> cases;
+    cases.push_back({"sphere", icosphere(kCentre, 2.6, 3), offset_grid(37, 0.2, kCentre)});
+    const Mesh bunny = load_mesh(mesh_path("bunny00.off"));
+    GridFit fit;
+    fit.resolution = 45;
+    fit.pad = 4;
+    cases.push_back({"bunny00", bunny, fit_grid(bunny, fit)});
+    Grid rg;
+    rg.dims = {29, 34, 27};
+    cases.push_back({"random", random_triangles(120, -3.0, 33.0, 5.0, 11), rg});
+    return cases;
+}
+
+TEST(SparseSdf, ToDenseIsTheDenseFieldBitForBitOnDeviceAndReference) {
+    for (const SparseCase& c : sparse_cases())
+        for (const SdfOptions& o : {band(3.0), band(1.25)}) {
+            SCOPED_TRACE(std::string(c.name) + " band " + std::to_string(o.band_voxels));
+            VoxelizeStats stats;
+            const SparseField sparse = signed_distance_sparse(device(), c.mesh, c.grid, o, &stats);
+            const SparseField reference = signed_distance_sparse_reference(c.mesh, c.grid, o);
+            EXPECT_EQ(sparse.leaf_indices(), reference.leaf_indices());
+            EXPECT_EQ(stats.bricks_active, sparse.leaf_count());
+            EXPECT_GT(sparse.leaf_count(), 0u);
+            const ScalarField dense = signed_distance(device(), c.mesh, c.grid, o);
+            expect_identical(sparse.to_dense(), dense);
+            expect_identical(reference.to_dense(), signed_distance_reference(c.mesh, c.grid, o));
+            EXPECT_EQ(border_samples_inside(sparse), border_samples_inside(dense));
+        }
+}
+
+TEST(SparseSdf, BatchBudgetAndBrickSizeDoNotChangeAnySample) {
+    const SparseCase c = sparse_cases()[1];
+    const SdfOptions o = band(2.0);
+    VoxelizeStats one_batch;
+    const ScalarField expected =
+        signed_distance_sparse(device(), c.mesh, c.grid, o, &one_batch).to_dense();
+    EXPECT_EQ(one_batch.batches, 1u);
+    SdfOptions small = o;
+    small.device_budget_bytes = 7 * SparseField::kLeafSamples * 4;  // seven leaves a batch
+    small.brick_size = 16;
+    // Progress over all batches on one total, never going back, ending at the total.
+    uint64_t last = 0, calls = 0;
+    bool monotonic = true;
+    small.progress = [&](uint64_t done, uint64_t total) {
+        monotonic = monotonic && done >= last && done <= total;
+        last = done;
+        ++calls;
+        return true;
+    };
+    VoxelizeStats many;
+    const SparseField batched = signed_distance_sparse(device(), c.mesh, c.grid, small, &many);
+    EXPECT_EQ(many.batches, (batched.leaf_count() + 6) / 7);
+    expect_identical(batched.to_dense(), expected);
+    EXPECT_TRUE(monotonic);
+    EXPECT_GT(calls, 2u);
+    EXPECT_EQ(last, 1000000u);
+}
+
+TEST(SparseSdf, LeavesFollowTheSurface) {
+    // Every stored leaf is within the band (plus the leaf's half diagonal) of the sphere, and
+    // every voxel that close to it lies in a stored leaf: leaves are where the surface is.
+    const double vs = 0.05, radius = 2.0;
+    const Mesh m = icosphere(kCentre, radius, 4);
+    const Grid g = offset_grid(100, vs, kCentre);
+    const SparseField f = signed_distance_sparse(device(), m, g, band(3.0));
+    const auto n = f.leaf_dims();
+    const double reach =
+        3.0 * vs + icosphere_sagitta(m, kCentre, radius) + std::sqrt(3.0) * SparseField::kLeaf * vs;
+    for (uint64_t leaf : f.leaf_indices()) {
+        const int64_t x = int64_t(leaf % uint64_t(n[0])) * 8 + 4,
+                      y = int64_t(leaf / uint64_t(n[0]) % uint64_t(n[1])) * 8 + 4,
+                      z = int64_t(leaf / uint64_t(n[0] * n[1])) * 8 + 4;
+        const double r = norm(sub(centre_of(g, x, y, z), kCentre));
+        ASSERT_LT(std::abs(r - radius), reach) << leaf;
+    }
+    // A shell of leaves, far fewer samples than the grid.
+    const double shell = 4 * M_PI * radius * radius / (vs * vs) * 6;  // area times band width
+    EXPECT_LT(double(f.leaf_count() * SparseField::kLeafSamples), 4 * shell);
+}
+
+TEST(SparseSdf, GridBeyondTheDenseBudgetCompletesSparse) {
+    // 640^3 voxels: the dense field (4 bytes a voxel) is refused by a 256 MiB budget, the sparse
+    // one is not, and its samples are the sphere's distances.
+    const double vs = 0.1, radius = 1.5;
+    const Mesh m = icosphere(kCentre, radius, 3);
+    Grid g = offset_grid(640, vs, kCentre);
+    g.dims = {640, 640, 640};
+    SdfOptions o = band(3.0);
+    o.host_budget_bytes = uint64_t(256) << 20;
+    EXPECT_THROW(signed_distance(device(), m, g, o), GridError);
+    const SparseField f = signed_distance_sparse(device(), m, g, o);
+    const double sagitta = icosphere_sagitta(m, kCentre, radius);
+    const Vec3d c = to_grid(g, kCentre);
+    size_t checked = 0;
+    for (int64_t d = -20; d <= 20; ++d) {
+        const int64_t i = int64_t(c[0]) + d, j = int64_t(c[1]), k = int64_t(c[2]);
+        const double r = norm(sub(centre_of(g, i, j, k), kCentre));
+        const double expected = (r - radius) / vs;  // signed, in voxels, up to the sagitta
+        const float value = f.at(i, j, k) / float(vs);
+        if (std::abs(expected) < 3.0 - sagitta / vs - 1e-3) {
+            EXPECT_NEAR(value, expected, sagitta / vs + 1e-3) << d;
+            ++checked;
+        } else if (std::abs(expected) > 3.0 + 1e-3) {
+            EXPECT_EQ(std::abs(value), 3.0f) << d;
+            EXPECT_EQ(value < 0, expected < 0) << d;
+        }
+    }
+    EXPECT_GT(checked, 8u);
+    EXPECT_EQ(f.at(0, 0, 0), f.background());
+    EXPECT_EQ(f.at(int64_t(c[0]), int64_t(c[1]), int64_t(c[2])), -f.background());
+}
+
+TEST(SparseSdf, FullGridAndLayersAreRefused) {
+    const SparseCase c = sparse_cases()[0];
+    EXPECT_THROW(signed_distance_sparse(device(), c.mesh, c.grid, band(2.0, true)), GridError);
+    SdfOptions layers = band(2.0);
+    layers.first_layer = 3;
+    EXPECT_THROW(signed_distance_sparse_reference(c.mesh, c.grid, layers), GridError);
+    EXPECT_THROW(signed_distance_sparse(device(), c.mesh, c.grid, band(-1.0)), GridError);
+}
+
+TEST(SparseSdf, FilesEqualTheDenseFieldsFiles) {
+    // The .npy samples are the same bytes; the .vdb read back through OpenVDB has the same active
+    // voxels, values, inactive signs and transform.
+    const SparseCase c = sparse_cases()[1];
+    const SdfOptions o = band(2.5);
+    const SparseField sparse = signed_distance_sparse(device(), c.mesh, c.grid, o);
+    const ScalarField dense = signed_distance(device(), c.mesh, c.grid, o);
+    const std::string sparse_npy = temp_path("sparse.npy"), dense_npy = temp_path("dense.npy");
+    write_field(sparse_npy, sparse);
+    write_field(dense_npy, dense, o.band_voxels);
+    auto bytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    EXPECT_EQ(bytes(sparse_npy), bytes(dense_npy));
+    // The sidecars differ only in the file they name.
+    nlohmann::json sparse_sidecar = nlohmann::json::parse(bytes(sparse_npy + ".json"));
+    nlohmann::json dense_sidecar = nlohmann::json::parse(bytes(dense_npy + ".json"));
+    sparse_sidecar.erase("file");
+    dense_sidecar.erase("file");
+    EXPECT_EQ(sparse_sidecar, dense_sidecar);
+
+    const std::string sparse_vdb = temp_path("sparse.vdb"), dense_vdb = temp_path("dense.vdb");
+    write_field(sparse_vdb, sparse);
+    write_field(dense_vdb, dense, o.band_voxels);
+    openvdb::initialize();
+    auto read = [](const std::string& path) {
+        openvdb::io::File file(path);
+        file.open();
+        auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("sdf"));
+        file.close();
+        return grid;
+    };
+    const auto a = read(sparse_vdb), b = read(dense_vdb);
+    ASSERT_TRUE(a && b);
+    EXPECT_EQ(a->activeVoxelCount(), b->activeVoxelCount());
+    EXPECT_GT(a->activeVoxelCount(), 0u);
+    EXPECT_EQ(a->background(), b->background());
+    EXPECT_EQ(a->transform(), b->transform());
+    const auto access_a = a->getConstAccessor(), access_b = b->getConstAccessor();
+    const Grid& g = c.grid;
+    for (int64_t k = -1; k <= g.dims[2]; ++k)
+        for (int64_t j = -1; j <= g.dims[1]; ++j)
+            for (int64_t i = -1; i <= g.dims[0]; ++i) {
+                const openvdb::Coord at{int(i), int(j), int(k)};
+                ASSERT_EQ(access_a.isValueOn(at), access_b.isValueOn(at));
+                ASSERT_EQ(access_a.getValue(at), access_b.getValue(at))
+                    << i << " " << j << " " << k;
+            }
+    for (const auto& path : {sparse_npy, dense_npy, sparse_vdb, dense_vdb})
+        std::remove(path.c_str());
+    std::remove((sparse_npy + ".json").c_str());
+    std::remove((dense_npy + ".json").c_str());
+}
+
+TEST(SparseField, BoxesAndSamplesReadTheLeavesAndTheInsideVoxels) {
+    // A hand-built field: one leaf, inside voxels in and out of it.
+    Grid g;
+    g.dims = {20, 11, 9};
+    SparseVoxels inside(g, 8);
+    inside.set(1, 1, 1);    // in the leaf: its stored sample wins
+    inside.set(17, 10, 8);  // outside every leaf: -background
+    SparseField f(g, 2.0, inside);
+    std::vector<float> leaf(SparseField::kLeafSamples);
+    for (size_t v = 0; v < leaf.size(); ++v) leaf[v] = 0.001f * float(v);
+    const auto n = f.leaf_dims();
+    EXPECT_EQ(n, (std::array<int64_t, 3>{3, 2, 2}));
+    f.append_leaf(uint64_t(2 + 3 * 1), leaf.data());  // leaf (2, 1, 0): voxels 16.., 8.., 0..
+    EXPECT_THROW(f.append_leaf(1, leaf.data()), GridError);
+    EXPECT_THROW(f.append_leaf(12, leaf.data()), GridError);
+    EXPECT_EQ(f.at(16, 8, 0), 0.0f);
+    EXPECT_EQ(f.at(19, 10, 7), 0.001f * float(3 + 8 * (2 + 8 * 7)));
+    EXPECT_EQ(f.at(17, 10, 8), -2.0f);
+    EXPECT_EQ(f.at(1, 1, 1), -2.0f);
+    EXPECT_EQ(f.at(0, 0, 0), 2.0f);
+    EXPECT_THROW(f.at(20, 0, 0), std::out_of_range);
+    const ScalarField dense = f.to_dense();
+    for (int64_t k = 0; k < g.dims[2]; ++k)
+        for (int64_t j = 0; j < g.dims[1]; ++j)
+            for (int64_t i = 0; i < g.dims[0]; ++i) ASSERT_EQ(dense.at(i, j, k), f.at(i, j, k));
+    std::vector<float> box(3 * 4 * 2);
+    f.copy_box({15, 7, 6}, {18, 11, 8}, box.data());
+    for (int64_t k = 0; k < 2; ++k)
+        for (int64_t j = 0; j < 4; ++j)
+            for (int64_t i = 0; i < 3; ++i)
+                EXPECT_EQ(box[size_t(i + 3 * (j + 4 * k))], f.at(15 + i, 7 + j, 6 + k));
+    EXPECT_THROW(f.copy_box({0, 0, 0}, {21, 1, 1}, box.data()), GridError);
+    EXPECT_EQ(border_samples_inside(f), border_samples_inside(dense));
+    EXPECT_EQ(border_samples_inside(f), 1u);  // (17, 10, 8) only
+}
+
 }  // namespace
 }  // namespace oclvox::test

@@ -67,23 +67,40 @@ int run(const SdfArgs& args) {
     stop_if_interrupted();
     std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
-    // Phase 3: the distances, then the mesh of their zero level set if asked for.
+    // Phase 3: the distances, a narrow band as a sparse field (memory follows the surface), a full
+    // grid dense; then the mesh of their zero level set if asked for. Meshing and the preview
+    // read the dense field, made from the sparse one when the band is all there is.
     oclvox::VoxelizeStats stats;
-    const oclvox::ScalarField field = timed(
-        record.seconds.compute, [&] { return signed_distance(device, mesh, grid, args, &stats); });
+    std::optional<oclvox::SparseField> sparse;
+    std::optional<oclvox::ScalarField> dense;
+    timed(record.seconds.compute, [&] {
+        if (args.full)
+            dense = signed_distance(device, mesh, grid, args, &stats);
+        else
+            sparse = signed_distance_sparse(device, mesh, grid, args, &stats);
+        return 0;
+    });
     stop_if_interrupted();
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
-        surface =
-            timed(record.seconds.mesh, [&] { return extract_surface(device, field, args, 0.0f); });
+        surface = timed(record.seconds.mesh, [&] {
+            if (!dense) dense = sparse->to_dense();
+            return extract_surface(device, *dense, args, 0.0f);
+        });
         stop_if_interrupted();
     }
 
     // Phase 4: the files, then the report.
     timed(record.seconds.write, [&] {
-        write_field_output(output.path(), field, args.full ? 0.0 : args.band, args);
+        if (sparse)
+            write_field_output(output.path(), *sparse, args);
+        else
+            write_field_output(output.path(), *dense, 0.0, args);
         if (surface) oclvox::write_mesh(args.mesh_output, *surface);
-        if (!args.preview.empty()) write_preview(args.preview, field, 0.0f);
+        if (!args.preview.empty()) {
+            if (!dense) dense = sparse->to_dense();
+            write_preview(args.preview, *dense, 0.0f);
+        }
         output.finish();
         return 0;
     });
@@ -98,7 +115,8 @@ int run(const SdfArgs& args) {
     record_field_settings(record, args);
     record.stats = stats;
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
-    record.border_inside = oclvox::border_samples_inside(field);
+    record.border_inside =
+        sparse ? oclvox::border_samples_inside(*sparse) : oclvox::border_samples_inside(*dense);
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }

@@ -94,6 +94,16 @@ oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const
                   : oclvox::signed_distance_reference(mesh, grid, options, stats);
 }
 
+oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device,
+                                           const oclvox::Mesh& mesh, const oclvox::Grid& grid,
+                                           const FieldArgs& args, oclvox::VoxelizeStats* stats) {
+    oclvox::SdfOptions options = sdf_options(args);
+    ProgressBar bar("distance field", "", args.reporting);
+    options.progress = bar.callback();
+    return device ? oclvox::signed_distance_sparse(*device, mesh, grid, options, stats)
+                  : oclvox::signed_distance_sparse_reference(mesh, grid, options, stats);
+}
+
 oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
                         const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                         const FieldArgs& args, oclvox::VoxelizeStats* stats) {
@@ -119,6 +129,12 @@ void write_field_output(const std::string& path, const oclvox::ScalarField& fiel
                         double band_voxels, const FieldArgs& args) {
     ProgressBar bar("writing", "", args.reporting);
     oclvox::write_field(path, field, band_voxels, bar.callback());
+}
+
+void write_field_output(const std::string& path, const oclvox::SparseField& field,
+                        const FieldArgs& args) {
+    ProgressBar bar("writing", "", args.reporting);
+    oclvox::write_field(path, field, bar.callback());
 }
 
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record) {

@@ -48,6 +48,10 @@ oclvox::GridFit field_fit(const FieldArgs& args);
 oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
                                     const oclvox::Grid& grid, const FieldArgs& args,
                                     oclvox::VoxelizeStats* stats);
+// The narrow band as a sparse field (oclvox::signed_distance_sparse), the same way.
+oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device,
+                                           const oclvox::Mesh& mesh, const oclvox::Grid& grid,
+                                           const FieldArgs& args, oclvox::VoxelizeStats* stats);
 oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
                         const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                         const FieldArgs& args, oclvox::VoxelizeStats* stats);
@@ -56,12 +60,14 @@ oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mes
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
                              const oclvox::ScalarField& field, const FieldArgs& args, float iso);
 
-// A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
-// occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
 // write_field with a "writing" progress bar (and Ctrl-C checked through it).
 void write_field_output(const std::string& path, const oclvox::ScalarField& field,
                         double band_voxels, const FieldArgs& args);
+void write_field_output(const std::string& path, const oclvox::SparseField& field,
+                        const FieldArgs& args);
 
+// A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
+// occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record);
 
 // The settings every field command reports.

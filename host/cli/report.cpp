@@ -165,6 +165,10 @@ std::string stats_text(const RunRecord& r) {
             text += format("  bricks        %llu active of %llu, %llu batches\n",
                            ull(s.bricks_active), ull(s.bricks_total), ull(s.batches));
             text += format("  brick pairs   %llu\n", ull(s.brick_pairs));
+        } else if (s.bricks_total > 0) {
+            // A sparse field's bricks are its 8x8x8 leaves.
+            text += format("  leaves        %llu of %llu (8^3), %llu batches\n",
+                           ull(s.bricks_active), ull(s.bricks_total), ull(s.batches));
         }
         text += format("  work items    %llu\n", ull(s.work_items));
         if (is_voxelize(r))

@@ -14,6 +14,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <variant>
 
@@ -43,28 +44,36 @@ double inferred_band(const ScalarField& field) {
     return double(largest) / field.grid.voxel_size;
 }
 
-void write_npy_field(const std::string& path, const ScalarField& field, double band_voxels,
-                     detail::ProgressPhases& progress) {
-    // The samples as little-endian float32, converted a chunk at a time so the copy stays small.
+// Writes the samples a layer at a time: layer(k, out) puts the nx * ny samples of layer k into out,
+// x fastest. Only one layer is held, whatever the field.
+void write_npy_field(const std::string& path, const Grid& grid, double band_voxels,
+                     detail::ProgressPhases& progress,
+                     const std::function<void(int64_t k, float* out)>& layer) {
     const size_t samples = progress.add(1);
     auto write_samples = [&](std::ostream& out) {
-        constexpr size_t kChunk = size_t(1) << 16;
-        std::vector<char> bytes(kChunk * 4);
-        for (size_t first = 0; first < field.values.size(); first += kChunk) {
-            const size_t n = std::min(kChunk, field.values.size() - first);
-            for (size_t v = 0; v < n; ++v) detail::store_le(&bytes[v * 4], field.values[first + v]);
-            out.write(bytes.data(), std::streamsize(n * 4));
-            progress.report(samples, first + n, field.values.size());
+        const size_t per_layer = size_t(grid.dims[0]) * size_t(grid.dims[1]);
+        std::vector<float> values(per_layer);
+        std::vector<char> bytes(per_layer * 4);
+        for (int64_t k = 0; k < grid.dims[2]; ++k) {
+            layer(k, values.data());
+            for (size_t v = 0; v < per_layer; ++v) detail::store_le(&bytes[v * 4], values[v]);
+            out.write(bytes.data(), std::streamsize(bytes.size()));
+            progress.report(samples, uint64_t(k) + 1, uint64_t(grid.dims[2]));
         }
         progress.finish();
     };
-    nlohmann::json sidecar = detail::npy_sidecar(path, field.grid);
+    nlohmann::json sidecar = detail::npy_sidecar(path, grid);
     sidecar["dtype"] = "float32, distance in world units";
     sidecar["sample_position"] = "voxel centres: origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size";
     sidecar["sign_convention"] = "negative inside, positive outside";
     sidecar["band_voxels"] = band_voxels;
-    sidecar["background"] = band_voxels * field.grid.voxel_size;
-    detail::write_npy_with_sidecar(path, "<f4", field.grid, write_samples, sidecar);
+    sidecar["background"] = band_voxels * grid.voxel_size;
+    detail::write_npy_with_sidecar(path, "<f4", grid, write_samples, sidecar);
+}
+
+[[noreturn]] void unknown_field_extension(const std::string& path, const std::string& extension) {
+    throw OutputError("cannot write field " + path + ": unknown extension '" + extension +
+                      "' (expected .npy or .vdb)");
 }
 
 // ---- Reading ----------------------------------------------------------------------------------
@@ -418,10 +427,29 @@ void write_field(const std::string& path, const ScalarField& field, double band_
     if (!(band_voxels > 0)) band_voxels = inferred_band(field);
     const std::string extension = detail::lowercase_extension(path);
     detail::ProgressPhases phases(progress, "writing " + path);
-    if (extension == ".npy") return write_npy_field(path, field, band_voxels, phases);
+    if (extension == ".npy") {
+        const size_t per_layer = size_t(field.grid.dims[0]) * size_t(field.grid.dims[1]);
+        return write_npy_field(path, field.grid, band_voxels, phases, [&](int64_t k, float* out) {
+            std::copy_n(&field.values[size_t(k) * per_layer], per_layer, out);
+        });
+    }
     if (extension == ".vdb") return detail::write_field_vdb(path, field, band_voxels, phases);
-    throw OutputError("cannot write field " + path + ": unknown extension '" + extension +
-                      "' (expected .npy or .vdb)");
+    unknown_field_extension(path, extension);
+}
+
+void write_field(const std::string& path, const SparseField& field,
+                 const ProgressCallback& progress) {
+    validate_grid(field.grid());
+    const std::string extension = detail::lowercase_extension(path);
+    detail::ProgressPhases phases(progress, "writing " + path);
+    const auto& d = field.grid().dims;
+    if (extension == ".npy")
+        return write_npy_field(path, field.grid(), field.band_voxels(), phases,
+                               [&](int64_t k, float* out) {
+                                   field.copy_box({0, 0, k}, {d[0], d[1], k + 1}, out);
+                               });
+    if (extension == ".vdb") return detail::write_field_vdb(path, field, phases);
+    unknown_field_extension(path, extension);
 }
 
 std::variant<ScalarField, SparseVoxels> read_npy(const std::string& path) {

@@ -11,5 +11,7 @@ namespace oclvox::detail {
 // A level-set FloatGrid named "sdf" (see write_field in oclvox/sdf.hpp). Throws OutputError.
 void write_field_vdb(const std::string& path, const ScalarField& field, double band_voxels,
                      ProgressPhases& progress);
+// The same from a sparse field's leaves, its band field.band_voxels().
+void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress);
 
 }  // namespace oclvox::detail

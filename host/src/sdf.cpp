@@ -36,26 +36,18 @@ void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float
     const uint64_t items = prepared.first_item.back();
     for (size_t index = 0; index < prepared.triangles.size(); ++index) {
         const OvSdfTriangle& t = prepared.triangles[index];
-        for (int bz = t.lo[2] / 4 * 4; bz <= t.hi[2]; bz += 4)
-            for (int by = t.lo[1] / 4 * 4; by <= t.hi[1]; by += 4)
-                for (int bx = t.lo[0] / 4 * 4; bx <= t.hi[0]; bx += 4) {
-                    if (!ov_block_near(&t, bx, by, bz, prepared.band)) continue;
-                    for (int k = std::max(bz, t.lo[2]); k <= std::min(bz + 3, t.hi[2]); ++k)
-                        for (int j = std::max(by, t.lo[1]); j <= std::min(by + 3, t.hi[1]); ++j)
-                            for (int i = std::max(bx, t.lo[0]); i <= std::min(bx + 3, t.hi[0]);
-                                 ++i) {
-                                if (!ov_voxel_near(&t, i, j, k, prepared.band)) continue;
-                                const float d2 = ov_voxel_distance2(&t, i, j, k);
-                                if (!(d2 < prepared.band2)) continue;
-                                const size_t v = voxel_index(grid, i, j, k);
-                                if (d2 < distance2[v]) {
-                                    distance2[v] = d2;
-                                    if (nearest) (*nearest)[v] = uint32_t(index);
-                                } else if (nearest && d2 == distance2[v]) {
-                                    (*nearest)[v] = std::min((*nearest)[v], uint32_t(index));
-                                }
-                            }
-                }
+        for_each_near_block(t, prepared.band, [&](int bx, int by, int bz) {
+            for_each_band_sample(t, bx, by, bz, prepared.band, prepared.band2,
+                                 [&](int i, int j, int k, float d2) {
+                                     const size_t v = voxel_index(grid, i, j, k);
+                                     if (d2 < distance2[v]) {
+                                         distance2[v] = d2;
+                                         if (nearest) (*nearest)[v] = uint32_t(index);
+                                     } else if (nearest && d2 == distance2[v]) {
+                                         (*nearest)[v] = std::min((*nearest)[v], uint32_t(index));
+                                     }
+                                 });
+        });
         progress.report(phase, prepared.first_item[index + 1], items);
     }
 }
@@ -97,7 +89,7 @@ void jump_pass(const SdfTriangles& prepared, const Grid& grid, int step,
 
 }  // namespace
 
-void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel) {
+void validate_sdf_options(const Grid& grid, const SdfOptions& options) {
     validate_grid(grid);
     if (!(options.band_voxels > 0) || !std::isfinite(options.band_voxels) ||
         options.band_voxels > double(kMaxGridAxis))
@@ -113,6 +105,10 @@ void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_byt
         throw GridError(
             "a full-grid field cannot be computed in layers: jump flooding crosses "
             "them (use a narrow band, or the whole grid)");
+}
+
+void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel) {
+    validate_sdf_options(grid, options);
     const uint64_t voxels = field_grid(grid, options).voxel_count();
     if (voxels > kMaxFieldVoxels)
         throw GridError("a dense distance field of " + std::to_string(voxels) +
@@ -144,10 +140,8 @@ void keep_layers(SdfTriangles& prepared, const SdfOptions& options) {
         t.hi[2] = std::min(t.hi[2], last) - first;
         if (t.lo[2] > t.hi[2]) continue;
         t.anchor[2] -= first;
-        uint64_t blocks = 1;
-        for (int k = 0; k < 3; ++k) blocks *= uint64_t(t.hi[k] / 4 - t.lo[k] / 4 + 1);
         kept.push_back(t);
-        first_item.push_back(first_item.back() + blocks);
+        first_item.push_back(first_item.back() + item_count(t));
     }
     prepared.triangles = std::move(kept);
     prepared.first_item = std::move(first_item);
@@ -210,16 +204,25 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_la
 }
 
 SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
-                         const SdfOptions& options, bool sign) {
+                         const SdfOptions& options, bool sign, bool sparse) {
     // Costs in band work items (a triangle and a 4x4x4 block), as measured through PoCL on spot
     // and the Stanford bunny: the seeds pass about a third of the band pass (it only writes where
     // the band pass found the minimum); a voxel of a jump pass one to four items (it weighs up to
     // 27 candidates); the sign, whose cost follows the surface like the band's, about half the
     // band with the winding number and far less with parity, which is not known before the solid
     // voxelization picks it.
-    constexpr double kSeedsCost = 0.3, kJumpVoxelCost = 2.0, kSignCost = 0.5;
+    // The leaves of a sparse field visit the band's items once more, without their samples.
+    constexpr double kLeavesCost = 0.2, kSeedsCost = 0.3, kJumpVoxelCost = 2.0, kSignCost = 0.5;
     const double items = double(prepared.first_item.back());
     SdfPhases phases;
+    if (sparse) {
+        // A sparse field's sign comes before its band, so that batches of the band become signed
+        // leaves as they arrive.
+        phases.leaves = progress.add(kLeavesCost * items);
+        if (sign) phases.sign = progress.add(kSignCost * items);
+        phases.band = progress.add(items);
+        return phases;
+    }
     phases.band = progress.add(items);
     if (options.full_grid) {
         phases.seeds = progress.add(kSeedsCost * items);
@@ -256,46 +259,13 @@ std::vector<float> distance2_reference(const SdfTriangles& prepared, const Grid&
 
 namespace {
 
-// Where a run computes: the distances and the solid that signs them, on a device or both on the
-// host (the reference).
-struct OnDevice {
-    Device& device;
-    // Host bytes per voxel: the squared distances and the field made from them (the flood's
-    // buffers of nearest triangles stay on the device).
-    static uint64_t host_bytes_per_voxel(const SdfOptions&) { return 8; }
-    std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
-                                 const SdfOptions& options, ProgressPhases& progress,
-                                 const SdfPhases& phases, VoxelizeStats& stats) const {
-        return distance2_device(device, prepared, grid, options, progress, phases, stats);
-    }
-    SparseVoxels solid(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
-                       VoxelizeStats* stats) const {
-        return device.voxelize(mesh, grid, options, stats);
-    }
-};
-
-struct OnHost {
-    // The device's, plus two buffers of nearest triangles for a full-grid flood.
-    static uint64_t host_bytes_per_voxel(const SdfOptions& options) {
-        return options.full_grid ? 16 : 8;
-    }
-    std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
-                                 const SdfOptions& options, ProgressPhases& progress,
-                                 const SdfPhases& phases, VoxelizeStats& stats) const {
-        return distance2_reference(prepared, grid, options, progress, phases, stats);
-    }
-    SparseVoxels solid(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
-                       VoxelizeStats* stats) const {
-        return voxelize_reference(mesh, grid, options, stats);
-    }
-};
-
 // The Solid voxelization that signs a field: of the bricks holding the field's layers only.
 VoxelizeOptions sign_options(const Grid& grid, const SdfOptions& options) {
     VoxelizeOptions solid;
     solid.mode = VoxelizeMode::Solid;
     solid.inside = options.inside;
     solid.brick_size = options.brick_size;
+    solid.host_budget_bytes = options.host_budget_bytes;
     const Grid layers = field_grid(grid, options);
     if (layers.dims[2] == grid.dims[2]) return solid;
     const SparseVoxels layout(grid, options.brick_size);
@@ -308,27 +278,71 @@ VoxelizeOptions sign_options(const Grid& grid, const SdfOptions& options) {
     return solid;
 }
 
-// One field of a run: its mesh, prepared triangles and progress phases.
-struct FieldJob {
-    const Mesh& mesh;
-    SdfTriangles prepared;
-    SdfPhases phases;
-};
+}  // namespace
 
-// Prepares the mesh's triangles and adds the field's phases; the counts go to stats.
+SparseVoxels sign_voxels(Device* device, const Mesh& mesh, const Grid& grid,
+                         const SdfOptions& options, ProgressPhases& progress, size_t phase,
+                         VoxelizeStats& stats) {
+    VoxelizeOptions solid = sign_options(grid, options);
+    solid.progress = progress.forward(phase);
+    VoxelizeStats solid_stats;
+    SparseVoxels inside = device ? device->voxelize(mesh, grid, solid, &solid_stats)
+                                 : voxelize_reference(mesh, grid, solid, &solid_stats);
+    stats.seconds_binning += solid_stats.seconds_binning;
+    stats.seconds_upload += solid_stats.seconds_upload;
+    stats.seconds_kernels += solid_stats.seconds_kernels;
+    stats.seconds_download += solid_stats.seconds_download;
+    stats.allocation_retries += solid_stats.allocation_retries;
+    stats.voxels_set = solid_stats.voxels_set;
+    stats.inside_test = solid_stats.inside_test;
+    stats.inside_test_reason = solid_stats.inside_test_reason;
+    return inside;
+}
+
 FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& options, bool sign,
-                    ProgressPhases& progress, VoxelizeStats& stats) {
+                    bool sparse, ProgressPhases& progress, VoxelizeStats& stats) {
     const auto t = std::chrono::steady_clock::now();
     // Prepared on the whole grid, then cut to the layers (so every sample keeps its bits).
     FieldJob job{mesh, prepare_sdf_triangles(mesh, grid, options.band_voxels), {}};
     keep_layers(job.prepared, options);
-    job.phases = add_sdf_phases(progress, job.prepared, field_grid(grid, options), options, sign);
+    job.phases =
+        add_sdf_phases(progress, job.prepared, field_grid(grid, options), options, sign, sparse);
     stats.triangles_in = mesh.triangles.size();
     stats.triangles_used = job.prepared.triangles.size();
     stats.work_items = job.prepared.first_item.back();
     stats.seconds_binning += seconds_since(t);
     return job;
 }
+
+namespace {
+
+// Where a run computes: the distances and the solid that signs them, on a device or both on the
+// host (the reference).
+struct OnDevice {
+    Device& device;
+    // Host bytes per voxel: the squared distances and the field made from them (the flood's
+    // buffers of nearest triangles stay on the device).
+    static uint64_t host_bytes_per_voxel(const SdfOptions&) { return 8; }
+    std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
+                                 const SdfOptions& options, ProgressPhases& progress,
+                                 const SdfPhases& phases, VoxelizeStats& stats) const {
+        return distance2_device(device, prepared, grid, options, progress, phases, stats);
+    }
+    Device* solid_device() const { return &device; }
+};
+
+struct OnHost {
+    // The device's, plus two buffers of nearest triangles for a full-grid flood.
+    static uint64_t host_bytes_per_voxel(const SdfOptions& options) {
+        return options.full_grid ? 16 : 8;
+    }
+    std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
+                                 const SdfOptions& options, ProgressPhases& progress,
+                                 const SdfPhases& phases, VoxelizeStats& stats) const {
+        return distance2_reference(prepared, grid, options, progress, phases, stats);
+    }
+    static Device* solid_device() { return nullptr; }  // voxelize_reference
+};
 
 // The job's field, signed by the solid voxelization (with options.inside) when `sign` is set;
 // stats add the solid run's timings, its inside test and voxels_set = the inside voxels.
@@ -341,19 +355,10 @@ ScalarField compute_field(const Backend& backend, const FieldJob& job, const Gri
         layers, options, job.prepared,
         backend.distance2(job.prepared, layers, options, progress, job.phases, stats));
     if (!sign) return field;
-    VoxelizeOptions solid = sign_options(grid, options);
-    solid.host_budget_bytes = options.host_budget_bytes;
-    solid.progress = progress.forward(job.phases.sign);
-    VoxelizeStats solid_stats;
-    apply_sign(field, backend.solid(job.mesh, grid, solid, &solid_stats), options.first_layer);
-    stats.seconds_binning += solid_stats.seconds_binning;
-    stats.seconds_upload += solid_stats.seconds_upload;
-    stats.seconds_kernels += solid_stats.seconds_kernels;
-    stats.seconds_download += solid_stats.seconds_download;
-    stats.allocation_retries += solid_stats.allocation_retries;
-    stats.voxels_set = solid_stats.voxels_set;
-    stats.inside_test = solid_stats.inside_test;
-    stats.inside_test_reason = solid_stats.inside_test_reason;
+    apply_sign(field,
+               sign_voxels(backend.solid_device(), job.mesh, grid, options, progress,
+                           job.phases.sign, stats),
+               options.first_layer);
     return field;
 }
 
@@ -363,7 +368,7 @@ ScalarField distance_run(const Backend& backend, const Mesh& mesh, const Grid& g
     validate_sdf(grid, options, backend.host_bytes_per_voxel(options));
     ProgressPhases progress(options.progress, sign ? "signed distance field" : "distance field");
     VoxelizeStats stats;
-    const FieldJob job = plan_field(mesh, grid, options, sign, progress, stats);
+    const FieldJob job = plan_field(mesh, grid, options, sign, false, progress, stats);
     ScalarField field = compute_field(backend, job, grid, options, sign, progress, stats);
     progress.finish();
     if (stats_out) *stats_out = stats;
@@ -378,8 +383,8 @@ ScalarField csg_run(const Backend& backend, const Mesh& a, const Mesh& b, CsgOp 
     validate_sdf(grid, options, 2 * backend.host_bytes_per_voxel(options));
     ProgressPhases progress(options.progress, "CSG");
     VoxelizeStats stats, stats_b;
-    const FieldJob job_a = plan_field(a, grid, options, true, progress, stats);
-    const FieldJob job_b = plan_field(b, grid, options, true, progress, stats_b);
+    const FieldJob job_a = plan_field(a, grid, options, true, false, progress, stats);
+    const FieldJob job_b = plan_field(b, grid, options, true, false, progress, stats_b);
 
     // Phase 2: a's field, b's field combined into it.
     ScalarField field = compute_field(backend, job_a, grid, options, true, progress, stats);

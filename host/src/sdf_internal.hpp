@@ -3,7 +3,10 @@
 // squared distances each side computes and the final conversion from them to a field.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "kernel_sources.hpp"
@@ -25,10 +28,46 @@ struct SdfTriangles {
     float band = 0, band2 = 0;  // band in voxels and its square, as the kernels compare them
 };
 
-// Throws GridError for a band that is not a finite positive number of voxels, layers outside the
-// grid (or with full_grid), or a field too large to hold: over 2^32 voxels, or
-// host_bytes_per_voxel bytes per voxel (the field and the caller's working copies of it) over the
-// host memory budget.
+// The work items of a prepared triangle: the 4x4x4 blocks (aligned to multiples of 4) its voxel
+// range overlaps.
+inline uint64_t item_count(const OvSdfTriangle& t) {
+    uint64_t blocks = 1;
+    for (int k = 0; k < 3; ++k) blocks *= uint64_t(t.hi[k] / 4 - t.lo[k] / 4 + 1);
+    return blocks;
+}
+
+// The band pass's visit order, shared by the dense and the sparse reference: on_block(bx, by, bz)
+// for every 4x4x4 block (minimum voxel, multiples of 4) of t's voxel range that the block cull
+// keeps, x fastest, as the kernels' work items number them.
+template <class OnBlock>
+void for_each_near_block(const OvSdfTriangle& t, float band, OnBlock&& on_block) {
+    for (int bz = t.lo[2] / 4 * 4; bz <= t.hi[2]; bz += 4)
+        for (int by = t.lo[1] / 4 * 4; by <= t.hi[1]; by += 4)
+            for (int bx = t.lo[0] / 4 * 4; bx <= t.hi[0]; bx += 4)
+                if (ov_block_near(&t, bx, by, bz, band)) on_block(bx, by, bz);
+}
+
+// on_sample(i, j, k, d2) for every voxel of the block and of t's range whose squared distance to
+// t is below band2, as the band kernels visit them.
+template <class OnSample>
+void for_each_band_sample(const OvSdfTriangle& t, int bx, int by, int bz, float band, float band2,
+                          OnSample&& on_sample) {
+    for (int k = std::max(bz, t.lo[2]); k <= std::min(bz + 3, t.hi[2]); ++k)
+        for (int j = std::max(by, t.lo[1]); j <= std::min(by + 3, t.hi[1]); ++j)
+            for (int i = std::max(bx, t.lo[0]); i <= std::min(bx + 3, t.hi[0]); ++i) {
+                if (!ov_voxel_near(&t, i, j, k, band)) continue;
+                const float d2 = ov_voxel_distance2(&t, i, j, k);
+                if (d2 < band2) on_sample(i, j, k, d2);
+            }
+}
+
+// Throws GridError for an invalid grid, a band that is not a finite positive number of voxels,
+// or layers outside the grid (or with full_grid).
+void validate_sdf_options(const Grid& grid, const SdfOptions& options);
+
+// validate_sdf_options, and a GridError for a dense field too large to hold: over 2^32 voxels,
+// or host_bytes_per_voxel bytes per voxel (the field and the caller's working copies of it) over
+// the host memory budget.
 void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel);
 
 // The grid of the field a run produces: the whole grid cut to options' layers.
@@ -49,14 +88,26 @@ std::vector<int> jump_steps(const Grid& grid);
 
 // The progress phases of one distance field, in the order they run: the band pass, for full-grid
 // fields the nearest-triangle seeds and each jump-flooding pass, for signed fields the sign (the
-// solid voxelization).
+// solid voxelization); for sparse fields the leaves, the sign, then the band.
 struct SdfPhases {
-    size_t band = 0, seeds = 0, first_jump = 0, sign = 0;
+    size_t leaves = 0, band = 0, seeds = 0, first_jump = 0, sign = 0;
 };
 
 // Adds them to `progress`, weighted by their estimated cost (see sdf.cpp).
 SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
-                         const SdfOptions& options, bool sign);
+                         const SdfOptions& options, bool sign, bool sparse);
+
+// One field of a run: its mesh, prepared triangles and progress phases.
+struct FieldJob {
+    const Mesh& mesh;
+    SdfTriangles prepared;
+    SdfPhases phases;
+};
+
+// Prepares the mesh's triangles (cut to options' layers) and adds the field's phases (a sparse
+// field's leaves first); the counts go to stats.
+FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& options, bool sign,
+                    bool sparse, ProgressPhases& progress, VoxelizeStats& stats);
 
 // The squared distances in voxels of every voxel centre to its nearest prepared triangle, below
 // band2 (else band2), for full-grid fields everywhere; float, as the kernels compute them.
@@ -77,6 +128,66 @@ ScalarField distance_field(const Grid& grid, const SdfOptions& options,
 // Negates the samples whose voxels are set in `inside` (a voxelization of the whole grid; the
 // field covers its layers from first_layer on).
 void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer);
+
+// The Solid voxelization (with options.inside) that signs a field of options' layers of `grid`,
+// on `device` or, when it is null, by voxelize_reference; reported as `phase`. stats add its
+// timings, its inside test and voxels_set = the inside voxels.
+SparseVoxels sign_voxels(Device* device, const Mesh& mesh, const Grid& grid,
+                         const SdfOptions& options, ProgressPhases& progress, size_t phase,
+                         VoxelizeStats& stats);
+
+// ---- Sparse fields (sdf_sparse.cpp, sdf_sparse_device.cpp) -----------------------------------
+// The leaves of a sparse field: a bit per 8x8x8 leaf of the grid, set for every leaf holding a
+// block that a triangle's block cull keeps (so every sample within the band lies in a set leaf),
+// and per 32-bit word the number of set bits before it. A set leaf's slot, its place among the
+// set leaves in index order, is where its samples go.
+struct LeafSet {
+    std::array<int64_t, 3> dims{};  // leaves along each axis
+    std::vector<uint32_t> bits;
+    std::vector<uint32_t> rank;
+    uint64_t count = 0;  // set leaves
+
+    uint64_t leaf_of_block(int bx, int by, int bz) const {
+        return uint64_t(bx >> 3) +
+               uint64_t(dims[0]) * (uint64_t(by >> 3) + uint64_t(dims[1]) * uint64_t(bz >> 3));
+    }
+    uint64_t slot(uint64_t leaf) const {
+        const size_t word = size_t(leaf >> 5);
+        return rank[word] + uint64_t(__builtin_popcount(bits[word] & ((1u << (leaf & 31)) - 1u)));
+    }
+    // The leaf of a slot below count.
+    uint64_t leaf_at(uint64_t slot) const;
+    // Counts the set bits into rank and count, once bits are final.
+    void rank_bits();
+};
+
+// The leaf set of a grid with none set yet. Throws GridError if its bits and ranks do not fit
+// the host memory budget.
+LeafSet empty_leaf_set(const Grid& grid, const SdfOptions& options);
+
+// Orders the prepared triangles by their lowest voxel layer, renumbering their items. The band's
+// minima do not depend on the order; a batch of leaves in a few layers then needs only a run of
+// triangles.
+void order_by_layer(SdfTriangles& prepared);
+
+// The leaf set of the prepared triangles on the device (as the reference in sdf_sparse.cpp),
+// reported as `phase`.
+LeafSet band_leaves_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
+                           const SdfOptions& options, ProgressPhases& progress, size_t phase,
+                           VoxelizeStats& stats);
+
+// The squared voxel distances of the set leaves' samples (as distance2_device, leaf by leaf, x
+// fastest in a leaf, band2 where no triangle is within the band), in batches of consecutive
+// slots that fit options.device_budget_bytes and at most kMaxBatchLeaves leaves (so the host holds
+// one batch beside the field): on_batch(first_slot, slots, distance2) for each, in slot order.
+// Each batch runs only the items of the triangles that can reach its layers, which is few when
+// the triangles are ordered by layer (order_by_layer). stats.batches counts the batches.
+constexpr uint64_t kMaxBatchLeaves = 32768;
+void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const LeafSet& leaves,
+                           const SdfOptions& options, ProgressPhases& progress, size_t phase,
+                           VoxelizeStats& stats,
+                           const std::function<void(uint64_t first_slot, uint64_t slots,
+                                                    const float* distance2)>& on_batch);
 
 // csg(a, b, op) into a's values (csg.cpp); the grids must already match.
 void combine_fields(ScalarField& a, const ScalarField& b, CsgOp op);

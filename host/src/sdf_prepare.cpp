@@ -109,10 +109,8 @@ SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double ba
             for (int k = 0; k < 3; ++k) t.vertex[i][k] = float(g[i][k] - double(t.anchor[k]));
         set_constants(t);
 
-        uint64_t blocks = 1;
-        for (int k = 0; k < 3; ++k) blocks *= uint64_t(t.hi[k] / 4 - t.lo[k] / 4 + 1);
         out.triangles.push_back(t);
-        out.first_item.push_back(out.first_item.back() + blocks);
+        out.first_item.push_back(out.first_item.back() + item_count(t));
     }
     return out;
 }

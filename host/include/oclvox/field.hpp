@@ -12,6 +12,7 @@
 //  - the output depends only on the field and iso (never on the brick size or the device).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -27,6 +28,64 @@ struct ScalarField {
     std::vector<float> values;
     // The sample of voxel (i, j, k); throws std::out_of_range outside the grid.
     float at(int64_t i, int64_t j, int64_t k) const;
+};
+
+// A narrow-band signed distance field stored sparsely, as OpenVDB stores a level set: the samples
+// of the 8x8x8 leaves (aligned to multiples of 8 voxels) that hold a sample within the band, plus
+// the inside test's voxels, which give every other sample its sign: -background inside, +background
+// outside. Memory follows the surface (4 bytes per leaf sample) and the inside volume (1 bit per
+// voxel), not the grid's volume, so grids far beyond a dense field's reach can be held.
+// Made by signed_distance_sparse (oclvox/sdf.hpp); to_dense() gives exactly the values
+// signed_distance gives for the same mesh, grid and options.
+class SparseField {
+  public:
+    static constexpr int kLeaf = 8;
+    static constexpr size_t kLeafSamples = size_t(kLeaf) * kLeaf * kLeaf;
+
+    SparseField() = default;
+    // A field of `grid` with no leaves yet: every sample +-background by `inside`'s voxels, the
+    // background band_voxels * voxel_size rounded to float (as narrow-band fields hold it).
+    // Throws GridError unless inside's grid is `grid` and the band is finite and positive.
+    SparseField(const Grid& grid, double band_voxels, SparseVoxels inside);
+
+    const Grid& grid() const { return grid_; }
+    double band_voxels() const { return band_voxels_; }
+    float background() const { return background_; }
+    std::array<int64_t, 3> leaf_dims() const;  // leaves along each axis (ceil)
+    size_t leaf_count() const { return leaf_keys_.size(); }
+    // The linear indices lx + nlx*(ly + nly*lz) of the stored leaves, in increasing order.
+    const std::vector<uint64_t>& leaf_indices() const { return leaf_keys_; }
+    // The kLeafSamples samples of the n-th stored leaf, x fastest; samples of a leaf beyond the
+    // grid's far faces are +-background and belong to no voxel.
+    const float* leaf_samples(size_t n) const { return &samples_[n * kLeafSamples]; }
+    // The inside test's voxels: they sign every sample outside the leaves.
+    const SparseVoxels& inside() const { return inside_; }
+    // Appends a leaf with leaf index above every stored one; its samples are copied. Throws
+    // GridError for an index out of order or outside the grid.
+    void append_leaf(uint64_t leaf_index, const float* samples);
+    // Room for this many leaves in all, so appending them never copies the stored samples.
+    void reserve_leaves(size_t leaves) {
+        leaf_keys_.reserve(leaves);
+        samples_.reserve(leaves * kLeafSamples);
+    }
+
+    // The sample of voxel (i, j, k); throws std::out_of_range outside the grid.
+    float at(int64_t i, int64_t j, int64_t k) const;
+    // The samples of the box [lo, hi) into out, x fastest (hi - lo samples per row): one lookup
+    // per leaf the box touches plus one step per sample. Throws GridError for a box not inside the
+    // grid.
+    void copy_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
+                  float* out) const;
+    // The dense field; throws GridError if it does not fit the host memory budget.
+    ScalarField to_dense() const;
+
+  private:
+    Grid grid_{};
+    double band_voxels_ = 0;
+    float background_ = 0;
+    SparseVoxels inside_;
+    std::vector<uint64_t> leaf_keys_;
+    std::vector<float> samples_;
 };
 
 // Signed conversion of a binary occupancy: -0.5 inside (set), +0.5 outside, then
@@ -45,6 +104,7 @@ ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes 
 // shape is cut by the grid box and its meshes are open there. Throws GridError if values.size()
 // does not match the grid.
 uint64_t border_samples_inside(const ScalarField& field, float iso = 0.0f);
+uint64_t border_samples_inside(const SparseField& field, float iso = 0.0f);
 
 // Naive Surface Nets: one vertex per cell whose corners change sign, at the mean of the linearly
 // interpolated crossings on its sign-changing edges; one quad (two triangles) per sign-changing

@@ -1,0 +1,224 @@
+// Sparse narrow-band distance fields: the band computed only in the 8x8x8 leaves a triangle's band
+// reaches, signed by the solid voxelization, kept as a SparseField. The leaves are found first
+// from the same block culls the band pass makes (so the leaf set is exact, not a guess, and the
+// same on every device), then the band pass runs again writing only into those leaves' samples.
+// The samples equal the dense field's bit for bit: the same prepared triangles, the same squared
+// distances, the same minimum, the same conversion and the same solid. Device side in
+// sdf_sparse_device.cpp, dense fields in sdf.cpp.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "host_memory.hpp"
+#include "sdf_internal.hpp"
+
+namespace oclvox {
+
+namespace detail {
+
+namespace {
+
+constexpr int64_t kLeaf = SparseField::kLeaf;
+constexpr size_t kLeafSamples = SparseField::kLeafSamples;
+
+double seconds_since(std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+// The reference of band_leaves: every block the cull keeps marks its leaf.
+LeafSet band_leaves_reference(const SdfTriangles& prepared, const Grid& grid,
+                              const SdfOptions& options, ProgressPhases& progress, size_t phase) {
+    LeafSet leaves = empty_leaf_set(grid, options);
+    for (size_t index = 0; index < prepared.triangles.size(); ++index) {
+        for_each_near_block(prepared.triangles[index], prepared.band, [&](int bx, int by, int bz) {
+            const uint64_t leaf = leaves.leaf_of_block(bx, by, bz);
+            leaves.bits[size_t(leaf >> 5)] |= 1u << (leaf & 31);
+        });
+        progress.report(phase, prepared.first_item[index + 1], prepared.first_item.back());
+    }
+    leaves.rank_bits();
+    return leaves;
+}
+
+// The reference of band_distance_leaves, all leaves in one batch.
+std::vector<float> leaf_distance2_reference(const SdfTriangles& prepared, const LeafSet& leaves,
+                                            ProgressPhases& progress, size_t phase) {
+    std::vector<float> distance2(size_t(leaves.count) * kLeafSamples, prepared.band2);
+    for (size_t index = 0; index < prepared.triangles.size(); ++index) {
+        const OvSdfTriangle& t = prepared.triangles[index];
+        for_each_near_block(t, prepared.band, [&](int bx, int by, int bz) {
+            float* samples =
+                &distance2[leaves.slot(leaves.leaf_of_block(bx, by, bz)) * kLeafSamples];
+            for_each_band_sample(
+                t, bx, by, bz, prepared.band, prepared.band2, [&](int i, int j, int k, float d2) {
+                    float& sample = samples[(i & 7) + kLeaf * ((j & 7) + kLeaf * (k & 7))];
+                    sample = std::min(sample, d2);
+                });
+        });
+        progress.report(phase, prepared.first_item[index + 1], prepared.first_item.back());
+    }
+    return distance2;
+}
+
+// Appends the leaves of the next `slots` slots to the field, batch after batch in slot order:
+// world distances as distance_field makes them, negated where the inside voxels are set, as
+// apply_sign negates them. leaf_ walks the set leaf bits alongside the slots.
+class LeafWriter {
+  public:
+    LeafWriter(const LeafSet& leaves, const SdfTriangles& prepared)
+        : leaves_(leaves), band2_(prepared.band2) {}
+
+    void append(SparseField& field, uint64_t slots, const float* distance2) {
+        const Grid& grid = field.grid();
+        const SparseVoxels& inside = field.inside();
+        const auto n = leaves_.dims;
+        float samples[kLeafSamples];
+        uint8_t inside_marks[kLeafSamples];
+        for (uint64_t s = 0; s < slots; ++s, ++leaf_) {
+            while (!(leaves_.bits[size_t(leaf_ >> 5)] >> (leaf_ & 31) & 1)) ++leaf_;
+            const float* d2 = distance2 + s * kLeafSamples;
+            for (size_t v = 0; v < kLeafSamples; ++v)
+                samples[v] = d2[v] < band2_ ? float(std::sqrt(double(d2[v])) * grid.voxel_size)
+                                            : field.background();
+            // The leaf's part inside the grid, whose inside voxels flip the sign.
+            const std::array<int64_t, 3> lo = {
+                int64_t(leaf_ % uint64_t(n[0])) * kLeaf,
+                int64_t(leaf_ / uint64_t(n[0]) % uint64_t(n[1])) * kLeaf,
+                int64_t(leaf_ / (uint64_t(n[0]) * uint64_t(n[1]))) * kLeaf};
+            const std::array<int64_t, 3> hi = {std::min(lo[0] + kLeaf, grid.dims[0]),
+                                               std::min(lo[1] + kLeaf, grid.dims[1]),
+                                               std::min(lo[2] + kLeaf, grid.dims[2])};
+            std::fill(std::begin(inside_marks), std::end(inside_marks), uint8_t(0));
+            inside.mark_box(lo, hi, {1, kLeaf, kLeaf * kLeaf}, inside_marks);
+            for (size_t v = 0; v < kLeafSamples; ++v)
+                if (inside_marks[v]) samples[v] = -samples[v];
+            field.append_leaf(leaf_, samples);
+        }
+    }
+
+  private:
+    const LeafSet& leaves_;
+    float band2_;
+    uint64_t leaf_ = 0;
+};
+
+// The run of signed_distance_sparse on a device, or (device null) the reference.
+SparseField sparse_run(Device* device, const Mesh& mesh, const Grid& grid,
+                       const SdfOptions& options, VoxelizeStats* stats_out) {
+    // Phase 1: options. A sparse field is a narrow band of the whole grid.
+    validate_sdf_options(grid, options);
+    if (options.full_grid)
+        throw GridError(
+            "a sparse field holds a narrow band; a full-grid field needs the dense "
+            "signed_distance");
+    if (options.first_layer != 0 || options.end_layer != 0)
+        throw GridError(
+            "a sparse field covers the whole grid; layers need the dense signed_distance");
+    ProgressPhases progress(options.progress, "signed distance field");
+    VoxelizeStats stats;
+    FieldJob job = plan_field(mesh, grid, options, true, true, progress, stats);
+    order_by_layer(job.prepared);
+
+    // Phase 2: the leaves the band reaches, and the memory their samples need (the field's
+    // samples, and the reference's squared distances beside them).
+    auto t = std::chrono::steady_clock::now();
+    const LeafSet leaves =
+        device ? band_leaves_device(*device, job.prepared, grid, options, progress,
+                                    job.phases.leaves, stats)
+               : band_leaves_reference(job.prepared, grid, options, progress, job.phases.leaves);
+    if (!device) stats.seconds_kernels += seconds_since(t);
+    stats.bricks_total =
+        uint64_t(leaves.dims[0]) * uint64_t(leaves.dims[1]) * uint64_t(leaves.dims[2]);
+    stats.bricks_active = leaves.count;
+    const uint64_t working = device ? std::min(leaves.count, kMaxBatchLeaves) : leaves.count;
+    check_host_memory(
+        (leaves.count + working) * kLeafSamples * sizeof(float),
+        host_budget(options.host_budget_bytes),
+        "the samples of " + std::to_string(leaves.count) + " leaves of a sparse distance field");
+
+    // Phase 3: the sign. The solid comes first so each batch of distances becomes signed leaves
+    // as it arrives, and is dropped.
+    SparseVoxels inside =
+        sign_voxels(device, mesh, grid, options, progress, job.phases.sign, stats);
+    SparseField field(grid, options.band_voxels, std::move(inside));
+    field.reserve_leaves(size_t(leaves.count));
+    LeafWriter writer(leaves, job.prepared);
+
+    // Phase 4: the band in the leaves, batch by batch into the field.
+    t = std::chrono::steady_clock::now();
+    auto append = [&](uint64_t, uint64_t slots, const float* distance2) {
+        writer.append(field, slots, distance2);
+    };
+    if (device) {
+        leaf_distance2_device(*device, job.prepared, leaves, options, progress, job.phases.band,
+                              stats, append);
+    } else {
+        const std::vector<float> distance2 =
+            leaf_distance2_reference(job.prepared, leaves, progress, job.phases.band);
+        stats.seconds_kernels += seconds_since(t);
+        append(0, leaves.count, distance2.data());
+    }
+    progress.finish();
+    if (stats_out) *stats_out = stats;
+    return field;
+}
+
+}  // namespace
+
+uint64_t LeafSet::leaf_at(uint64_t slot) const {
+    // The last word whose rank is at most the slot holds it (words with no bit share the rank of
+    // the next word that has one).
+    const size_t word =
+        size_t(std::upper_bound(rank.begin(), rank.end(), uint32_t(slot)) - rank.begin() - 1);
+    uint32_t bits_left = bits[word];
+    for (uint64_t skip = slot - rank[word]; skip > 0; --skip) bits_left &= bits_left - 1;
+    return uint64_t(word) * 32 + uint64_t(__builtin_ctz(bits_left));
+}
+
+void order_by_layer(SdfTriangles& prepared) {
+    std::stable_sort(
+        prepared.triangles.begin(), prepared.triangles.end(),
+        [](const OvSdfTriangle& a, const OvSdfTriangle& b) { return a.lo[2] < b.lo[2]; });
+    prepared.first_item.assign(1, 0);
+    for (const OvSdfTriangle& t : prepared.triangles)
+        prepared.first_item.push_back(prepared.first_item.back() + item_count(t));
+}
+
+void LeafSet::rank_bits() {
+    rank.resize(bits.size());
+    count = 0;
+    for (size_t w = 0; w < bits.size(); ++w) {
+        rank[w] = uint32_t(count);
+        count += uint64_t(__builtin_popcount(bits[w]));
+    }
+}
+
+LeafSet empty_leaf_set(const Grid& grid, const SdfOptions& options) {
+    LeafSet leaves;
+    for (int a = 0; a < 3; ++a) leaves.dims[a] = (grid.dims[a] + kLeaf - 1) / kLeaf;
+    const uint64_t total =
+        uint64_t(leaves.dims[0]) * uint64_t(leaves.dims[1]) * uint64_t(leaves.dims[2]);
+    const uint64_t words = (total + 31) / 32;
+    // Slots are 32-bit on the device: more leaves than that could never be held anyway.
+    if (words > (uint64_t(1) << 27))
+        throw GridError("a sparse field of " + std::to_string(total) +
+                        " leaves is over the limit of 2^32 leaves: lower the resolution");
+    check_host_memory(words * 2 * sizeof(uint32_t), host_budget(options.host_budget_bytes),
+                      "the leaf bits of a sparse distance field");
+    leaves.bits.assign(size_t(words), 0);
+    return leaves;
+}
+
+}  // namespace detail
+
+SparseField signed_distance_sparse(Device& device, const Mesh& mesh, const Grid& grid,
+                                   const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::sparse_run(&device, mesh, grid, options, stats);
+}
+
+SparseField signed_distance_sparse_reference(const Mesh& mesh, const Grid& grid,
+                                             const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::sparse_run(nullptr, mesh, grid, options, stats);
+}
+
+}  // namespace oclvox

@@ -1,0 +1,143 @@
+// Sparse narrow-band fields: leaves of 8x8x8 samples kept sorted by leaf index, and the inside
+// voxels that sign every sample outside them. Reading a box finds each leaf it touches once per
+// row of leaves, so any slab, the border or the whole grid costs one step per sample.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "host_memory.hpp"
+#include "oclvox/field.hpp"
+
+namespace oclvox {
+
+namespace {
+
+constexpr int64_t kLeaf = SparseField::kLeaf;
+
+bool same_grid(const Grid& a, const Grid& b) {
+    return a.origin == b.origin && a.voxel_size == b.voxel_size && a.dims == b.dims;
+}
+
+}  // namespace
+
+SparseField::SparseField(const Grid& grid, double band_voxels, SparseVoxels inside)
+    : grid_(grid),
+      band_voxels_(band_voxels),
+      background_(float(band_voxels * grid.voxel_size)),
+      inside_(std::move(inside)) {
+    validate_grid(grid);
+    if (!same_grid(inside_.grid(), grid))
+        throw GridError("a sparse field's inside voxels must have the field's grid");
+    if (!(background_ > 0) || !std::isfinite(background_))
+        throw GridError("a sparse field's band must be finite and positive, got " +
+                        std::to_string(band_voxels) + " voxels");
+}
+
+std::array<int64_t, 3> SparseField::leaf_dims() const {
+    return {(grid_.dims[0] + kLeaf - 1) / kLeaf, (grid_.dims[1] + kLeaf - 1) / kLeaf,
+            (grid_.dims[2] + kLeaf - 1) / kLeaf};
+}
+
+void SparseField::append_leaf(uint64_t leaf_index, const float* samples) {
+    const auto n = leaf_dims();
+    if (leaf_index >= uint64_t(n[0]) * uint64_t(n[1]) * uint64_t(n[2]))
+        throw GridError("leaf " + std::to_string(leaf_index) + " is outside the field's grid");
+    if (!leaf_keys_.empty() && leaf_index <= leaf_keys_.back())
+        throw GridError("leaf " + std::to_string(leaf_index) +
+                        " does not come after the last stored leaf");
+    leaf_keys_.push_back(leaf_index);
+    samples_.insert(samples_.end(), samples, samples + kLeafSamples);
+}
+
+float SparseField::at(int64_t i, int64_t j, int64_t k) const {
+    const auto& d = grid_.dims;
+    if (i < 0 || j < 0 || k < 0 || i >= d[0] || j >= d[1] || k >= d[2])
+        throw std::out_of_range("SparseField::at(" + std::to_string(i) + ", " + std::to_string(j) +
+                                ", " + std::to_string(k) + ") is outside the grid");
+    float value;
+    copy_box({i, j, k}, {i + 1, j + 1, k + 1}, &value);
+    return value;
+}
+
+void SparseField::copy_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
+                           float* out) const {
+    for (int a = 0; a < 3; ++a)
+        if (lo[a] < 0 || lo[a] > hi[a] || hi[a] > grid_.dims[a])
+            throw GridError("box [" + std::to_string(lo[a]) + ", " + std::to_string(hi[a]) +
+                            ") on axis " + std::to_string(a) + " is not inside the field's grid");
+    const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1], wz = hi[2] - lo[2];
+    const size_t samples = size_t(wx) * size_t(wy) * size_t(wz);
+    if (samples == 0) return;
+
+    // Phase 1: the background, signed by the inside voxels.
+    std::vector<uint8_t> inside(samples, 0);
+    inside_.mark_box(lo, hi, {1, wx, wx * wy}, inside.data());
+    for (size_t s = 0; s < samples; ++s) out[s] = inside[s] ? -background_ : background_;
+
+    // Phase 2: the stored leaves over it, a row of leaves (fixed ly, lz) at a time: the leaves of
+    // a row are consecutive in index order, so one search finds the first of them.
+    const auto n = leaf_dims();
+    for (int64_t lz = lo[2] / kLeaf; lz <= (hi[2] - 1) / kLeaf; ++lz)
+        for (int64_t ly = lo[1] / kLeaf; ly <= (hi[1] - 1) / kLeaf; ++ly) {
+            const uint64_t row = uint64_t(n[0]) * (uint64_t(ly) + uint64_t(n[1]) * uint64_t(lz));
+            const uint64_t last = row + uint64_t((hi[0] - 1) / kLeaf);
+            auto it = std::lower_bound(leaf_keys_.begin(), leaf_keys_.end(),
+                                       row + uint64_t(lo[0] / kLeaf));
+            for (; it != leaf_keys_.end() && *it <= last; ++it) {
+                const float* leaf = leaf_samples(size_t(it - leaf_keys_.begin()));
+                const int64_t ox = int64_t(*it - row) * kLeaf, oy = ly * kLeaf, oz = lz * kLeaf;
+                const int64_t x0 = std::max(lo[0], ox), x1 = std::min(hi[0], ox + kLeaf);
+                for (int64_t z = std::max(lo[2], oz); z < std::min(hi[2], oz + kLeaf); ++z)
+                    for (int64_t y = std::max(lo[1], oy); y < std::min(hi[1], oy + kLeaf); ++y)
+                        std::memcpy(out + (x0 - lo[0]) + wx * ((y - lo[1]) + wy * (z - lo[2])),
+                                    leaf + (x0 - ox) + kLeaf * ((y - oy) + kLeaf * (z - oz)),
+                                    size_t(x1 - x0) * sizeof(float));
+            }
+        }
+}
+
+ScalarField SparseField::to_dense() const {
+    detail::check_host_memory(
+        grid_.voxel_count() * sizeof(float), detail::default_host_budget(),
+        "a dense field of " + std::to_string(grid_.voxel_count()) + " samples");
+    ScalarField field;
+    field.grid = grid_;
+    field.values.resize(size_t(grid_.voxel_count()));
+    // A layer of leaves at a time, so the inside marks stay small.
+    const size_t layer = size_t(grid_.dims[0]) * size_t(grid_.dims[1]);
+    for (int64_t z = 0; z < grid_.dims[2]; z += kLeaf) {
+        const int64_t end = std::min(grid_.dims[2], z + kLeaf);
+        copy_box({0, 0, z}, {grid_.dims[0], grid_.dims[1], end}, &field.values[size_t(z) * layer]);
+    }
+    return field;
+}
+
+uint64_t border_samples_inside(const SparseField& field, float iso) {
+    // The six faces as boxes that do not overlap: both z faces whole, both y faces between them,
+    // both x faces between those (a face of a one-sample-thick grid is counted once).
+    const auto& d = field.grid().dims;
+    std::vector<std::pair<std::array<int64_t, 3>, std::array<int64_t, 3>>> faces;
+    for (int64_t k : {int64_t(0), d[2] - 1}) {
+        faces.push_back({{0, 0, k}, {d[0], d[1], k + 1}});
+        if (d[2] == 1) break;
+    }
+    for (int64_t j : {int64_t(0), d[1] - 1}) {
+        faces.push_back({{0, j, 1}, {d[0], j + 1, std::max<int64_t>(1, d[2] - 1)}});
+        if (d[1] == 1) break;
+    }
+    for (int64_t i : {int64_t(0), d[0] - 1}) {
+        faces.push_back(
+            {{i, 1, 1}, {i + 1, std::max<int64_t>(1, d[1] - 1), std::max<int64_t>(1, d[2] - 1)}});
+        if (d[0] == 1) break;
+    }
+    uint64_t inside = 0;
+    std::vector<float> samples;
+    for (const auto& [lo, hi] : faces) {
+        samples.resize(size_t((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2])));
+        field.copy_box(lo, hi, samples.data());
+        for (float v : samples) inside += v < iso;
+    }
+    return inside;
+}
+
+}  // namespace oclvox
