@@ -345,6 +345,36 @@ for op in union intersection difference; do
         fail "csg $op" "rc=$RC faces=${csg_faces[$op]} err=$ERR"
     fi
 done
+# A narrow-band csg of meshes is sparse, a full-grid one dense: equal within the band, and the
+# sparse difference's .vdb (its leaves combined) holds exactly the band of its .npy.
+"$OCLVOX" csg "$MESH" difference "$WORK/spot_moved.obj" -r 28 -q -o "$WORK/csg_narrow.npy"
+"$OCLVOX" csg "$MESH" difference "$WORK/spot_moved.obj" -r 28 -q -o "$WORK/csg_narrow.vdb"
+"$OCLVOX" csg "$MESH" difference "$WORK/spot_moved.obj" -r 28 --full -q -o "$WORK/csg_full.npy"
+verdict=$("$vdb_python" - "$WORK/csg_narrow.npy" "$WORK/csg_full.npy" "$WORK/csg_narrow.vdb" \
+    <<'EOF_PY' 2>&1
+import json, sys
+import numpy as np
+narrow, full = np.load(sys.argv[1]), np.load(sys.argv[2])
+background = np.float32(json.load(open(sys.argv[1] + ".json"))["background"])
+band = np.abs(narrow) < background
+assert band.any() and (narrow < 0).any(), "empty band or no inside"
+# Full-grid distances are below the band's clamp wherever the narrow band is, so each band
+# sample is the full-grid sample; off the band both fields agree in sign.
+assert np.array_equal(narrow[band], full[band]), "band samples differ"
+assert np.array_equal(narrow[~band] < 0, full[~band] < 0), "signs off the band differ"
+try:
+    import pyopenvdb as vdb
+except ImportError:
+    print("ok (no pyopenvdb)")
+    sys.exit(0)
+grid = vdb.read(sys.argv[3], "sdf")
+assert grid.activeVoxelCount() == band.sum(), (grid.activeVoxelCount(), band.sum())
+print("ok")
+EOF_PY
+)
+[[ "$verdict" == ok* ]] &&
+    pass "csg: sparse narrow band equals the dense full grid in the band; .vdb holds it ($verdict)" ||
+    fail "csg: sparse narrow band vs dense full grid" "$verdict"
 [ "${csg_faces[union]}" != "${csg_faces[intersection]}" ] &&
     pass "csg union and intersection differ (${csg_faces[union]} vs ${csg_faces[intersection]} faces)" ||
     fail "csg union equals intersection" "${csg_faces[union]} faces"

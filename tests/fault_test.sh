@@ -231,14 +231,13 @@ OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0.004 retried "winding-number solid" \
 "$OCLVOX" sdf "$MESH" -r 128 -q -o "$WORK/device/expected.npy"
 OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0.25 retried "sdf sign and leaves" "$WORK/device/expected.npy" \
     "$WORK/device/retried.npy" sdf "$MESH" -r 128 -o "$WORK/device/retried.npy"
-# csg computes two dense distance fields: its count is the sum of both (here the same mesh twice
-# on the same grid, so twice that of sdf's dense field, --full, whose only batches are its sign's;
-# a narrow-band sdf is sparse and also retries its batches of leaves).
+# csg computes two distance fields: its count is the sum of both (here the same mesh twice on the
+# same grid, so twice the sdf's; both sparse, retrying their signs' and their leaves' batches).
 retries() {  # command... (prints allocation_retries of its --json summary)
     OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=0.1 "$OCLVOX" "$@" --json 2>/dev/null |
         python3 -c 'import json, sys; print(json.load(sys.stdin)["allocation_retries"])'
 }
-sdf_retries=$(retries sdf "$MESH" -r 96 --full -o "$WORK/device/one.npy")
+sdf_retries=$(retries sdf "$MESH" -r 96 -o "$WORK/device/one.npy")
 csg_retries=$(retries csg "$MESH" union "$MESH" -r 96 -o "$WORK/device/two.npy")
 if [ -n "$sdf_retries" ] && [ "$sdf_retries" -gt 0 ] && [ "$csg_retries" = $((2 * sdf_retries)) ]; then
     pass "device allocation failure, csg: both distance fields' retries counted ($csg_retries)"

@@ -1026,5 +1026,39 @@ TEST(SparseField, BoxesAndSamplesReadTheLeavesAndTheInsideVoxels) {
     EXPECT_EQ(border_samples_inside(f), 1u);  // (17, 10, 8) only
 }
 
+TEST(SparseCsg, ToDenseIsTheDenseCsgBitForBitForEveryOperation) {
+    // Two overlapping spheres of different sizes on one grid: every operation of the sparse
+    // fields equals the operation of the dense fields, on the device and the reference, and the
+    // CSG of sparse fields equals the CSG of their dense copies.
+    const Mesh a = icosphere(kCentre, 1.6, 3);
+    const Mesh b = icosphere({kCentre[0] + 1.1, kCentre[1] - 0.3, kCentre[2] + 0.2}, 1.0, 3);
+    GridFit fit;
+    fit.resolution = 40;
+    fit.pad = 4;
+    const Grid g = fit_grid(a, b, fit);
+    const SdfOptions o = band(2.5);
+    const SparseField sa = signed_distance_sparse(device(), a, g, o);
+    const SparseField sb = signed_distance_sparse(device(), b, g, o);
+    for (CsgOp op : {CsgOp::Union, CsgOp::Intersection, CsgOp::Difference}) {
+        SCOPED_TRACE(to_string(op));
+        const ScalarField dense = csg(device(), a, b, op, g, o);
+        VoxelizeStats stats;
+        const SparseField sparse = csg_sparse(device(), a, b, op, g, o, &stats);
+        expect_identical(sparse.to_dense(), dense);
+        expect_identical(csg_sparse_reference(a, b, op, g, o).to_dense(),
+                         csg_reference(a, b, op, g, o));
+        expect_identical(csg(sa, sb, op).to_dense(), csg(sa.to_dense(), sb.to_dense(), op));
+        EXPECT_EQ(stats.bricks_active, sa.leaf_count() + sb.leaf_count());
+        EXPECT_LE(sparse.leaf_count(), sa.leaf_count() + sb.leaf_count());
+    }
+    // Different bands or grids are refused.
+    SdfOptions wide = o;
+    wide.band_voxels = 3.0;
+    EXPECT_THROW(csg(sa, signed_distance_sparse(device(), b, g, wide), CsgOp::Union), GridError);
+    Grid moved = g;
+    moved.origin[0] += g.voxel_size;
+    EXPECT_THROW(csg(sa, signed_distance_sparse(device(), b, moved, o), CsgOp::Union), GridError);
+}
+
 }  // namespace
 }  // namespace oclvox::test

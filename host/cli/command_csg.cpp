@@ -62,8 +62,10 @@ int run(const FieldArgs& args) {
         throw UsageError("grid options do not apply to .npy field inputs (their grids are used)");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: both operands as fields on one grid, combined.
+    // Phase 2: both operands as fields on one grid, combined: .npy fields and full grids dense,
+    // narrow bands of meshes sparse (then made dense only to mesh them).
     oclvox::ScalarField combined;
+    std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::Device> device;
     if (fields_in) {
         record.inputs.resize(2);
@@ -99,8 +101,12 @@ int run(const FieldArgs& args) {
         stop_if_interrupted();
         device = open_device(args.device, record.seconds.device_open);
         oclvox::VoxelizeStats stats;
-        combined = timed(record.seconds.compute, [&] {
-            return csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
+        timed(record.seconds.compute, [&] {
+            if (args.full)
+                combined = csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
+            else
+                sparse = csg_sparse(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
+            return 0;
         });
         stop_if_interrupted();
         record.stats = stats;
@@ -109,8 +115,10 @@ int run(const FieldArgs& args) {
     // Phase 3: mesh if the output is a mesh.
     std::optional<oclvox::Mesh> surface;
     if (mesh_out) {
-        surface = timed(record.seconds.mesh,
-                        [&] { return extract_surface(device, combined, args, 0.0f); });
+        surface = timed(record.seconds.mesh, [&] {
+            if (sparse) combined = sparse->to_dense();
+            return extract_surface(device, combined, args, 0.0f);
+        });
         stop_if_interrupted();
     }
 
@@ -118,6 +126,8 @@ int run(const FieldArgs& args) {
     timed(record.seconds.write, [&] {
         if (surface)
             oclvox::write_mesh(output.path(), *surface);
+        else if (sparse)
+            write_field_output(output.path(), *sparse, args);
         else
             write_field_output(output.path(), combined, fields_in || args.full ? 0.0 : args.band,
                                args);
@@ -130,7 +140,8 @@ int run(const FieldArgs& args) {
     if (device) record.device = device->info();
     record_field_settings(record, args);
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
-    record.border_inside = oclvox::border_samples_inside(combined);
+    record.border_inside =
+        sparse ? oclvox::border_samples_inside(*sparse) : oclvox::border_samples_inside(combined);
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }

@@ -84,34 +84,53 @@ oclvox::SdfOptions sdf_options(const FieldArgs& args) {
 
 }  // namespace
 
+namespace {
+
+// run(options) with the field options of args and a progress bar named `what`.
+template <class Run>
+auto with_progress(const FieldArgs& args, const char* what, Run&& run) {
+    oclvox::SdfOptions options = sdf_options(args);
+    ProgressBar bar(what, "", args.reporting);
+    options.progress = bar.callback();
+    return run(options);
+}
+
+}  // namespace
+
 oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
                                     const oclvox::Grid& grid, const FieldArgs& args,
                                     oclvox::VoxelizeStats* stats) {
-    oclvox::SdfOptions options = sdf_options(args);
-    ProgressBar bar("distance field", "", args.reporting);
-    options.progress = bar.callback();
-    return device ? oclvox::signed_distance(*device, mesh, grid, options, stats)
-                  : oclvox::signed_distance_reference(mesh, grid, options, stats);
+    return with_progress(args, "distance field", [&](const oclvox::SdfOptions& options) {
+        return device ? oclvox::signed_distance(*device, mesh, grid, options, stats)
+                      : oclvox::signed_distance_reference(mesh, grid, options, stats);
+    });
 }
 
 oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device,
                                            const oclvox::Mesh& mesh, const oclvox::Grid& grid,
                                            const FieldArgs& args, oclvox::VoxelizeStats* stats) {
-    oclvox::SdfOptions options = sdf_options(args);
-    ProgressBar bar("distance field", "", args.reporting);
-    options.progress = bar.callback();
-    return device ? oclvox::signed_distance_sparse(*device, mesh, grid, options, stats)
-                  : oclvox::signed_distance_sparse_reference(mesh, grid, options, stats);
+    return with_progress(args, "distance field", [&](const oclvox::SdfOptions& options) {
+        return device ? oclvox::signed_distance_sparse(*device, mesh, grid, options, stats)
+                      : oclvox::signed_distance_sparse_reference(mesh, grid, options, stats);
+    });
 }
 
 oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
                         const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                         const FieldArgs& args, oclvox::VoxelizeStats* stats) {
-    oclvox::SdfOptions options = sdf_options(args);
-    ProgressBar bar("distance fields", "", args.reporting);
-    options.progress = bar.callback();
-    return device ? oclvox::csg(*device, a, b, op, grid, options, stats)
-                  : oclvox::csg_reference(a, b, op, grid, options, stats);
+    return with_progress(args, "distance fields", [&](const oclvox::SdfOptions& options) {
+        return device ? oclvox::csg(*device, a, b, op, grid, options, stats)
+                      : oclvox::csg_reference(a, b, op, grid, options, stats);
+    });
+}
+
+oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
+                               const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
+                               const FieldArgs& args, oclvox::VoxelizeStats* stats) {
+    return with_progress(args, "distance fields", [&](const oclvox::SdfOptions& options) {
+        return device ? oclvox::csg_sparse(*device, a, b, op, grid, options, stats)
+                      : oclvox::csg_sparse_reference(a, b, op, grid, options, stats);
+    });
 }
 
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,

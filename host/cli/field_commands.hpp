@@ -48,13 +48,17 @@ oclvox::GridFit field_fit(const FieldArgs& args);
 oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
                                     const oclvox::Grid& grid, const FieldArgs& args,
                                     oclvox::VoxelizeStats* stats);
-// The narrow band as a sparse field (oclvox::signed_distance_sparse), the same way.
+// The narrow band as a sparse field (oclvox::signed_distance_sparse, oclvox::csg_sparse), the
+// same way.
 oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device,
                                            const oclvox::Mesh& mesh, const oclvox::Grid& grid,
                                            const FieldArgs& args, oclvox::VoxelizeStats* stats);
 oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
                         const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                         const FieldArgs& args, oclvox::VoxelizeStats* stats);
+oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
+                               const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
+                               const FieldArgs& args, oclvox::VoxelizeStats* stats);
 
 // The iso-surface by --mesher, with a progress bar, stopping on Ctrl-C.
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cstdint>
+#include <iterator>
 
 #include "file_names.hpp"
 #include "host_memory.hpp"
@@ -13,10 +14,6 @@
 namespace oclvox {
 
 namespace {
-
-bool same_grid(const Grid& a, const Grid& b) {
-    return a.origin == b.origin && a.voxel_size == b.voxel_size && a.dims == b.dims;
-}
 
 std::string describe(const Grid& g) {
     return std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
@@ -73,25 +70,35 @@ ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op) {
         a.values.size() * sizeof(float), detail::default_host_budget(),
         "the CSG result field of " + std::to_string(a.values.size()) + " samples");
     ScalarField out = a;
-    detail::combine_fields(out, b, op);
+    detail::combine_samples(out.values.data(), b.values.data(), out.values.size(), op);
     return out;
 }
 
-void detail::combine_fields(ScalarField& a, const ScalarField& b, CsgOp op) {
-    for (size_t v = 0; v < a.values.size(); ++v) {
-        const float x = a.values[v], y = b.values[v];
-        switch (op) {
-            case CsgOp::Union:
-                a.values[v] = std::min(x, y);
-                break;
-            case CsgOp::Intersection:
-                a.values[v] = std::max(x, y);
-                break;
-            case CsgOp::Difference:
-                a.values[v] = std::max(x, -y);
-                break;
-        }
+SparseField csg(const SparseField& a, const SparseField& b, CsgOp op) {
+    require_same_grid(a.grid(), b.grid(), "fields");
+    if (a.background() != b.background())
+        throw GridError("CSG needs both sparse fields with the same band, got " +
+                        std::to_string(a.band_voxels()) + " and " +
+                        std::to_string(b.band_voxels()) + " voxels");
+    // Away from both fields' leaves every sample is +-background, so the result's sign there is
+    // the same operation on the inside voxels; the leaves of either field are combined sample by
+    // sample, whatever the other field holds there.
+    SparseField out(a.grid(), a.band_voxels(), csg(a.inside(), b.inside(), op));
+    const std::vector<uint64_t>&ka = a.leaf_indices(), &kb = b.leaf_indices();
+    std::vector<uint64_t> leaves;
+    std::set_union(ka.begin(), ka.end(), kb.begin(), kb.end(), std::back_inserter(leaves));
+    detail::check_host_memory(leaves.size() * SparseField::kLeafSamples * sizeof(float),
+                              detail::default_host_budget(),
+                              "the CSG result's " + std::to_string(leaves.size()) + " leaves");
+    out.reserve_leaves(leaves.size());
+    float x[SparseField::kLeafSamples], y[SparseField::kLeafSamples];
+    for (const uint64_t leaf : leaves) {
+        a.copy_leaf(leaf, x);
+        b.copy_leaf(leaf, y);
+        detail::combine_samples(x, y, SparseField::kLeafSamples, op);
+        out.append_leaf(leaf, x);
     }
+    return out;
 }
 
 SparseVoxels csg(const SparseVoxels& a, const SparseVoxels& b_in, CsgOp op) {

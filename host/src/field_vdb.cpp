@@ -91,16 +91,11 @@ void write_field_vdb(const std::string& path, const ScalarField& field, double b
 
 void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress) {
     // The stored leaves only: every sample outside them is the background.
-    const auto n = field.leaf_dims();
     write_level_set(path, field.grid(), field.band_voxels(), progress, field.leaf_count(),
                     [&](const LeafVisit& visit) {
-                        for (size_t l = 0; l < field.leaf_count(); ++l) {
-                            const uint64_t index = field.leaf_indices()[l];
-                            visit({int64_t(index % uint64_t(n[0])) * kLeaf,
-                                   int64_t(index / uint64_t(n[0]) % uint64_t(n[1])) * kLeaf,
-                                   int64_t(index / (uint64_t(n[0]) * uint64_t(n[1]))) * kLeaf},
+                        for (size_t l = 0; l < field.leaf_count(); ++l)
+                            visit(field.leaf_origin(field.leaf_indices()[l]),
                                   field.leaf_samples(l));
-                        }
                     });
 }
 

@@ -26,6 +26,10 @@ void detail::used_bounds(const Mesh& mesh, std::array<double, 3>& lo, std::array
             }
 }
 
+bool same_grid(const Grid& a, const Grid& b) {
+    return a.origin == b.origin && a.voxel_size == b.voxel_size && a.dims == b.dims;
+}
+
 void validate_grid(const Grid& grid) {
     if (!(grid.voxel_size > 0) || !std::isfinite(grid.voxel_size))
         throw GridError("voxel size must be a positive finite number, got " +

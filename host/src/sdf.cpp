@@ -299,6 +299,20 @@ SparseVoxels sign_voxels(Device* device, const Mesh& mesh, const Grid& grid,
     return inside;
 }
 
+void add_second_field_stats(VoxelizeStats& stats, const VoxelizeStats& b) {
+    stats.triangles_in += b.triangles_in;
+    stats.triangles_used += b.triangles_used;
+    stats.work_items += b.work_items;
+    stats.bricks_total += b.bricks_total;
+    stats.bricks_active += b.bricks_active;
+    stats.batches += b.batches;
+    stats.seconds_binning += b.seconds_binning;
+    stats.seconds_upload += b.seconds_upload;
+    stats.seconds_kernels += b.seconds_kernels;
+    stats.seconds_download += b.seconds_download;
+    stats.allocation_retries += b.allocation_retries;
+}
+
 FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& options, bool sign,
                     bool sparse, ProgressPhases& progress, VoxelizeStats& stats) {
     const auto t = std::chrono::steady_clock::now();
@@ -388,18 +402,12 @@ ScalarField csg_run(const Backend& backend, const Mesh& a, const Mesh& b, CsgOp 
 
     // Phase 2: a's field, b's field combined into it.
     ScalarField field = compute_field(backend, job_a, grid, options, true, progress, stats);
-    combine_fields(field, compute_field(backend, job_b, grid, options, true, progress, stats_b),
-                   op);
+    const ScalarField field_b =
+        compute_field(backend, job_b, grid, options, true, progress, stats_b);
+    combine_samples(field.values.data(), field_b.values.data(), field.values.size(), op);
     progress.finish();
 
-    stats.triangles_in += stats_b.triangles_in;
-    stats.triangles_used += stats_b.triangles_used;
-    stats.work_items += stats_b.work_items;
-    stats.seconds_binning += stats_b.seconds_binning;
-    stats.seconds_upload += stats_b.seconds_upload;
-    stats.seconds_kernels += stats_b.seconds_kernels;
-    stats.seconds_download += stats_b.seconds_download;
-    stats.allocation_retries += stats_b.allocation_retries;
+    add_second_field_stats(stats, stats_b);
     if (stats_out) *stats_out = stats;
     return field;
 }

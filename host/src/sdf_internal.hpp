@@ -97,6 +97,10 @@ struct SdfPhases {
 SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
                          const SdfOptions& options, bool sign, bool sparse);
 
+// The stats of a CSG run of two fields: the second field's counts, timings, batches and retries
+// added to the first's (its inside test and inside voxels stay the first's).
+void add_second_field_stats(VoxelizeStats& stats, const VoxelizeStats& b);
+
 // One field of a run: its mesh, prepared triangles and progress phases.
 struct FieldJob {
     const Mesh& mesh;
@@ -189,7 +193,22 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const L
                            const std::function<void(uint64_t first_slot, uint64_t slots,
                                                     const float* distance2)>& on_batch);
 
-// csg(a, b, op) into a's values (csg.cpp); the grids must already match.
-void combine_fields(ScalarField& a, const ScalarField& b, CsgOp op);
+// The CSG rule sample by sample, into a: union min(a, b), intersection max(a, b), difference
+// max(a, -b).
+inline void combine_samples(float* a, const float* b, size_t n, CsgOp op) {
+    for (size_t v = 0; v < n; ++v) {
+        switch (op) {
+            case CsgOp::Union:
+                a[v] = std::min(a[v], b[v]);
+                break;
+            case CsgOp::Intersection:
+                a[v] = std::max(a[v], b[v]);
+                break;
+            case CsgOp::Difference:
+                a[v] = std::max(a[v], -b[v]);
+                break;
+        }
+    }
+}
 
 }  // namespace oclvox::detail

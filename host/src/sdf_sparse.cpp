@@ -69,29 +69,18 @@ class LeafWriter {
         : leaves_(leaves), band2_(prepared.band2) {}
 
     void append(SparseField& field, uint64_t slots, const float* distance2) {
-        const Grid& grid = field.grid();
-        const SparseVoxels& inside = field.inside();
-        const auto n = leaves_.dims;
-        float samples[kLeafSamples];
-        uint8_t inside_marks[kLeafSamples];
+        float signs[kLeafSamples], samples[kLeafSamples];
         for (uint64_t s = 0; s < slots; ++s, ++leaf_) {
             while (!(leaves_.bits[size_t(leaf_ >> 5)] >> (leaf_ & 31) & 1)) ++leaf_;
+            // The leaf is not stored yet: copy_leaf gives -background at its inside voxels.
+            field.copy_leaf(leaf_, signs);
             const float* d2 = distance2 + s * kLeafSamples;
-            for (size_t v = 0; v < kLeafSamples; ++v)
-                samples[v] = d2[v] < band2_ ? float(std::sqrt(double(d2[v])) * grid.voxel_size)
-                                            : field.background();
-            // The leaf's part inside the grid, whose inside voxels flip the sign.
-            const std::array<int64_t, 3> lo = {
-                int64_t(leaf_ % uint64_t(n[0])) * kLeaf,
-                int64_t(leaf_ / uint64_t(n[0]) % uint64_t(n[1])) * kLeaf,
-                int64_t(leaf_ / (uint64_t(n[0]) * uint64_t(n[1]))) * kLeaf};
-            const std::array<int64_t, 3> hi = {std::min(lo[0] + kLeaf, grid.dims[0]),
-                                               std::min(lo[1] + kLeaf, grid.dims[1]),
-                                               std::min(lo[2] + kLeaf, grid.dims[2])};
-            std::fill(std::begin(inside_marks), std::end(inside_marks), uint8_t(0));
-            inside.mark_box(lo, hi, {1, kLeaf, kLeaf * kLeaf}, inside_marks);
-            for (size_t v = 0; v < kLeafSamples; ++v)
-                if (inside_marks[v]) samples[v] = -samples[v];
+            for (size_t v = 0; v < kLeafSamples; ++v) {
+                const float value = d2[v] < band2_
+                                        ? float(std::sqrt(double(d2[v])) * field.grid().voxel_size)
+                                        : field.background();
+                samples[v] = signs[v] < 0 ? -value : value;
+            }
             field.append_leaf(leaf_, samples);
         }
     }
@@ -102,10 +91,8 @@ class LeafWriter {
     uint64_t leaf_ = 0;
 };
 
-// The run of signed_distance_sparse on a device, or (device null) the reference.
-SparseField sparse_run(Device* device, const Mesh& mesh, const Grid& grid,
-                       const SdfOptions& options, VoxelizeStats* stats_out) {
-    // Phase 1: options. A sparse field is a narrow band of the whole grid.
+// A sparse field is a narrow band of the whole grid.
+void validate_sparse(const Grid& grid, const SdfOptions& options) {
     validate_sdf_options(grid, options);
     if (options.full_grid)
         throw GridError(
@@ -114,13 +101,22 @@ SparseField sparse_run(Device* device, const Mesh& mesh, const Grid& grid,
     if (options.first_layer != 0 || options.end_layer != 0)
         throw GridError(
             "a sparse field covers the whole grid; layers need the dense signed_distance");
-    ProgressPhases progress(options.progress, "signed distance field");
-    VoxelizeStats stats;
+}
+
+// Prepares a mesh's triangles for a sparse field, ordered by layer, and adds its phases.
+FieldJob plan_sparse(const Mesh& mesh, const Grid& grid, const SdfOptions& options,
+                     ProgressPhases& progress, VoxelizeStats& stats) {
     FieldJob job = plan_field(mesh, grid, options, true, true, progress, stats);
     order_by_layer(job.prepared);
+    return job;
+}
 
-    // Phase 2: the leaves the band reaches, and the memory their samples need (the field's
-    // samples, and the reference's squared distances beside them).
+// The job's sparse field on a device, or (device null) the reference.
+SparseField compute_sparse(Device* device, const FieldJob& job, const Grid& grid,
+                           const SdfOptions& options, ProgressPhases& progress,
+                           VoxelizeStats& stats) {
+    // Phase 1: the leaves the band reaches, and the memory their samples need (the field's
+    // samples, and beside them one batch, or the reference's squared distances).
     auto t = std::chrono::steady_clock::now();
     const LeafSet leaves =
         device ? band_leaves_device(*device, job.prepared, grid, options, progress,
@@ -136,15 +132,15 @@ SparseField sparse_run(Device* device, const Mesh& mesh, const Grid& grid,
         host_budget(options.host_budget_bytes),
         "the samples of " + std::to_string(leaves.count) + " leaves of a sparse distance field");
 
-    // Phase 3: the sign. The solid comes first so each batch of distances becomes signed leaves
+    // Phase 2: the sign. The solid comes first so each batch of distances becomes signed leaves
     // as it arrives, and is dropped.
     SparseVoxels inside =
-        sign_voxels(device, mesh, grid, options, progress, job.phases.sign, stats);
+        sign_voxels(device, job.mesh, grid, options, progress, job.phases.sign, stats);
     SparseField field(grid, options.band_voxels, std::move(inside));
     field.reserve_leaves(size_t(leaves.count));
     LeafWriter writer(leaves, job.prepared);
 
-    // Phase 4: the band in the leaves, batch by batch into the field.
+    // Phase 3: the band in the leaves, batch by batch into the field.
     t = std::chrono::steady_clock::now();
     auto append = [&](uint64_t, uint64_t slots, const float* distance2) {
         writer.append(field, slots, distance2);
@@ -158,7 +154,36 @@ SparseField sparse_run(Device* device, const Mesh& mesh, const Grid& grid,
         stats.seconds_kernels += seconds_since(t);
         append(0, leaves.count, distance2.data());
     }
+    return field;
+}
+
+SparseField sparse_run(Device* device, const Mesh& mesh, const Grid& grid,
+                       const SdfOptions& options, VoxelizeStats* stats_out) {
+    validate_sparse(grid, options);
+    ProgressPhases progress(options.progress, "signed distance field");
+    VoxelizeStats stats;
+    const FieldJob job = plan_sparse(mesh, grid, options, progress, stats);
+    SparseField field = compute_sparse(device, job, grid, options, progress, stats);
     progress.finish();
+    if (stats_out) *stats_out = stats;
+    return field;
+}
+
+SparseField sparse_csg_run(Device* device, const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                           const SdfOptions& options, VoxelizeStats* stats_out) {
+    // Phase 1: both fields' phases, so that progress runs once over both.
+    validate_sparse(grid, options);
+    ProgressPhases progress(options.progress, "CSG");
+    VoxelizeStats stats, stats_b;
+    const FieldJob job_a = plan_sparse(a, grid, options, progress, stats);
+    const FieldJob job_b = plan_sparse(b, grid, options, progress, stats_b);
+
+    // Phase 2: both fields, then their leaves combined.
+    const SparseField field_a = compute_sparse(device, job_a, grid, options, progress, stats);
+    const SparseField field_b = compute_sparse(device, job_b, grid, options, progress, stats_b);
+    SparseField field = csg(field_a, field_b, op);
+    progress.finish();
+    add_second_field_stats(stats, stats_b);
     if (stats_out) *stats_out = stats;
     return field;
 }
@@ -219,6 +244,16 @@ SparseField signed_distance_sparse(Device& device, const Mesh& mesh, const Grid&
 SparseField signed_distance_sparse_reference(const Mesh& mesh, const Grid& grid,
                                              const SdfOptions& options, VoxelizeStats* stats) {
     return detail::sparse_run(nullptr, mesh, grid, options, stats);
+}
+
+SparseField csg_sparse(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                       const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::sparse_csg_run(&device, a, b, op, grid, options, stats);
+}
+
+SparseField csg_sparse_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                                 const SdfOptions& options, VoxelizeStats* stats) {
+    return detail::sparse_csg_run(nullptr, a, b, op, grid, options, stats);
 }
 
 }  // namespace oclvox

@@ -14,10 +14,6 @@ namespace {
 
 constexpr int64_t kLeaf = SparseField::kLeaf;
 
-bool same_grid(const Grid& a, const Grid& b) {
-    return a.origin == b.origin && a.voxel_size == b.voxel_size && a.dims == b.dims;
-}
-
 }  // namespace
 
 SparseField::SparseField(const Grid& grid, double band_voxels, SparseVoxels inside)
@@ -36,6 +32,13 @@ SparseField::SparseField(const Grid& grid, double band_voxels, SparseVoxels insi
 std::array<int64_t, 3> SparseField::leaf_dims() const {
     return {(grid_.dims[0] + kLeaf - 1) / kLeaf, (grid_.dims[1] + kLeaf - 1) / kLeaf,
             (grid_.dims[2] + kLeaf - 1) / kLeaf};
+}
+
+std::array<int64_t, 3> SparseField::leaf_origin(uint64_t leaf_index) const {
+    const auto n = leaf_dims();
+    return {int64_t(leaf_index % uint64_t(n[0])) * kLeaf,
+            int64_t(leaf_index / uint64_t(n[0]) % uint64_t(n[1])) * kLeaf,
+            int64_t(leaf_index / (uint64_t(n[0]) * uint64_t(n[1]))) * kLeaf};
 }
 
 void SparseField::append_leaf(uint64_t leaf_index, const float* samples) {
@@ -94,6 +97,26 @@ void SparseField::copy_box(const std::array<int64_t, 3>& lo, const std::array<in
                                     size_t(x1 - x0) * sizeof(float));
             }
         }
+}
+
+void SparseField::copy_leaf(uint64_t leaf_index, float* samples) const {
+    const auto n = leaf_dims();
+    if (leaf_index >= uint64_t(n[0]) * uint64_t(n[1]) * uint64_t(n[2]))
+        throw GridError("leaf " + std::to_string(leaf_index) + " is outside the field's grid");
+    const auto it = std::lower_bound(leaf_keys_.begin(), leaf_keys_.end(), leaf_index);
+    if (it != leaf_keys_.end() && *it == leaf_index) {
+        std::memcpy(samples, leaf_samples(size_t(it - leaf_keys_.begin())),
+                    kLeafSamples * sizeof(float));
+        return;
+    }
+    // Not stored: the background, negated at the inside voxels of the leaf's part in the grid.
+    const std::array<int64_t, 3> lo = leaf_origin(leaf_index);
+    const std::array<int64_t, 3> hi = {std::min(lo[0] + kLeaf, grid_.dims[0]),
+                                       std::min(lo[1] + kLeaf, grid_.dims[1]),
+                                       std::min(lo[2] + kLeaf, grid_.dims[2])};
+    uint8_t inside[kLeafSamples] = {};
+    inside_.mark_box(lo, hi, {1, kLeaf, kLeaf * kLeaf}, inside);
+    for (size_t v = 0; v < kLeafSamples; ++v) samples[v] = inside[v] ? -background_ : background_;
 }
 
 ScalarField SparseField::to_dense() const {

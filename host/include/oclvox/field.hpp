@@ -52,6 +52,8 @@ class SparseField {
     double band_voxels() const { return band_voxels_; }
     float background() const { return background_; }
     std::array<int64_t, 3> leaf_dims() const;  // leaves along each axis (ceil)
+    // The minimum voxel of leaf lx + nlx*(ly + nly*lz): (lx, ly, lz) * kLeaf.
+    std::array<int64_t, 3> leaf_origin(uint64_t leaf_index) const;
     size_t leaf_count() const { return leaf_keys_.size(); }
     // The linear indices lx + nlx*(ly + nly*lz) of the stored leaves, in increasing order.
     const std::vector<uint64_t>& leaf_indices() const { return leaf_keys_; }
@@ -76,6 +78,9 @@ class SparseField {
     // grid.
     void copy_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
                   float* out) const;
+    // The kLeafSamples samples of leaf `leaf_index` (below the product of leaf_dims()), stored or
+    // not, x fastest; samples beyond the grid's far faces are +background.
+    void copy_leaf(uint64_t leaf_index, float* samples) const;
     // The dense field; throws GridError if it does not fit the host memory budget.
     ScalarField to_dense() const;
 

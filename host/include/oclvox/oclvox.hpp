@@ -116,6 +116,8 @@ constexpr int64_t kMaxGridAxis = int64_t(1) << 20;
 // Throws GridError on zero/negative/absurd sizes or a degenerate mesh box.
 Grid fit_grid(const Mesh& mesh, const GridFit& fit);
 void validate_grid(const Grid& grid);
+// The same voxels: equal origin, voxel size and dims.
+bool same_grid(const Grid& a, const Grid& b);
 
 // ---------------------------------------------------------------------------------------------
 // Sparse voxel results

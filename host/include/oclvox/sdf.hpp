@@ -134,6 +134,20 @@ ScalarField csg(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Gr
 ScalarField csg_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
                           const SdfOptions& options, VoxelizeStats* stats = nullptr);
 
+// CSG of two sparse fields on the same grid with the same band, leaf by leaf: the leaves of
+// either field, combined sample by sample as above, and the inside voxels combined by the same
+// operation on occupancy (which is what the rule gives away from both fields' leaves). Its
+// to_dense() equals csg(a.to_dense(), b.to_dense(), op) bit for bit. Throws GridError otherwise.
+SparseField csg(const SparseField& a, const SparseField& b, CsgOp op);
+
+// CSG of two meshes through their sparse narrow-band fields (signed_distance_sparse; options as
+// there), with one progress over both. Its to_dense() equals csg's dense field of the same
+// meshes bit for bit; the device result equals the reference's.
+SparseField csg_sparse(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                       const SdfOptions& options, VoxelizeStats* stats = nullptr);
+SparseField csg_sparse_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
+                                 const SdfOptions& options, VoxelizeStats* stats = nullptr);
+
 // ---------------------------------------------------------------------------------------------
 // Field files
 // ---------------------------------------------------------------------------------------------
