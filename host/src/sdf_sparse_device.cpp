@@ -134,12 +134,12 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const L
         // every lowest layer is above the batch's highest.
         const size_t n = prepared.triangles.size();
         std::vector<int> highest_so_far(n), lowest_from(n);
-        for (size_t t = 0; t < n; ++t)
-            highest_so_far[t] =
-                std::max(t ? highest_so_far[t - 1] : INT32_MIN, prepared.triangles[t].hi[2]);
-        for (size_t t = n; t-- > 0;)
-            lowest_from[t] =
-                std::min(t + 1 < n ? lowest_from[t + 1] : INT32_MAX, prepared.triangles[t].lo[2]);
+        for (size_t i = 0; i < n; ++i)
+            highest_so_far[i] =
+                std::max(i ? highest_so_far[i - 1] : INT32_MIN, prepared.triangles[i].hi[2]);
+        for (size_t i = n; i-- > 0;)
+            lowest_from[i] =
+                std::min(i + 1 < n ? lowest_from[i + 1] : INT32_MAX, prepared.triangles[i].lo[2]);
         const uint64_t per_layer = uint64_t(leaves.dims[0]) * uint64_t(leaves.dims[1]);
         auto item_range = [&](uint64_t first_slot, uint64_t end_slot) {
             const int low = int(leaves.leaf_at(first_slot) / per_layer) * SparseField::kLeaf;
