@@ -25,13 +25,14 @@ from ._oclvox import (
     KernelBuildError,
     Mesh,
     OutputError,
+    SparseField,
     VoxelGrid,
 )
 from . import _oclvox
 
 __all__ = [
     "load_mesh", "save_mesh", "voxelize", "candidate_bricks", "selection_triangles", "sdf", "csg", "mesh", "devices", "load_field",
-    "Mesh", "VoxelGrid", "Field", "Error", "InputError",
+    "Mesh", "VoxelGrid", "Field", "SparseField", "Error", "InputError",
     "GridError", "DeviceError", "KernelBuildError", "OutputError", "Cancelled",
 ]
 
@@ -179,7 +180,7 @@ def _field_pad(pad, band, origin, dims):
 
 def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, inside="auto",
         voxel_size=None, origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None,
-        reference=False, progress=None, layers=None):
+        reference=False, progress=None, layers=None, sparse=False):
     """Signed distance field (negative inside) at voxel centres; returns a Field.
 
     Exact within `band` voxels of the surface, clamped to +-band * voxel_size beyond it, or
@@ -192,23 +193,27 @@ def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, insi
     layers=(first, end): only the voxel layers first <= k < end of the whole grid (end 0: to the
     top), bit for bit the whole field's samples there; stacked along z, consecutive ranges give
     the whole field (narrow band only). The sign's solid still does its whole columns' work.
+    sparse=True: a narrow band of the whole grid kept as a SparseField (the 8x8x8 leaves the band
+    reaches and the inside voxels as bits), for grids whose dense field would not fit; its
+    .save() writes .vdb from the leaves or .npy a layer at a time, .to_field() gives the Field
+    (bit for bit the sparse=False result).
     """
     mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
     pad = _field_pad(pad, band, origin, dims)
     return _oclvox.sdf(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), band=band,
                        full_grid=full_grid, inside=inside, brick_size=brick_size,
                        device=_selector(device), reference=reference, progress=progress,
-                       layers=layers)
+                       layers=layers, sparse=sparse)
 
 
 def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", voxel_size=None,
         origin=None, dims=None, pad=None, cubic=False, brick_size=64, device=None, reference=False,
-        progress=None):
+        progress=None, sparse=False):
     """Combines two shapes; op is "union", "intersection" or "difference" (a minus b).
 
     - two meshes: their signed distance fields on one grid fitted around both (grid and SDF
       options, and progress over both fields, as for sdf), combined by min / max / max(a, -b);
-      returns a Field;
+      returns a Field, or with sparse=True a SparseField combined leaf by leaf (as sdf's);
     - two Fields on the same grid: returns a Field;
     - two VoxelGrids on the same grid: a | b, a & b, a & ~b; returns a VoxelGrid.
     """
@@ -224,7 +229,7 @@ def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", v
                                   _fit(resolution, voxel_size, origin, dims, pad, cubic),
                                   band=band, full_grid=full_grid, inside=inside,
                                   brick_size=brick_size, device=_selector(device),
-                                  reference=reference, progress=progress)
+                                  reference=reference, progress=progress, sparse=sparse)
     raise TypeError("csg takes two meshes, two Fields or two VoxelGrids; got "
                     f"{type(a).__name__} and {type(b).__name__}")
 

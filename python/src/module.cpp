@@ -15,11 +15,13 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <oclvox/field.hpp>
 #include <oclvox/oclvox.hpp>
 #include <oclvox/sdf.hpp>
 #include <optional>
 #include <string>
+#include <type_traits>
 
 #include "arrays.hpp"
 #include "devices.hpp"
@@ -45,6 +47,14 @@ struct VoxelGrid {
 struct Field {
     oclvox::ScalarField field;
     double band_voxels = 0;  // 0: taken from the values when written (see oclvox::write_field)
+    oclvox::VoxelizeStats stats;
+    std::string device;
+};
+
+// A narrow-band field kept sparse (oclvox::SparseField): what sdf and csg of meshes give with
+// sparse=True, for grids whose dense field would not fit.
+struct SparseField {
+    oclvox::SparseField field;
     oclvox::VoxelizeStats stats;
     std::string device;
 };
@@ -286,46 +296,62 @@ VoxelGrid voxelize(const oclvox::Mesh& mesh, const oclvox::GridFit& fit,
     return result;
 }
 
-Field sdf(const oclvox::Mesh& mesh, const oclvox::GridFit& fit, oclvox::SdfOptions options,
-          const py::object& device_selector, bool reference, py::object progress) {
+// The signed distance field of a mesh, dense (Field) or sparse (SparseField), on the picked
+// device or the reference.
+template <class Result>
+Result sdf(const oclvox::Mesh& mesh, const oclvox::GridFit& fit, oclvox::SdfOptions options,
+           const py::object& device_selector, bool reference, py::object progress) {
+    constexpr bool kSparse = std::is_same_v<Result, SparseField>;
     ProgressBridge bridge(std::move(progress));
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
-    Field result;
+    Result result;
     result.device = device_name(device);
-    result.band_voxels = options.full_grid ? 0 : options.band_voxels;
+    if constexpr (!kSparse) result.band_voxels = options.full_grid ? 0 : options.band_voxels;
     bridge.run_released([&](oclvox::ProgressCallback callback) {
         options.progress = std::move(callback);
         const oclvox::Grid grid = oclvox::fit_grid(mesh, fit);
-        if (!device) {
-            result.field = oclvox::signed_distance_reference(mesh, grid, options, &result.stats);
-            return 0;
-        }
-        std::lock_guard<std::mutex> lock(device->in_use);
-        result.field = oclvox::signed_distance(device->device, mesh, grid, options, &result.stats);
+        std::unique_lock<std::mutex> lock;
+        if (device) lock = std::unique_lock<std::mutex>(device->in_use);
+        if constexpr (kSparse)
+            result.field = device ? oclvox::signed_distance_sparse(device->device, mesh, grid,
+                                                                   options, &result.stats)
+                                  : oclvox::signed_distance_sparse_reference(mesh, grid, options,
+                                                                             &result.stats);
+        else
+            result.field =
+                device ? oclvox::signed_distance(device->device, mesh, grid, options, &result.stats)
+                       : oclvox::signed_distance_reference(mesh, grid, options, &result.stats);
         return 0;
     });
     return result;
 }
 
-Field csg_meshes(const oclvox::Mesh& a, const std::string& op_name, const oclvox::Mesh& b,
-                 const oclvox::GridFit& fit, oclvox::SdfOptions options,
-                 const py::object& device_selector, bool reference, py::object progress) {
+// The CSG of two meshes through their fields, dense (Field) or sparse (SparseField).
+template <class Result>
+Result csg_meshes(const oclvox::Mesh& a, const std::string& op_name, const oclvox::Mesh& b,
+                  const oclvox::GridFit& fit, oclvox::SdfOptions options,
+                  const py::object& device_selector, bool reference, py::object progress) {
+    constexpr bool kSparse = std::is_same_v<Result, SparseField>;
     const oclvox::CsgOp op = oclvox::csg_op_from_string(op_name);
     ProgressBridge bridge(std::move(progress));
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
-    Field result;
+    Result result;
     result.device = device_name(device);
-    result.band_voxels = options.full_grid ? 0 : options.band_voxels;
+    if constexpr (!kSparse) result.band_voxels = options.full_grid ? 0 : options.band_voxels;
     bridge.run_released([&](oclvox::ProgressCallback callback) {
         options.progress = std::move(callback);
         // Both fields on one grid around both meshes, as the CLI's csg does.
         const oclvox::Grid grid = oclvox::fit_grid(a, b, fit);
-        if (!device) {
-            result.field = oclvox::csg_reference(a, b, op, grid, options, &result.stats);
-            return 0;
-        }
-        std::lock_guard<std::mutex> lock(device->in_use);
-        result.field = oclvox::csg(device->device, a, b, op, grid, options, &result.stats);
+        std::unique_lock<std::mutex> lock;
+        if (device) lock = std::unique_lock<std::mutex>(device->in_use);
+        if constexpr (kSparse)
+            result.field =
+                device ? oclvox::csg_sparse(device->device, a, b, op, grid, options, &result.stats)
+                       : oclvox::csg_sparse_reference(a, b, op, grid, options, &result.stats);
+        else
+            result.field = device
+                               ? oclvox::csg(device->device, a, b, op, grid, options, &result.stats)
+                               : oclvox::csg_reference(a, b, op, grid, options, &result.stats);
         return 0;
     });
     return result;
@@ -542,6 +568,49 @@ PYBIND11_MODULE(_oclvox, m) {
             "Writes .npy (+ .json) or .vdb; progress(done, total) as for sdf, False cancelling "
             "with no file left");
 
+    py::class_<SparseField>(m, "SparseField")
+        .def_property_readonly("origin",
+                               [](const SparseField& f) { return origin_tuple(f.field.grid()); })
+        .def_property_readonly("voxel_size",
+                               [](const SparseField& f) { return f.field.grid().voxel_size; })
+        .def_property_readonly("dims",
+                               [](const SparseField& f) { return dims_tuple(f.field.grid()); })
+        .def_property_readonly("band", [](const SparseField& f) { return f.field.band_voxels(); })
+        .def_property_readonly("leaf_count",
+                               [](const SparseField& f) { return f.field.leaf_count(); })
+        .def_property_readonly("stats", [](const SparseField& f) { return stats_dict(f.stats); })
+        .def_property_readonly("device", [](const SparseField& f) { return f.device; })
+        .def(
+            "to_field",
+            [](const SparseField& f) {
+                Field result;
+                py::gil_scoped_release release;
+                result.field = f.field.to_dense();
+                result.band_voxels = f.field.band_voxels();
+                result.stats = f.stats;
+                result.device = f.device;
+                return result;
+            },
+            "The dense Field (checked against the host memory budget first).")
+        .def("__repr__",
+             [](const SparseField& f) {
+                 const oclvox::Grid& grid = f.field.grid();
+                 return "<oclvox.SparseField " + std::to_string(grid.dims[0]) + "x" +
+                        std::to_string(grid.dims[1]) + "x" + std::to_string(grid.dims[2]) + ", " +
+                        std::to_string(f.field.leaf_count()) + " leaves>";
+             })
+        .def(
+            "save",
+            [](const SparseField& f, const std::filesystem::path& path, py::object progress) {
+                ProgressBridge bridge(std::move(progress));
+                bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                    oclvox::write_field(path.string(), f.field, callback);
+                });
+            },
+            "path"_a, "progress"_a = py::none(),
+            "Writes .vdb from the leaves or .npy (+ .json) a layer at a time; progress as for "
+            "Field.save");
+
     m.def(
         "load_mesh",
         [](const std::filesystem::path& path) {
@@ -616,22 +685,32 @@ PYBIND11_MODULE(_oclvox, m) {
         "sdf",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, double band, bool full_grid,
            const std::string& inside, int brick_size, py::object device, bool reference,
-           py::object progress, std::optional<std::array<int64_t, 2>> layers) {
-            return sdf(mesh, fit, sdf_options(band, full_grid, inside, brick_size, layers), device,
-                       reference, std::move(progress));
+           py::object progress, std::optional<std::array<int64_t, 2>> layers,
+           bool sparse) -> py::object {
+            const oclvox::SdfOptions options =
+                sdf_options(band, full_grid, inside, brick_size, layers);
+            if (sparse)
+                return py::cast(
+                    sdf<SparseField>(mesh, fit, options, device, reference, std::move(progress)));
+            return py::cast(sdf<Field>(mesh, fit, options, device, reference, std::move(progress)));
         },
         "mesh"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a, "device"_a,
-        "reference"_a, "progress"_a, "layers"_a = py::none());
+        "reference"_a, "progress"_a, "layers"_a = py::none(), "sparse"_a = false);
     m.def(
         "csg_meshes",
         [](const oclvox::Mesh& a, const std::string& op, const oclvox::Mesh& b,
            const oclvox::GridFit& fit, double band, bool full_grid, const std::string& inside,
-           int brick_size, py::object device, bool reference, py::object progress) {
-            return csg_meshes(a, op, b, fit, sdf_options(band, full_grid, inside, brick_size),
-                              device, reference, std::move(progress));
+           int brick_size, py::object device, bool reference, py::object progress,
+           bool sparse) -> py::object {
+            const oclvox::SdfOptions options = sdf_options(band, full_grid, inside, brick_size);
+            if (sparse)
+                return py::cast(csg_meshes<SparseField>(a, op, b, fit, options, device, reference,
+                                                        std::move(progress)));
+            return py::cast(
+                csg_meshes<Field>(a, op, b, fit, options, device, reference, std::move(progress)));
         },
         "a"_a, "op"_a, "b"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a,
-        "device"_a, "reference"_a, "progress"_a);
+        "device"_a, "reference"_a, "progress"_a, "sparse"_a = false);
     m.def("csg_fields", &csg_fields, "a"_a, "op"_a, "b"_a);
     m.def("csg_voxels", &csg_voxels, "a"_a, "op"_a, "b"_a);
     m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a,
@@ -648,7 +727,7 @@ PYBIND11_MODULE(_oclvox, m) {
         },
         "mesh"_a, "fit"_a);
     // The classes are documented and used as oclvox.Mesh, oclvox.VoxelGrid, oclvox.Field.
-    for (const char* name : {"Mesh", "GridFit", "VoxelGrid", "Field"})
+    for (const char* name : {"Mesh", "GridFit", "VoxelGrid", "Field", "SparseField"})
         m.attr(name).attr("__module__") = "oclvox";
 
     // Devices are released before the interpreter tears down the module.

@@ -126,3 +126,35 @@ def test_mesh_of_voxels_and_of_a_field_file(tmp_path):
     assert loaded.dims == field.dims and loaded.voxel_size == field.voxel_size
     assert np.allclose(loaded.origin, field.origin)
     assert np.array_equal(oclvox.mesh(tmp_path / "sphere.npy")[1], oclvox.mesh(field)[1])
+
+
+@pytest.mark.parametrize("reference", [False, True])
+def test_sparse_sdf_is_the_dense_sdf_and_saves_the_same_files(reference, tmp_path):
+    # A box's sparse field: its dense copy is the dense field bit for bit, it holds only the
+    # leaves near the surface, and its .npy file is the dense field's.
+    dense = oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, reference=reference)
+    sparse = oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, reference=reference, sparse=True)
+    assert isinstance(sparse, oclvox.SparseField) and "leaves" in repr(sparse)
+    assert sparse.dims == dense.dims and sparse.origin == dense.origin and sparse.band == BAND
+    np.testing.assert_array_equal(sparse.to_field().to_numpy(), dense.to_numpy())
+    leaves = np.prod([(n + 7) // 8 for n in GRID["dims"]])
+    assert 0 < sparse.leaf_count < leaves
+    assert sparse.stats["bricks_active"] == sparse.leaf_count
+    sparse.save(tmp_path / "sparse.npy")
+    dense.save(tmp_path / "dense.npy")
+    np.testing.assert_array_equal(np.load(tmp_path / "sparse.npy"), dense.to_numpy())
+
+
+def test_sparse_csg_of_meshes_is_the_dense_csg(tmp_path):
+    a, b = box_mesh(*BOX_A), box_mesh(*BOX_B)
+    for op in ("union", "intersection", "difference"):
+        dense = oclvox.csg(a, op, b, band=BAND, resolution=40)
+        sparse = oclvox.csg(a, op, b, band=BAND, resolution=40, sparse=True)
+        np.testing.assert_array_equal(sparse.to_field().to_numpy(), dense.to_numpy())
+
+
+def test_sparse_fields_refuse_full_grids_and_layers():
+    with pytest.raises(oclvox.GridError):
+        oclvox.sdf(*box_mesh(*BOX_A), **GRID, full_grid=True, sparse=True)
+    with pytest.raises(oclvox.GridError):
+        oclvox.sdf(*box_mesh(*BOX_A), **GRID, layers=(0, 8), sparse=True)
