@@ -81,12 +81,14 @@ int run(const SdfArgs& args) {
         return 0;
     });
     stop_if_interrupted();
+    auto dense_field = [&]() -> const oclvox::ScalarField& {
+        if (!dense) dense = sparse->to_dense();
+        return *dense;
+    };
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
-        surface = timed(record.seconds.mesh, [&] {
-            if (!dense) dense = sparse->to_dense();
-            return extract_surface(device, *dense, args, 0.0f);
-        });
+        surface = timed(record.seconds.mesh,
+                        [&] { return extract_surface(device, dense_field(), args, 0.0f); });
         stop_if_interrupted();
     }
 
@@ -97,10 +99,7 @@ int run(const SdfArgs& args) {
         else
             write_field_output(output.path(), *dense, 0.0, args);
         if (surface) oclvox::write_mesh(args.mesh_output, *surface);
-        if (!args.preview.empty()) {
-            if (!dense) dense = sparse->to_dense();
-            write_preview(args.preview, *dense, 0.0f);
-        }
+        if (!args.preview.empty()) write_preview(args.preview, dense_field(), 0.0f);
         output.finish();
         return 0;
     });
