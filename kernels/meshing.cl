@@ -61,7 +61,7 @@ __kernel void sn_emit(__global const float* values, int nx, int ny, int nz, floa
     int x, y, z;
     if (!om_item(bricks, brick_size, first, count, f, &x, &y, &z)) return;
     om_sn_emit(values, f, x, y, z, om_tiling(brick_size, nx, ny, nz), brick_base, vertex_offset,
-               triangle_offset, vertex_sample, vertex_local, triangles);
+               triangle_offset, 0u, 0u, vertex_sample, vertex_local, triangles);
 }
 
 __kernel void mc_count(__global const float* values, __global const uchar* table, int nx, int ny,
@@ -88,5 +88,5 @@ __kernel void mc_emit(__global const float* values, __global const uchar* table,
     int x, y, z;
     if (!om_item(bricks, brick_size, first, count, f, &x, &y, &z)) return;
     om_mc_emit(values, table, f, x, y, z, om_tiling(brick_size, nx, ny, nz), brick_base,
-               vertex_offset, triangle_offset, vertex_sample, vertex_local, triangles);
+               vertex_offset, triangle_offset, 0u, 0u, vertex_sample, vertex_local, triangles);
 }

@@ -14,7 +14,10 @@
 // A count pass gives each sample its numbers of vertices and triangles; exclusive prefix sums
 // over samples in index order give every sample its first vertex and triangle; an emit pass
 // writes them. So vertices come out ordered by owner, and a triangle finds the index of a vertex
-// owned by a neighbour from that neighbour's offset.
+// owned by a neighbour from that neighbour's offset. The emit functions write vertex v and
+// triangle t at v - vertex_base and t - triangle_base of their output arrays (the kernels and
+// the dense reference pass 0), so a caller can emit a part of the mesh into buffers of its own
+// while triangles keep the global vertex indices.
 //
 // Counts and offsets are stored only for the samples of the active bricks (those that can hold
 // surface, see OmTiling): the storage follows the surface, not the grid, while the prefix sums
@@ -300,7 +303,8 @@ OM_FN void om_sn_count(OM_GLOBAL const float* values, OmField f, int x, int y, i
 OM_FN void om_sn_emit(OM_GLOBAL const float* values, OmField f, int x, int y, int z,
                       OmTiling tiling, OM_GLOBAL const OM_UINT* brick_base,
                       OM_GLOBAL const OM_UINT* vertex_offset,
-                      OM_GLOBAL const OM_UINT* triangle_offset, OM_GLOBAL OM_UINT* vertex_sample,
+                      OM_GLOBAL const OM_UINT* triangle_offset, OM_UINT vertex_base,
+                      OM_UINT triangle_base, OM_GLOBAL OM_UINT* vertex_sample,
                       OM_GLOBAL float* vertex_local, OM_GLOBAL OM_UINT* triangles) {
     OM_UINT s = om_index(f, x, y, z), slot = om_slot(f, tiling, brick_base, x, y, z);
     if (om_cell_exists(f, x, y, z)) {
@@ -310,12 +314,12 @@ OM_FN void om_sn_emit(OM_GLOBAL const float* values, OmField f, int x, int y, in
         if (mask != 0 && mask != 255) {
             float p[3];
             om_mean_crossing(v, f.iso, om_changing_edges(v, f.iso), p);
-            OM_UINT o = vertex_offset[slot];
+            OM_UINT o = vertex_offset[slot] - vertex_base;
             vertex_sample[o] = s;
             for (int k = 0; k < 3; ++k) vertex_local[3 * o + k] = p[k];
         }
     }
-    OM_UINT t = triangle_offset[slot];
+    OM_UINT t = triangle_offset[slot] - triangle_base;
     for (int a = 0; a < 3; ++a) {
         if (!om_sn_has_quad(values, f, x, y, z, a)) continue;
         // The four cells around the edge, counter-clockwise in the (b, c) plane, so the quad
@@ -405,10 +409,11 @@ OM_FN void om_mc_count(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* 
 OM_FN void om_mc_emit(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* table, OmField f,
                       int x, int y, int z, OmTiling tiling, OM_GLOBAL const OM_UINT* brick_base,
                       OM_GLOBAL const OM_UINT* vertex_offset,
-                      OM_GLOBAL const OM_UINT* triangle_offset, OM_GLOBAL OM_UINT* vertex_sample,
+                      OM_GLOBAL const OM_UINT* triangle_offset, OM_UINT vertex_base,
+                      OM_UINT triangle_base, OM_GLOBAL OM_UINT* vertex_sample,
                       OM_GLOBAL float* vertex_local, OM_GLOBAL OM_UINT* triangles) {
     OM_UINT s = om_index(f, x, y, z), slot = om_slot(f, tiling, brick_base, x, y, z);
-    OM_UINT o = vertex_offset[slot];
+    OM_UINT o = vertex_offset[slot] - vertex_base;
     for (int a = 0; a < 3; ++a) {
         if (!om_edge_changes(values, f, x, y, z, a)) continue;
         int u[3] = {x, y, z};
@@ -422,7 +427,7 @@ OM_FN void om_mc_emit(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* t
     float v[8];
     om_cell_values(values, f, x, y, z, v);
     OM_GLOBAL const OM_UCHAR* entry = table + om_mc_case(v, f.iso) * OM_MC_ENTRY_BYTES;
-    OM_UINT first_centre = o;
+    OM_UINT first_centre = o + vertex_base;  // the global index, for the triangles
     for (int j = 0; j < (int)entry[1]; ++j) {
         float p[3];
         om_mean_crossing(v, f.iso, entry[2 + 2 * j] | entry[3 + 2 * j] << 8, p);
@@ -430,7 +435,7 @@ OM_FN void om_mc_emit(OM_GLOBAL const float* values, OM_GLOBAL const OM_UCHAR* t
         for (int k = 0; k < 3; ++k) vertex_local[3 * o + k] = p[k];
         ++o;
     }
-    OM_UINT t = triangle_offset[slot];
+    OM_UINT t = triangle_offset[slot] - triangle_base;
     for (int i = 0; i < 3 * (int)entry[0]; ++i) {
         int code = entry[OM_MC_TRIANGLES_AT + i];
         if (code >= OM_MC_CENTRE_BASE) {

@@ -18,6 +18,7 @@
 #include "meshing.hpp"
 #include "meshing_math.h"
 #include "oclvox/field.hpp"
+#include "oclvox/sdf.hpp"
 #include "opencl_runtime.hpp"
 #include "test_support.hpp"
 
@@ -392,6 +393,130 @@ TEST(Meshing, ProgressReportsEveryPassAndCancels) {
                 EXPECT_TRUE(cancel.cancelled) << what << " at " << at;
             }
         }
+}
+
+// ---- sparse fields ---------------------------------------------------------------------------
+// The independent reference of the sparse meshers is the dense mesher run on the field's dense
+// copy: the meshes must be equal bit for bit, order included.
+
+void expect_sparse_meshes_dense(const SparseField& field, float iso, const std::string& what) {
+    SCOPED_TRACE(what + " iso " + std::to_string(iso));
+    const ScalarField dense = field.to_dense();
+    const Mesh nets = surface_nets(field, iso), cubes = marching_cubes(field, iso);
+    expect_identical(nets, surface_nets(dense, iso));
+    expect_identical(cubes, marching_cubes(dense, iso));
+}
+
+// Distance fields of a sphere off the origin (parity sign), the scan (parity) and open random
+// triangles (winding-number sign: the inside voxels change across holes, away from any leaf), on
+// grids that are not multiples of the leaves, at several bands and iso values.
+TEST(SparseMeshing, EqualsMeshingTheDenseCopyBitForBit) {
+    const Vec3 centre{-310.25, 7.5, 1200.75};
+    Grid sphere_grid;
+    sphere_grid.dims = {37, 35, 41};
+    sphere_grid.voxel_size = 0.2;
+    sphere_grid.origin = {centre[0] - 3.7, centre[1] - 3.5, centre[2] - 4.1};
+    const Mesh bunny = load_mesh(test::mesh_path("bunny00.off"));
+    GridFit fit;
+    fit.resolution = 45;
+    fit.pad = 4;
+    Grid random_grid;
+    random_grid.dims = {29, 34, 27};
+    const struct {
+        const char* name;
+        Mesh mesh;
+        Grid grid;
+    } cases[] = {{"sphere", test::icosphere(centre, 2.6, 3), sphere_grid},
+                 {"bunny00", bunny, fit_grid(bunny, fit)},
+                 {"random", test::random_triangles(120, -3.0, 33.0, 5.0, 11), random_grid}};
+    for (const auto& c : cases)
+        for (double band : {3.0, 1.25}) {
+            SdfOptions o;
+            o.band_voxels = band;
+            const SparseField field = signed_distance_sparse_reference(c.mesh, c.grid, o);
+            const float background = field.background();
+            EXPECT_GT(surface_nets(field).triangles.size(), 100u) << c.name;
+            for (float iso : {0.0f, 0.4f * background, -0.7f * background, background})
+                expect_sparse_meshes_dense(field, iso,
+                                           std::string(c.name) + " band " + std::to_string(band));
+        }
+}
+
+// Sign changes far from every leaf come from the inside voxels alone: a box of them that crosses
+// the voxels' bricks (8^3, so full words border other bricks), a one-voxel speck, a hollow shell,
+// and random leaves of random values (many sign changes, leaves on the grid's faces).
+TEST(SparseMeshing, InsideVoxelsAwayFromTheLeavesAndRandomLeavesMeshAsTheDenseCopy) {
+    Grid g;
+    g.dims = {43, 29, 38};
+    g.voxel_size = 0.5;
+    g.origin = {-3.0, 2.0, 11.0};
+    SparseVoxels inside(g, 8);
+    // Faces on the bricks' faces (multiples of 8) and between them.
+    for (int64_t k = 3; k < 32; ++k)
+        for (int64_t j = 4; j < 16; ++j)
+            for (int64_t i = 2; i < 24; ++i) {
+                const bool hollow = i >= 8 && i < 16 && j >= 8 && j < 12 && k >= 16 && k < 23;
+                if (!hollow) inside.set(i, j, k);
+            }
+    inside.set(35, 25, 33);
+    for (int64_t k = 0; k < 38; ++k) inside.set(40, 1, k);  // a column along z to the faces
+
+    SparseField no_leaves(g, 1.5, inside);
+    expect_sparse_meshes_dense(no_leaves, 0.0f, "no leaves");
+    EXPECT_GT(marching_cubes(no_leaves).triangles.size(), 1000u);
+    // Both backgrounds on one side of iso: no surface at all.
+    for (float iso : {-2.0f * no_leaves.background(), 1.1f * no_leaves.background()}) {
+        EXPECT_TRUE(surface_nets(no_leaves, iso).triangles.empty());
+        EXPECT_TRUE(marching_cubes(no_leaves, iso).positions.empty());
+    }
+
+    std::mt19937 rng(5);
+    SparseField leaves(g, 1.5, inside);
+    const auto n = leaves.leaf_dims();
+    std::vector<float> samples(SparseField::kLeafSamples);
+    std::uniform_real_distribution<float> value(-leaves.background(), leaves.background());
+    for (uint64_t leaf = 0; leaf < uint64_t(n[0] * n[1] * n[2]); ++leaf) {
+        if (rng() % 4) continue;
+        for (float& v : samples) v = value(rng);
+        leaves.append_leaf(leaf, samples.data());
+    }
+    ASSERT_GT(leaves.leaf_count(), 10u);
+    for (float iso : {0.0f, 0.3f, -0.9f}) expect_sparse_meshes_dense(leaves, iso, "random leaves");
+}
+
+TEST(SparseMeshing, ProgressReachesItsTotalAndCancels) {
+    SdfOptions o;
+    o.band_voxels = 2.0;
+    const SparseField field = signed_distance_sparse_reference(
+        test::icosphere({1.0, 2.0, 3.0}, 2.0, 3), test::unit_grid(48, 48, 48), o);
+    for (bool nets : {false, true}) {
+        auto mesh = [&](const ProgressCallback& progress) {
+            return nets ? surface_nets(field, 0.0f, progress)
+                        : marching_cubes(field, 0.0f, progress);
+        };
+        test::ProgressLog log;
+        const Mesh got = mesh(log.callback());
+        log.expect_contract(nets ? "sparse surface nets" : "sparse cubes");
+        expect_identical(got, mesh({}));
+        for (double at : {0.0, 0.5}) {
+            test::ProgressLog cancel;
+            cancel.cancel_from = at;
+            EXPECT_THROW(mesh(cancel.callback()), Cancelled) << at;
+        }
+    }
+}
+
+TEST(SparseMeshing, NonFiniteSamplesAndIsoAreRejected) {
+    const Grid g = test::unit_grid(12, 10, 9);
+    SparseField field(g, 2.0, SparseVoxels(g, 8));
+    std::vector<float> samples(SparseField::kLeafSamples, 1.0f);
+    samples[2 + 8 * (1 + 8 * 1)] = NAN;  // voxel (10, 1, 1)
+    field.append_leaf(1, samples.data());
+    EXPECT_THROW(surface_nets(field), InputError);
+    EXPECT_THROW(marching_cubes(SparseField(g, 2.0, SparseVoxels(g, 8)), INFINITY), InputError);
+    // A grid without cells meshes to nothing.
+    const Grid flat = test::unit_grid(9, 9, 1);
+    EXPECT_TRUE(surface_nets(SparseField(flat, 2.0, SparseVoxels(flat, 8))).positions.empty());
 }
 
 // ---- the same bits on any conformant device ---------------------------------------------------

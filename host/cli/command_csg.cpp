@@ -63,7 +63,7 @@ int run(const FieldArgs& args) {
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
     // Phase 2: both operands as fields on one grid, combined: .npy fields and full grids dense,
-    // narrow bands of meshes sparse (then made dense only to mesh them).
+    // narrow bands of meshes sparse (and meshed sparse).
     oclvox::ScalarField combined;
     std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::Device> device;
@@ -116,8 +116,8 @@ int run(const FieldArgs& args) {
     std::optional<oclvox::Mesh> surface;
     if (mesh_out) {
         surface = timed(record.seconds.mesh, [&] {
-            if (sparse) combined = sparse->to_dense();
-            return extract_surface(device, combined, args, 0.0f);
+            return sparse ? extract_surface(*sparse, args, 0.0f)
+                          : extract_surface(device, combined, args, 0.0f);
         });
         stop_if_interrupted();
     }

@@ -68,8 +68,9 @@ int run(const SdfArgs& args) {
     std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
     // Phase 3: the distances, a narrow band as a sparse field (memory follows the surface), a full
-    // grid dense; then the mesh of their zero level set if asked for. Meshing and the preview
-    // read the dense field, made from the sparse one when the band is all there is.
+    // grid dense; then the mesh of their zero level set if asked for, from the field as it is.
+    // Only the preview reads a dense field, made from the sparse one when the band is all there
+    // is.
     oclvox::VoxelizeStats stats;
     std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::ScalarField> dense;
@@ -81,14 +82,12 @@ int run(const SdfArgs& args) {
         return 0;
     });
     stop_if_interrupted();
-    auto dense_field = [&]() -> const oclvox::ScalarField& {
-        if (!dense) dense = sparse->to_dense();
-        return *dense;
-    };
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
-        surface = timed(record.seconds.mesh,
-                        [&] { return extract_surface(device, dense_field(), args, 0.0f); });
+        surface = timed(record.seconds.mesh, [&] {
+            return sparse ? extract_surface(*sparse, args, 0.0f)
+                          : extract_surface(device, *dense, args, 0.0f);
+        });
         stop_if_interrupted();
     }
 
@@ -99,7 +98,8 @@ int run(const SdfArgs& args) {
         else
             write_field_output(output.path(), *dense, 0.0, args);
         if (surface) oclvox::write_mesh(args.mesh_output, *surface);
-        if (!args.preview.empty()) write_preview(args.preview, dense_field(), 0.0f);
+        if (!args.preview.empty())
+            write_preview(args.preview, sparse ? sparse->to_dense() : *dense, 0.0f);
         output.finish();
         return 0;
     });

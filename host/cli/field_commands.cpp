@@ -144,6 +144,12 @@ oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
                   : oclvox::surface_nets(field, iso, progress);
 }
 
+oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& args, float iso) {
+    ProgressBar bar("meshing", "", args.reporting);
+    return args.mesher == "marching-cubes" ? oclvox::marching_cubes(field, iso, bar.callback())
+                                           : oclvox::surface_nets(field, iso, bar.callback());
+}
+
 void write_field_output(const std::string& path, const oclvox::ScalarField& field,
                         double band_voxels, const FieldArgs& args) {
     ProgressBar bar("writing", "", args.reporting);

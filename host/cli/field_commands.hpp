@@ -63,6 +63,9 @@ oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclv
 // The iso-surface by --mesher, with a progress bar, stopping on Ctrl-C.
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
                              const oclvox::ScalarField& field, const FieldArgs& args, float iso);
+// The same of a sparse field, on the host, without a dense copy (the same mesh as its dense copy
+// gives).
+oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& args, float iso);
 
 // write_field with a "writing" progress bar (and Ctrl-C checked through it).
 void write_field_output(const std::string& path, const oclvox::ScalarField& field,

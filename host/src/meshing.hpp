@@ -61,6 +61,21 @@ void check_meshing_memory(uint64_t slots, uint64_t vertices, uint64_t triangles,
 uint32_t exclusive_scan(const ScalarField& field, const BrickLayout& layout,
                         std::vector<uint32_t>& counts, const char* what);
 
+// Throws GridError naming `what` (vertices, triangles) when `total` of them do not fit the 32-bit
+// indices (3 per triangle) of the meshing code.
+void check_mesh_indices(uint64_t total, const char* what);
+
+// The world position of a vertex record: owner sample `index` plus `local` (3 floats, voxel units
+// relative to it). Samples sit at voxel centres, hence the half voxel. Every mesher converts
+// through this, so their positions agree bit for bit.
+inline std::array<double, 3> vertex_position(const Grid& grid, const std::array<uint64_t, 3>& index,
+                                             const float* local) {
+    std::array<double, 3> p;
+    for (int k = 0; k < 3; ++k)
+        p[k] = grid.origin[k] + (double(index[k]) + 0.5 + double(local[k])) * grid.voxel_size;
+    return p;
+}
+
 // World-space mesh from vertex records (owner sample + position relative to it in voxel units)
 // and triangles.
 Mesh records_to_mesh(const ScalarField& field, const std::vector<uint32_t>& vertex_sample,

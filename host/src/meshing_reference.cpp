@@ -129,10 +129,14 @@ uint32_t exclusive_scan(const ScalarField& field, const BrickLayout& layout,
             }
         slab = slab_end;
     }
+    check_mesh_indices(total, what);
+    return uint32_t(total);
+}
+
+void check_mesh_indices(uint64_t total, const char* what) {
     if (3 * total > std::numeric_limits<uint32_t>::max())
         throw GridError("the surface has " + std::to_string(total) + " " + what +
                         ", more than the 32-bit indices of the mesher can address");
-    return uint32_t(total);
 }
 
 void check_meshing_memory(uint64_t slots, uint64_t vertices, uint64_t triangles, const char* who) {
@@ -156,12 +160,8 @@ Mesh records_to_mesh(const ScalarField& field, const std::vector<uint32_t>& vert
     mesh.positions.resize(vertex_sample.size());
     for (size_t v = 0; v < vertex_sample.size(); ++v) {
         const uint64_t s = vertex_sample[v];
-        const uint64_t index[3] = {s % nx, s / nx % ny, s / (nx * ny)};
-        // Samples sit at voxel centres, hence the half voxel.
-        for (int k = 0; k < 3; ++k)
-            mesh.positions[v][k] =
-                g.origin[k] +
-                (double(index[k]) + 0.5 + double(vertex_local[3 * v + k])) * g.voxel_size;
+        mesh.positions[v] =
+            vertex_position(g, {s % nx, s / nx % ny, s / (nx * ny)}, &vertex_local[3 * v]);
     }
     mesh.triangles.resize(triangles.size() / 3);
     for (size_t t = 0; t < mesh.triangles.size(); ++t)
@@ -220,11 +220,11 @@ Mesh mesh_field_reference(const ScalarField& field, float iso, MeshingMethod met
         for_each_sample(active[brick], [&](int x, int y, int z) {
             if (nets)
                 om_sn_emit(values, f, x, y, z, layout.tiling, base, vertex_offset.data(),
-                           triangle_offset.data(), vertex_sample.data(), vertex_local.data(),
+                           triangle_offset.data(), 0, 0, vertex_sample.data(), vertex_local.data(),
                            triangles.data());
             else
                 om_mc_emit(values, table, f, x, y, z, layout.tiling, base, vertex_offset.data(),
-                           triangle_offset.data(), vertex_sample.data(), vertex_local.data(),
+                           triangle_offset.data(), 0, 0, vertex_sample.data(), vertex_local.data(),
                            triangles.data());
         });
         progress.report(phases.emit, brick + 1, active.size());

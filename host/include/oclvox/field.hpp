@@ -141,6 +141,17 @@ Mesh surface_nets(Device& device, const ScalarField& field, float iso = 0.0f,
 Mesh marching_cubes(Device& device, const ScalarField& field, float iso = 0.0f,
                     const ProgressCallback& progress = {});
 
+// The same meshes of a sparse narrow-band field, on the host, without a dense copy: equal bit for
+// bit to meshing field.to_dense() (the same vertices in the same order, the same triangles), also
+// where the inside voxels change away from the leaves (holes an inside test closed). Work and
+// memory follow the surface: the 8x8x8 blocks that reach a leaf or a change of the inside voxels,
+// three slabs of them at a time, plus the mesh. Throws InputError for a non-finite sample or iso,
+// GridError when the mesh exceeds 32-bit indices or the host memory budget.
+Mesh surface_nets(const SparseField& field, float iso = 0.0f,
+                  const ProgressCallback& progress = {});
+Mesh marching_cubes(const SparseField& field, float iso = 0.0f,
+                    const ProgressCallback& progress = {});
+
 // Writes a triangle mesh by extension (case-insensitive): .obj (text, exact shortest decimals),
 // .ply (binary little-endian, double vertices, int indices), .stl (binary, float, facet normals).
 // Written to a temporary file and renamed into place. Throws OutputError for an unknown extension,

@@ -1,0 +1,464 @@
+// Surface Nets and Marching Cubes of a sparse narrow-band field, on the host, without a dense
+// copy. The per-sample functions of the dense reference and the kernels (kernels/meshing_math.h)
+// run on small dense boxes read from the leaves, and the prefix sums follow the same global
+// sample order, so the mesh equals meshing field.to_dense() bit for bit: the same vertices in the
+// same order and the same triangles. Work and memory follow the surface: the blocks near it, three
+// slabs of them at a time, plus the mesh.
+//
+// Phases:
+//  1. Candidate blocks: the 8^3 blocks of the leaves' tiling whose samples, with the one-sample
+//     halo their cells and edges reach, may not all lie on one side of iso. A sample outside the
+//     leaves is -background where the inside voxels are set and +background elsewhere, so such a
+//     block either reaches a stored leaf or a place where the inside voxels change.
+//  2. Slab by slab (the blocks of one z), count each sample's vertices and triangles from a box
+//     of its block with a halo; blocks that own nothing are dropped.
+//  3. Exclusive prefix sums over the slab in global sample order, continued from the slab before:
+//     the dense mesh's numbering.
+//  4. Emit a slab once the next one is counted, since Marching Cubes' triangles use vertices owned
+//     one sample above (Surface Nets' quads use cells one sample below, counted already). The
+//     vertex records become world positions at once.
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "meshing.hpp"
+
+namespace oclvox {
+
+namespace {
+
+using Index3 = std::array<int64_t, 3>;
+
+constexpr int kBlock = SparseField::kLeaf;
+constexpr size_t kBlockSamples = SparseField::kLeafSamples;
+// The box read for a block reaches one sample below it (Surface Nets' quads join the cells one
+// below) and two above (Marching Cubes ranks the edges of the samples one above, which read one
+// further). Within it, the per-sample functions' checks against the box's faces say what they
+// say against the grid's for every sample of the block.
+constexpr int64_t kBelow = 1, kAbove = 2;
+
+struct Block {
+    Index3 origin{};            // lowest sample
+    Index3 box_lo{}, box_hi{};  // the box read, clipped to the grid
+    std::vector<float> box;     // its samples, x fastest
+};
+
+// The blocks of one z that own vertices or triangles, by (y, x), with kBlockSamples slots each
+// (x fastest over the whole block; slots beyond the grid stay unused).
+struct Slab {
+    int64_t bz = 0;
+    std::vector<Block> blocks;
+    std::vector<uint64_t> keys;  // the blocks' indices, for lookups
+    std::vector<uint32_t> vertex_count, vertex_offset, triangle_offset;
+    uint32_t first_vertex = 0, first_triangle = 0, end_vertex = 0, end_triangle = 0;
+};
+
+size_t slot_in_block(const Index3& origin, int64_t x, int64_t y, int64_t z) {
+    return size_t((x - origin[0]) + kBlock * ((y - origin[1]) + kBlock * (z - origin[2])));
+}
+
+// Calls f(origin) for every 4^3 word of the voxels that may hold or border a change: a word with
+// both set and unset voxels, or a full one beside one that is not (stored or not). Neighbours
+// beyond the grid's faces hold no samples, so they border nothing.
+template <typename F>
+void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
+    const int64_t words_per_axis = voxels.blocks_per_brick_axis(), word = SparseVoxels::kBlock;
+    const Index3 bricks = voxels.brick_dims();
+    const auto& n = voxels.grid().dims;
+    auto word_at = [&](const Index3& w) {  // w in words of the whole grid, inside it
+        const uint64_t brick =
+            uint64_t(w[0] / words_per_axis) +
+            uint64_t(bricks[0]) * (uint64_t(w[1] / words_per_axis) +
+                                   uint64_t(bricks[1]) * uint64_t(w[2] / words_per_axis));
+        const uint64_t* words = voxels.brick_blocks(brick);
+        if (!words) return uint64_t(0);
+        return words[(w[0] % words_per_axis) +
+                     words_per_axis *
+                         ((w[1] % words_per_axis) + words_per_axis * (w[2] % words_per_axis))];
+    };
+    for (uint64_t brick : voxels.brick_indices()) {
+        const Index3 b = {int64_t(brick % uint64_t(bricks[0])),
+                          int64_t(brick / uint64_t(bricks[0]) % uint64_t(bricks[1])),
+                          int64_t(brick / (uint64_t(bricks[0]) * uint64_t(bricks[1])))};
+        const uint64_t* words = voxels.brick_blocks(brick);
+        size_t i = 0;
+        for (int64_t wz = 0; wz < words_per_axis; ++wz)
+            for (int64_t wy = 0; wy < words_per_axis; ++wy)
+                for (int64_t wx = 0; wx < words_per_axis; ++wx, ++i) {
+                    if (words[i] == 0) continue;
+                    const Index3 w = {b[0] * words_per_axis + wx, b[1] * words_per_axis + wy,
+                                      b[2] * words_per_axis + wz};
+                    bool border = words[i] != ~uint64_t(0);
+                    for (int a = 0; a < 3 && !border; ++a)
+                        for (int64_t step : {-1, 1}) {
+                            Index3 beside = w;
+                            beside[a] += step;
+                            if (beside[a] < 0 || beside[a] * word >= n[a]) continue;
+                            if (word_at(beside) != ~uint64_t(0)) border = true;
+                        }
+                    if (border) f(Index3{w[0] * word, w[1] * word, w[2] * word});
+                }
+    }
+}
+
+// Phase 1: the indices (bx + nbx * (by + nby * bz), increasing) of the blocks that may own part
+// of the surface.
+std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso) {
+    const Index3 nb = field.leaf_dims();  // blocks tile the grid as the leaves do
+    const auto& n = field.grid().dims;
+    std::vector<uint64_t> blocks;
+    auto add_range = [&](const Index3& lo, const Index3& hi) {  // inclusive block coordinates
+        for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (int64_t x = lo[0]; x <= hi[0]; ++x)
+                    blocks.push_back(uint64_t(x) +
+                                     uint64_t(nb[0]) *
+                                         (uint64_t(y) + uint64_t(nb[1]) * uint64_t(z)));
+    };
+    // A stored leaf reaches its own block and, through their halo, the seven below it.
+    for (uint64_t leaf : field.leaf_indices()) {
+        const Index3 l = {int64_t(leaf % uint64_t(nb[0])),
+                          int64_t(leaf / uint64_t(nb[0]) % uint64_t(nb[1])),
+                          int64_t(leaf / (uint64_t(nb[0]) * uint64_t(nb[1])))};
+        add_range({std::max<int64_t>(l[0] - 1, 0), std::max<int64_t>(l[1] - 1, 0),
+                   std::max<int64_t>(l[2] - 1, 0)},
+                  l);
+    }
+    // Changes of the inside voxels matter only when the two backgrounds lie on either side of iso.
+    // An edge with an end in the word at p is owned by a sample in [p - 1, p + 3].
+    const float background = field.background();
+    if (detail::om_inside(-background, iso) != detail::om_inside(background, iso))
+        for_each_inside_boundary(field.inside(), [&](const Index3& p) {
+            Index3 lo, hi;
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = std::max<int64_t>(p[k] - 1, 0) / kBlock;
+                hi[k] = std::min<int64_t>(p[k] + SparseVoxels::kBlock - 1, n[k] - 1) / kBlock;
+            }
+            add_range(lo, hi);
+        });
+    std::sort(blocks.begin(), blocks.end());
+    blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+    return blocks;
+}
+
+class SparseMesher {
+  public:
+    SparseMesher(const SparseField& field, float iso, detail::MeshingMethod method, const char* who)
+        : field_(field),
+          n_(field.grid().dims),
+          nb_(field.leaf_dims()),
+          iso_(iso),
+          nets_(method == detail::MeshingMethod::SurfaceNets),
+          table_(nets_ ? nullptr : detail::marching_cubes_table().data()),
+          who_(who) {}
+
+    // Phase 2 and 3 for the candidates [first, last), all of one z. Blocks are independent, so
+    // they are counted in parallel, each into its own slots.
+    Slab count(const uint64_t* first, const uint64_t* last) {
+        Slab slab;
+        slab.bz = int64_t(*first / (uint64_t(nb_[0]) * uint64_t(nb_[1])));
+        const size_t candidates = size_t(last - first);
+        slab.keys.assign(first, last);
+        slab.blocks.resize(candidates);
+        slab.vertex_count.assign(candidates * kBlockSamples, 0);
+        slab.triangle_offset.assign(candidates * kBlockSamples, 0);
+        std::vector<uint8_t> owns(candidates, 0);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates, 4), [&](const auto& range) {
+            for (size_t b = range.begin(); b != range.end(); ++b) {
+                Block& block = slab.blocks[b];
+                const uint64_t key = slab.keys[b];
+                block.origin = {int64_t(key % uint64_t(nb_[0])) * kBlock,
+                                int64_t(key / uint64_t(nb_[0]) % uint64_t(nb_[1])) * kBlock,
+                                slab.bz * kBlock};
+                for (int k = 0; k < 3; ++k) {
+                    block.box_lo[k] = std::max<int64_t>(block.origin[k] - kBelow, 0);
+                    block.box_hi[k] = std::min<int64_t>(block.origin[k] + kBlock + kAbove, n_[k]);
+                }
+                read_box(block);
+                const detail::OmField local = local_field(block);
+                uint32_t* vertices = &slab.vertex_count[b * kBlockSamples];
+                uint32_t* triangles = &slab.triangle_offset[b * kBlockSamples];
+                for_each_changing_sample(block, [&](int64_t x, int64_t y, int64_t z) {
+                    const size_t s = slot_in_block(block.origin, x, y, z);
+                    const int lx = int(x - block.box_lo[0]), ly = int(y - block.box_lo[1]),
+                              lz = int(z - block.box_lo[2]);
+                    if (nets_)
+                        detail::om_sn_count(block.box.data(), local, lx, ly, lz, &vertices[s],
+                                            &triangles[s]);
+                    else
+                        detail::om_mc_count(block.box.data(), table_, local, lx, ly, lz,
+                                            &vertices[s], &triangles[s]);
+                    owns[b] = owns[b] || vertices[s] || triangles[s];
+                });
+            }
+        });
+        // Only the blocks that own something stay.
+        size_t kept = 0;
+        for (size_t b = 0; b < candidates; ++b) {
+            if (!owns[b]) continue;
+            if (kept != b) {
+                slab.blocks[kept] = std::move(slab.blocks[b]);
+                slab.keys[kept] = slab.keys[b];
+                std::copy_n(&slab.vertex_count[b * kBlockSamples], kBlockSamples,
+                            &slab.vertex_count[kept * kBlockSamples]);
+                std::copy_n(&slab.triangle_offset[b * kBlockSamples], kBlockSamples,
+                            &slab.triangle_offset[kept * kBlockSamples]);
+            }
+            ++kept;
+        }
+        slab.blocks.resize(kept);
+        slab.keys.resize(kept);
+        slab.vertex_count.resize(kept * kBlockSamples);
+        slab.triangle_offset.resize(kept * kBlockSamples);
+        scan(slab);
+        return slab;
+    }
+
+    // Phase 4: the slab's vertices and triangles into the mesh; `below` and `above` are the
+    // slabs one block below and above it, or null. Blocks write disjoint parts of the mesh, so
+    // they are emitted in parallel.
+    void emit(const Slab& slab, const Slab* below, const Slab* above, Mesh& mesh) const {
+        std::vector<uint32_t> vertex_sample(slab.end_vertex - slab.first_vertex);
+        std::vector<float> vertex_local(3 * vertex_sample.size());
+        std::vector<uint32_t> triangles(3 * size_t(slab.end_triangle - slab.first_triangle));
+        mesh.positions.resize(slab.end_vertex);
+        struct BoxOffsets {
+            std::vector<uint32_t> vertex, triangle;
+        };
+        tbb::enumerable_thread_specific<BoxOffsets> scratch;
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(0, slab.blocks.size(), 4), [&](const auto& range) {
+                BoxOffsets& box = scratch.local();
+                for (size_t b = range.begin(); b != range.end(); ++b) {
+                    const Block& block = slab.blocks[b];
+                    // The global offsets of the box's samples that own something; one brick covers
+                    // the box, so a slot in it is the sample's index in the box.
+                    box.vertex.assign(block.box.size(), 0);
+                    box.triangle.assign(block.box.size(), 0);
+                    for (const Slab* from : {below, &slab, above})
+                        if (from) copy_offsets(*from, block, box.vertex, box.triangle);
+                    const detail::OmField local = local_field(block);
+                    detail::OmTiling tiling{};
+                    tiling.size = std::max({local.n[0], local.n[1], local.n[2]});
+                    tiling.count[0] = tiling.count[1] = tiling.count[2] = 1;
+                    const uint32_t box_base[1] = {0};
+                    for_each_changing_sample(block, [&](int64_t x, int64_t y, int64_t z) {
+                        const int lx = int(x - block.box_lo[0]), ly = int(y - block.box_lo[1]),
+                                  lz = int(z - block.box_lo[2]);
+                        if (nets_)
+                            detail::om_sn_emit(block.box.data(), local, lx, ly, lz, tiling,
+                                               box_base, box.vertex.data(), box.triangle.data(),
+                                               slab.first_vertex, slab.first_triangle,
+                                               vertex_sample.data(), vertex_local.data(),
+                                               triangles.data());
+                        else
+                            detail::om_mc_emit(block.box.data(), table_, local, lx, ly, lz, tiling,
+                                               box_base, box.vertex.data(), box.triangle.data(),
+                                               slab.first_vertex, slab.first_triangle,
+                                               vertex_sample.data(), vertex_local.data(),
+                                               triangles.data());
+                        // The sample's vertex records as world positions.
+                        const size_t s = b * kBlockSamples + slot_in_block(block.origin, x, y, z);
+                        const uint32_t first = slab.vertex_offset[s];
+                        for (uint32_t v = first; v < first + slab.vertex_count[s]; ++v)
+                            mesh.positions[v] = detail::vertex_position(
+                                field_.grid(), {uint64_t(x), uint64_t(y), uint64_t(z)},
+                                &vertex_local[3 * size_t(v - slab.first_vertex)]);
+                    });
+                }
+            });
+        for (size_t t = 0; t < triangles.size(); t += 3)
+            mesh.triangles.push_back({triangles[t], triangles[t + 1], triangles[t + 2]});
+    }
+
+  private:
+    // Calls f(x, y, z) for the block's samples whose cell corners are not all on one side of iso:
+    // the others own nothing (their edges are edges of that cell, or do not exist), and they are
+    // most of a block. The corners' sides are packed a bit per x in a row per (y, z), so a row of
+    // cells is tested at once. Corners beyond the grid repeat the last sample: they change
+    // nothing, as edges and cells beyond the grid do not exist.
+    template <typename F>
+    void for_each_changing_sample(const Block& block, F f) const {
+        const Index3 &o = block.origin, &lo = block.box_lo, &hi = block.box_hi;
+        const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1];
+        auto row = [&](int64_t y, int64_t z) {  // box-local, clamped to the box
+            y = std::min(y, wy - 1);
+            z = std::min(z, hi[2] - lo[2] - 1);
+            const float* values = &block.box[size_t(wx * (y + wy * z))];
+            uint32_t bits = 0;
+            for (int64_t x = 0; x < wx; ++x) bits |= uint32_t(values[x] < iso_) << x;
+            return bits | ((bits >> (wx - 1)) & 1u) << wx;
+        };
+        const int64_t x0 = o[0] - lo[0], y0 = o[1] - lo[1], z0 = o[2] - lo[2];
+        const int64_t ex = std::min<int64_t>(kBlock, n_[0] - o[0]),
+                      ey = std::min<int64_t>(kBlock, n_[1] - o[1]),
+                      ez = std::min<int64_t>(kBlock, n_[2] - o[2]);
+        const uint32_t block_bits = ((1u << ex) - 1u) << x0;
+        for (int64_t z = z0; z < z0 + ez; ++z)
+            for (int64_t y = y0; y < y0 + ey; ++y) {
+                const uint32_t r00 = row(y, z), r10 = row(y + 1, z), r01 = row(y, z + 1),
+                               r11 = row(y + 1, z + 1);
+                const uint32_t all = r00 & r10 & r01 & r11, any = r00 | r10 | r01 | r11;
+                uint32_t changing = ~((all & (all >> 1)) | ~(any | (any >> 1))) & block_bits;
+                while (changing) {
+                    const int x = __builtin_ctz(changing);
+                    changing &= changing - 1;
+                    f(lo[0] + x, lo[1] + y, lo[2] + z);
+                }
+            }
+    }
+
+    detail::OmField local_field(const Block& block) const {
+        detail::OmField local{};
+        for (int k = 0; k < 3; ++k) local.n[k] = int(block.box_hi[k] - block.box_lo[k]);
+        local.iso = iso_;
+        return local;
+    }
+
+    // The dense field does not hold a non-finite sample, so neither may the meshed one; every
+    // stored sample lies in the box of its own leaf's block, which is a candidate.
+    void read_box(Block& block) const {
+        block.box.resize(
+            size_t((block.box_hi[0] - block.box_lo[0]) * (block.box_hi[1] - block.box_lo[1]) *
+                   (block.box_hi[2] - block.box_lo[2])));
+        field_.copy_box(block.box_lo, block.box_hi, block.box.data());
+        for (float value : block.box)
+            if (!std::isfinite(value))
+                throw InputError(std::string(who_) + ": a sample of the field near voxel (" +
+                                 std::to_string(block.origin[0]) + ", " +
+                                 std::to_string(block.origin[1]) + ", " +
+                                 std::to_string(block.origin[2]) + ") is not finite");
+    }
+
+    // Phase 3: the slab's counts become offsets, walking its samples in global order (z, then
+    // y, then x over the whole grid): layer by layer, each row of blocks row by row, and each
+    // row of samples across the blocks.
+    void scan(Slab& slab) {
+        slab.first_vertex = uint32_t(vertices_);
+        slab.first_triangle = uint32_t(triangles_);
+        slab.vertex_offset.resize(slab.vertex_count.size());
+        const int64_t z0 = slab.bz * kBlock;
+        for (int64_t lz = 0; lz < std::min<int64_t>(kBlock, n_[2] - z0); ++lz)
+            for (size_t row = 0; row < slab.blocks.size();) {
+                size_t row_end = row;
+                const int64_t y0 = slab.blocks[row].origin[1];
+                while (row_end < slab.blocks.size() && slab.blocks[row_end].origin[1] == y0)
+                    ++row_end;
+                for (int64_t ly = 0; ly < std::min<int64_t>(kBlock, n_[1] - y0); ++ly)
+                    for (size_t b = row; b < row_end; ++b) {
+                        const int64_t x0 = slab.blocks[b].origin[0];
+                        const size_t s = b * kBlockSamples + size_t(kBlock * (ly + kBlock * lz));
+                        for (int64_t lx = 0; lx < std::min<int64_t>(kBlock, n_[0] - x0); ++lx) {
+                            slab.vertex_offset[s + lx] = uint32_t(vertices_);
+                            vertices_ += slab.vertex_count[s + lx];
+                            const uint32_t triangles = slab.triangle_offset[s + lx];
+                            slab.triangle_offset[s + lx] = uint32_t(triangles_);
+                            triangles_ += triangles;
+                        }
+                    }
+                row = row_end;
+            }
+        detail::check_mesh_indices(vertices_, "vertices");
+        detail::check_mesh_indices(triangles_, "triangles");
+        detail::check_meshing_memory(slab.vertex_count.size(), vertices_, triangles_, who_);
+        slab.end_vertex = uint32_t(vertices_);
+        slab.end_triangle = uint32_t(triangles_);
+    }
+
+    // The offsets of the samples of `from`'s blocks that lie in `block`'s box.
+    void copy_offsets(const Slab& from, const Block& block, std::vector<uint32_t>& box_vertex,
+                      std::vector<uint32_t>& box_triangle) const {
+        const Index3& lo = block.box_lo;
+        const Index3& hi = block.box_hi;
+        const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1];
+        for (int64_t by = lo[1] / kBlock; by <= (hi[1] - 1) / kBlock; ++by)
+            for (int64_t bx = lo[0] / kBlock; bx <= (hi[0] - 1) / kBlock; ++bx) {
+                const uint64_t key =
+                    uint64_t(bx) +
+                    uint64_t(nb_[0]) * (uint64_t(by) + uint64_t(nb_[1]) * uint64_t(from.bz));
+                const auto it = std::lower_bound(from.keys.begin(), from.keys.end(), key);
+                if (it == from.keys.end() || *it != key) continue;
+                const size_t b = size_t(it - from.keys.begin());
+                const Index3& o = from.blocks[b].origin;
+                for (int64_t z = std::max(lo[2], o[2]); z < std::min(hi[2], o[2] + kBlock); ++z)
+                    for (int64_t y = std::max(lo[1], o[1]); y < std::min(hi[1], o[1] + kBlock); ++y)
+                        for (int64_t x = std::max(lo[0], o[0]); x < std::min(hi[0], o[0] + kBlock);
+                             ++x) {
+                            const size_t s = b * kBlockSamples + slot_in_block(o, x, y, z);
+                            const size_t at =
+                                size_t((x - lo[0]) + wx * ((y - lo[1]) + wy * (z - lo[2])));
+                            box_vertex[at] = from.vertex_offset[s];
+                            box_triangle[at] = from.triangle_offset[s];
+                        }
+            }
+    }
+
+    const SparseField& field_;
+    const std::array<int64_t, 3> n_, nb_;
+    const float iso_;
+    const bool nets_;
+    const uint8_t* table_;
+    const char* who_;
+    uint64_t vertices_ = 0, triangles_ = 0;
+};
+
+Mesh mesh_sparse(const SparseField& field, float iso, detail::MeshingMethod method,
+                 const ProgressCallback& callback) {
+    const char* who =
+        method == detail::MeshingMethod::SurfaceNets ? "surface_nets" : "marching_cubes";
+    if (!std::isfinite(iso)) throw InputError(std::string(who) + ": the iso value is not finite");
+    detail::ProgressPhases progress(callback, who);
+    const detail::MeshingPhases phases = detail::add_meshing_phases(progress);
+    Mesh mesh;
+    const auto& n = field.grid().dims;
+    if (n[0] < 2 || n[1] < 2 || n[2] < 2) {  // no cells
+        progress.finish();
+        return mesh;
+    }
+
+    // Phase 1: candidates.
+    const std::vector<uint64_t> candidates = candidate_blocks(field, iso);
+    progress.report(phases.scan, 1, 1);
+
+    // Phases 2 to 4, a slab at a time: slab i is emitted once slab i + 1 is counted.
+    SparseMesher mesher(field, iso, method, who);
+    const uint64_t per_slab = uint64_t(field.leaf_dims()[0]) * uint64_t(field.leaf_dims()[1]);
+    const uint64_t* next = candidates.data();
+    const uint64_t* end = next + candidates.size();
+    auto count_next = [&]() -> std::optional<Slab> {
+        if (next == end) return std::nullopt;
+        const uint64_t* last = next;
+        while (last != end && *last / per_slab == *next / per_slab) ++last;
+        Slab slab = mesher.count(next, last);
+        next = last;
+        progress.report(phases.count, uint64_t(next - candidates.data()), candidates.size());
+        return slab;
+    };
+    std::optional<Slab> below, current = count_next();
+    while (current) {
+        std::optional<Slab> following = count_next();
+        mesher.emit(*current, below && below->bz + 1 == current->bz ? &*below : nullptr,
+                    following && following->bz == current->bz + 1 ? &*following : nullptr, mesh);
+        progress.report(phases.emit, uint64_t(next - candidates.data()), candidates.size());
+        below = std::move(current);
+        current = std::move(following);
+    }
+    progress.finish();
+    return mesh;
+}
+
+}  // namespace
+
+Mesh surface_nets(const SparseField& field, float iso, const ProgressCallback& progress) {
+    return mesh_sparse(field, iso, detail::MeshingMethod::SurfaceNets, progress);
+}
+
+Mesh marching_cubes(const SparseField& field, float iso, const ProgressCallback& progress) {
+    return mesh_sparse(field, iso, detail::MeshingMethod::MarchingCubes, progress);
+}
+
+}  // namespace oclvox
