@@ -10,13 +10,14 @@ again, so a machine whose speed drifts slows every column alike), and reports th
   - oclvox sdf MESH -r R --band B -o X.vdb       whole process, and its own "field" time;
   - OpenVDB FloatGrid.createLevelSetFromPolygons  the call alone, same voxel size, sample
                                                   positions and half width;
-  - oclvox mesh X.npy --mesher surface-nets / marching-cubes: the "mesh" time of the field oclvox
-    wrote, and the whole process;
-  - OpenVDB convertToPolygons (volumeToMesh) of that same field, read from oclvox's .vdb;
+  - oclvox mesh X.vdb --mesher surface-nets / marching-cubes: the "mesh" time of the level set
+    oclvox wrote (read sparse, meshed on the host's cores), and the whole process;
+  - OpenVDB convertToPolygons (volumeToMesh) of that same .vdb;
   - scikit-image measure.marching_cubes of that same field, read from oclvox's .npy.
 Peers that are not installed (Debian python3-openvdb, python3-skimage) are named and skipped.
-OpenVDB runs on all the cores this process may use (TBB), oclvox on its OpenCL device (PoCL
-uses the same cores), scikit-image on one core.
+OpenVDB runs on all the cores this process may use (TBB), oclvox's distance field on its OpenCL
+device (PoCL uses the same cores) and its sparse meshing on the host's cores (TBB), scikit-image
+on one core.
 """
 import argparse
 import json
@@ -130,7 +131,7 @@ def main():
                         points, triangles=triangles, transform=xf, halfWidth=args.band))
                     t["vdb_ls"].append(seconds)
                 for mesher, key in (("surface-nets", "sn"), ("marching-cubes", "mc")):
-                    seconds, out = run_timed([args.oclvox, "mesh", npy, "-o", ply, "--mesher",
+                    seconds, out = run_timed([args.oclvox, "mesh", vdb, "-o", ply, "--mesher",
                                               mesher, "--quiet", "--stats"])
                     t[key + "_proc"].append(seconds)
                     t[key].append(stat_seconds(out, "mesh"))
@@ -160,10 +161,11 @@ def main():
                      f"{cell(m['vdb_ls'])} | {cell(m['sn'])} | {cell(m['mc'])} | "
                      f"{cell(m['vdb_mesh'])} | {cell(m['skimage'])} |")
     table.append("")
-    table.append("oclvox meshing columns are the mesh phase of `oclvox mesh field.npy`; its whole "
-                 "processes took " + ", ".join(
+    table.append("oclvox meshing columns are the mesh phase of `oclvox mesh field.vdb` (the same "
+                 "file OpenVDB meshes, read sparse); its whole processes took " + ", ".join(
                      f"{res}: SN {cell(m['sn_proc'])} / MC {cell(m['mc_proc'])}"
-                     for res, _, m in rows) + " s (reading the dense .npy included).")
+                     for res, _, m in rows) + " s (reading the .vdb and writing the .ply "
+                 "included).")
     text = "\n".join(table)
     print(text)
     if args.out:

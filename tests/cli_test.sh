@@ -375,6 +375,40 @@ EOF_PY
 [[ "$verdict" == ok* ]] &&
     pass "csg: sparse narrow band equals the dense full grid in the band; .vdb holds it ($verdict)" ||
     fail "csg: sparse narrow band vs dense full grid" "$verdict"
+# .vdb level sets are read sparse: the sdf's .vdb meshes to the very file `sdf --mesh` wrote, and
+# two .vdb fields on the csg's grid combine to the very samples the csg of the meshes gave.
+run sdf "$MESH" -r 32 -q -o "$WORK/level_set.vdb" --mesh "$WORK/level_set_direct.obj"
+run mesh "$WORK/level_set.vdb" -o "$WORK/level_set_read.obj"
+if [ "$RC" -eq 0 ] && cmp -s "$WORK/level_set_direct.obj" "$WORK/level_set_read.obj" &&
+    grep -qE 'level set' <<<"$OUT"; then
+    pass "mesh of a .vdb level set equals sdf --mesh byte for byte"
+else
+    fail "mesh of a .vdb level set" "rc=$RC out=$OUT err=$ERR"
+fi
+grid_of() {  # --origin X,Y,Z --voxel-size H --dims NX,NY,NZ of a .npy sidecar
+    python3 -c "
+import json, sys
+s = json.load(open(sys.argv[1]))
+print('--origin', ','.join(repr(v) for v in s['origin']), '--voxel-size', repr(s['voxel_size']),
+      '--dims', ','.join(str(v) for v in s['dims']))" "$1"
+}
+read -r -a csg_grid <<<"$(grid_of "$WORK/csg_narrow.npy.json")"
+"$OCLVOX" sdf "$MESH" "${csg_grid[@]}" -q -o "$WORK/csg_a.vdb"
+"$OCLVOX" sdf "$WORK/spot_moved.obj" "${csg_grid[@]}" -q -o "$WORK/csg_b.vdb"
+run csg "$WORK/csg_a.vdb" difference "$WORK/csg_b.vdb" -q -o "$WORK/csg_of_vdbs.npy"
+if [ "$RC" -eq 0 ] && python3 -c "
+import sys
+a, b = (open(p, 'rb').read() for p in sys.argv[1:3])
+sys.exit(a != b)" "$WORK/csg_narrow.npy" "$WORK/csg_of_vdbs.npy"; then
+    pass "csg of two .vdb level sets equals the csg of their meshes sample for sample"
+else
+    fail "csg of two .vdb level sets" "rc=$RC err=$ERR"
+fi
+expect_failure "csg of a .npy and a .vdb field" "$WORK/mixed.npy" 'two \.npy fields or two \.vdb' \
+    csg "$WORK/csg_narrow.npy" union "$WORK/csg_a.vdb" -o "$WORK/mixed.npy"
+printf 'not a vdb' >"$WORK/not_vdb.vdb"
+expect_failure "mesh of a file that is not a .vdb" "$WORK/from_not_vdb.obj" 'not_vdb\.vdb.*not a readable' \
+    mesh "$WORK/not_vdb.vdb" -o "$WORK/from_not_vdb.obj"
 [ "${csg_faces[union]}" != "${csg_faces[intersection]}" ] &&
     pass "csg union and intersection differ (${csg_faces[union]} vs ${csg_faces[intersection]} faces)" ||
     fail "csg union equals intersection" "${csg_faces[union]} faces"

@@ -3,6 +3,7 @@
 // projection-or-edges formulation).
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/SignedFloodFill.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -988,6 +989,141 @@ TEST(SparseSdf, FilesEqualTheDenseFieldsFiles) {
         std::remove(path.c_str());
     std::remove((sparse_npy + ".json").c_str());
     std::remove((dense_npy + ".json").c_str());
+}
+
+// ---- level sets read from .vdb ------------------------------------------------------------------
+
+TEST(LevelSetFiles, OurVdbReadsBackToTheSameGridAndSamples) {
+    // write_field keeps the grid in metadata and the signs by flood fill, so reading back gives
+    // the same dense samples (and so the same meshes), whatever leaves had no band sample.
+    for (const SparseCase& c : sparse_cases()) {
+        if (std::string(c.name) == "random") continue;  // open: no flood-fill signs to keep
+        SCOPED_TRACE(c.name);
+        const SparseField field = signed_distance_sparse_reference(c.mesh, c.grid, band(2.5));
+        const std::string path = temp_path("read_back.vdb");
+        write_field(path, field);
+        const SparseField read = read_sparse_field(path);
+        EXPECT_TRUE(same_grid(read.grid(), c.grid));
+        EXPECT_EQ(read.background(), field.background());
+        EXPECT_LE(read.leaf_count(), field.leaf_count());
+        expect_identical(read.to_dense(), field.to_dense());
+        std::remove(path.c_str());
+    }
+}
+
+// A level set OpenVDB made itself, at negative indices, with a translation that is not a multiple
+// of the voxel: every sample of the field read is the grid's value at the same world position,
+// the tree lies inside the grid with an outside border, and the surface meshes closed.
+TEST(LevelSetFiles, ForeignLevelSetSamplesAreOpenVdbsValuesAtTheSamePlaces) {
+    openvdb::initialize();
+    const double voxel = 0.37;
+    auto vdb = openvdb::FloatGrid::create(float(3 * voxel));
+    vdb->setTransform(openvdb::math::Transform::createLinearTransform(voxel));
+    vdb->transform().postTranslate(openvdb::Vec3d(-5.11, 2.03, 7.5));
+    vdb->setGridClass(openvdb::GRID_LEVEL_SET);
+    vdb->setName("surface");
+    // A sphere of radius 8.1 (22 voxels, so its inside holds whole tiles) at world (-9, 1, 3):
+    // index centre about (-10.5, -2.8, -12.2).
+    const openvdb::Vec3d centre(-9.0, 1.0, 3.0);
+    const double radius = 8.1;
+    auto access = vdb->getAccessor();
+    for (int k = -40; k < 20; ++k)
+        for (int j = -30; j < 30; ++j)
+            for (int i = -40; i < 20; ++i) {
+                const openvdb::Coord at(i, j, k);
+                const double d = (vdb->indexToWorld(at) - centre).length() - radius;
+                if (std::abs(d) < 3 * voxel) access.setValue(at, float(d));
+            }
+    openvdb::tools::signedFloodFill(vdb->tree());
+    const std::string path = temp_path("foreign.vdb");
+    {
+        openvdb::io::File file(path);
+        file.write({vdb});
+    }
+    const SparseField field = read_sparse_field(path);
+    const Grid& g = field.grid();
+    EXPECT_NEAR(g.voxel_size, voxel, 1e-15);
+    EXPECT_EQ(field.background(), vdb->background());
+    const auto read = vdb->getConstAccessor();
+    size_t negative = 0;
+    for (int64_t k = 0; k < g.dims[2]; ++k)
+        for (int64_t j = 0; j < g.dims[1]; ++j)
+            for (int64_t i = 0; i < g.dims[0]; ++i) {
+                const openvdb::Vec3d world(g.origin[0] + (double(i) + 0.5) * voxel,
+                                           g.origin[1] + (double(j) + 0.5) * voxel,
+                                           g.origin[2] + (double(k) + 0.5) * voxel);
+                const openvdb::Vec3d index = vdb->worldToIndex(world);
+                const openvdb::Coord at(int(std::lround(index[0])), int(std::lround(index[1])),
+                                        int(std::lround(index[2])));
+                ASSERT_NEAR((index - at.asVec3d()).length(), 0.0, 1e-9);
+                ASSERT_EQ(field.at(i, j, k), read.getValue(at)) << i << " " << j << " " << k;
+                negative += field.at(i, j, k) < 0;
+            }
+    EXPECT_GT(negative, 1000u);  // the inside tiles became inside voxels
+    EXPECT_EQ(border_samples_inside(field), 0u);
+    openvdb::CoordBBox active = vdb->evalActiveVoxelBoundingBox();
+    EXPECT_GE(uint64_t(g.dims[0]), uint64_t(active.dim()[0]) + 2);
+    const test::Topology t = test::topology(marching_cubes(field));
+    EXPECT_TRUE(t.closed_and_oriented);
+    EXPECT_EQ(t.components, 1);
+    std::remove(path.c_str());
+}
+
+TEST(LevelSetFiles, FilesThatAreNotNarrowBandLevelSetsAreInputErrorsNamingTheFile) {
+    openvdb::initialize();
+    auto expect_refused = [](const std::string& path, const std::string& why) {
+        try {
+            read_sparse_field(path);
+            ADD_FAILURE() << why << ": no error";
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+        }
+    };
+    expect_refused(temp_path("field.npy"), "not a .vdb");
+    const std::string garbage = temp_path("garbage.vdb");
+    std::ofstream(garbage) << "not a vdb file at all";
+    expect_refused(garbage, "garbage");
+    expect_refused(temp_path("missing.vdb"), "missing");
+
+    auto write = [](const std::string& path, const openvdb::GridBase::Ptr& grid) {
+        openvdb::io::File file(path);
+        file.write({grid});
+    };
+    auto level_set = [] {
+        auto g = openvdb::FloatGrid::create(1.0f);
+        g->setGridClass(openvdb::GRID_LEVEL_SET);
+        g->tree().setValueOn(openvdb::Coord(3, 4, 5), -0.5f);
+        return g;
+    };
+    const std::string path = temp_path("bad.vdb");
+    auto fog = level_set();
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    write(path, fog);
+    expect_refused(path, "a fog volume");
+    auto tiles = level_set();
+    tiles->tree().addTile(1, openvdb::Coord(128, 0, 0), -1.0f, true);
+    write(path, tiles);
+    expect_refused(path, "an active tile");
+    auto rotated = level_set();
+    openvdb::math::Transform::Ptr transform = openvdb::math::Transform::createLinearTransform(0.5);
+    transform->postRotate(0.3, openvdb::math::Z_AXIS);
+    rotated->setTransform(transform);
+    write(path, rotated);
+    expect_refused(path, "a rotated transform");
+    auto nan = level_set();
+    nan->tree().setValueOn(openvdb::Coord(3, 4, 6), NAN);
+    write(path, nan);
+    expect_refused(path, "a NaN");
+    auto negative = openvdb::FloatGrid::create(-1.0f);
+    negative->setGridClass(openvdb::GRID_LEVEL_SET);
+    negative->tree().setValueOn(openvdb::Coord(1, 1, 1), 0.5f);
+    write(path, negative);
+    expect_refused(path, "a negative background");
+    auto empty = openvdb::FloatGrid::create(1.0f);
+    empty->setGridClass(openvdb::GRID_LEVEL_SET);
+    write(path, empty);
+    expect_refused(path, "no leaves");
+    for (const auto& p : {garbage, path}) std::remove(p.c_str());
 }
 
 TEST(SparseField, BoxesAndSamplesReadTheLeavesAndTheInsideVoxels) {

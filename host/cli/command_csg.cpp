@@ -1,5 +1,5 @@
 // `oclvox csg`: union, intersection or difference of two meshes (through their signed distance
-// fields on one grid) or of two .npy fields.
+// fields on one grid) or of two fields: .npy (dense) or .vdb level sets (sparse).
 #include "commands.hpp"
 #include "field_commands.hpp"
 #include "interrupt.hpp"
@@ -13,14 +13,15 @@ void add_options(CLI::App& command, FieldArgs& args) {
     command
         .add_option("a", args.input,
                     std::string("first mesh file (") + kMeshFormatsText +
-                        "; - reads stdin), or a .npy signed distance field")
+                        "; - reads stdin), or a signed distance field: .npy, or a .vdb level "
+                        "set (combined sparse, leaf by leaf)")
         ->type_name("A")
         ->required();
     command.add_option("op", args.op, "union, intersection or difference (A minus B)")
         ->type_name("OP")
         ->check(CLI::IsMember({"union", "intersection", "difference"}))
         ->required();
-    command.add_option("b", args.input_b, "second mesh file, or a .npy field on A's grid")
+    command.add_option("b", args.input_b, "second mesh file, or a field of A's kind on A's grid")
         ->type_name("B")
         ->required();
     command
@@ -57,17 +58,31 @@ int run(const FieldArgs& args) {
         throw UsageError("--input-format applies to stdin (-) only; A and B are files");
     const bool fields_in = is_field_path(args.input) && is_field_path(args.input_b);
     if (!fields_in && (is_field_path(args.input) || is_field_path(args.input_b)))
-        throw UsageError("csg takes two meshes or two .npy fields, not one of each");
+        throw UsageError("csg takes two meshes or two fields, not one of each");
+    const bool level_sets_in = fields_in && is_sparse_field_path(args.input);
+    if (fields_in && level_sets_in != is_sparse_field_path(args.input_b))
+        throw UsageError("csg takes two .npy fields or two .vdb level sets, not one of each");
     if (fields_in && any_given(args.grid_options))
-        throw UsageError("grid options do not apply to .npy field inputs (their grids are used)");
+        throw UsageError("grid options do not apply to field inputs (their grids are used)");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
     // Phase 2: both operands as fields on one grid, combined: .npy fields and full grids dense,
-    // narrow bands of meshes sparse (and meshed sparse).
+    // .vdb level sets and narrow bands of meshes sparse (and meshed sparse).
     oclvox::ScalarField combined;
     std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::Device> device;
-    if (fields_in) {
+    if (level_sets_in) {
+        record.inputs.resize(2);
+        std::optional<oclvox::SparseField> a, b;
+        timed(record.seconds.load, [&] {
+            a = read_sparse_field_input(args.input, record.inputs[0]);
+            b = read_sparse_field_input(args.input_b, record.inputs[1]);
+            return 0;
+        });
+        record.grid = a->grid();
+        sparse = oclvox::csg(*a, *b, op);
+        stop_if_interrupted();
+    } else if (fields_in) {
         record.inputs.resize(2);
         std::optional<oclvox::ScalarField> a, b;
         timed(record.seconds.load, [&] {
@@ -150,7 +165,7 @@ int run(const FieldArgs& args) {
 
 Command add_csg_command(CLI::App& app) {
     CLI::App* command = app.add_subcommand(
-        "csg", "union, intersection or difference of two meshes (or two .npy fields)");
+        "csg", "union, intersection or difference of two meshes (or two .npy or .vdb fields)");
     command->footer(
         std::string(kExitCodesText) +
         "Both signed distance fields are computed on one grid fitted to both meshes and\n"

@@ -12,7 +12,8 @@ namespace {
 void add_options(CLI::App& command, FieldArgs& args) {
     command
         .add_option("input", args.input,
-                    std::string("a .npy scalar field (with its .json sidecar), meshed at --iso; "
+                    std::string("a .npy scalar field (with its .json sidecar) or a .vdb level "
+                                "set (read and meshed sparse, on the host), meshed at --iso; "
                                 "or a mesh file (") +
                         kMeshFormatsText +
                         "; - reads stdin), which is voxelized (mode solid, on the grid options' "
@@ -56,15 +57,21 @@ int run(const FieldArgs& args) {
     check_reporting(args.reporting, {args.input}, {args.output});
     const bool field_in = is_field_path(args.input);
     if (field_in && any_given(args.grid_options))
-        throw UsageError("grid options do not apply to a .npy field input (its grid is used)");
+        throw UsageError("grid options do not apply to a field input (its grid is used)");
     if (field_in && !args.files.input_format.empty())
         throw UsageError("--input-format applies to a mesh read from stdin (-) only");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the field, read or made from the mesh's solid voxels.
+    // Phase 2: the field, read (a level set sparse) or made from the mesh's solid voxels.
     std::optional<oclvox::ScalarField> field;
+    std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::Device> device;
-    if (field_in) {
+    if (is_sparse_field_path(args.input)) {
+        record.inputs.resize(1);
+        sparse = timed(record.seconds.load,
+                       [&] { return read_sparse_field_input(args.input, record.inputs[0]); });
+        stop_if_interrupted();
+    } else if (field_in) {
         record.inputs.resize(1);
         field = timed(record.seconds.load,
                       [&] { return read_field_input(args.input, record.inputs[0]); });
@@ -97,7 +104,8 @@ int run(const FieldArgs& args) {
 
     // Phase 3: the surface, the file, the report.
     const oclvox::Mesh surface = timed(record.seconds.mesh, [&] {
-        return extract_surface(device, *field, args, float(args.iso));
+        return sparse ? extract_surface(*sparse, args, float(args.iso))
+                      : extract_surface(device, *field, args, float(args.iso));
     });
     stop_if_interrupted();
     timed(record.seconds.write, [&] {
@@ -108,11 +116,12 @@ int run(const FieldArgs& args) {
     record.seconds.total = seconds_since(start);
 
     record.outputs = {args.output};
-    record.grid = field->grid;
+    record.grid = sparse ? sparse->grid() : field->grid;
     if (device) record.device = device->info();
     record_field_settings(record, args);
     record.mesh_made = {{surface.triangles.size(), surface.positions.size()}};
-    record.border_inside = oclvox::border_samples_inside(*field, float(args.iso));
+    record.border_inside = sparse ? oclvox::border_samples_inside(*sparse, float(args.iso))
+                                  : oclvox::border_samples_inside(*field, float(args.iso));
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }
@@ -121,7 +130,9 @@ int run(const FieldArgs& args) {
 
 Command add_mesh_command(CLI::App& app) {
     CLI::App* command = app.add_subcommand(
-        "mesh", "mesh the iso-surface of a .npy field, or remesh a mesh through a voxel field");
+        "mesh",
+        "mesh the iso-surface of a .npy or .vdb field, or remesh a mesh through a voxel "
+        "field");
     command->footer(std::string(kExitCodesText) +
                     "A mesh INPUT is voxelized (mode solid) and meshed via occupancy_to_field.\n"
                     "Example: oclvox mesh bunny.npy --iso 0 -o bunny.ply --mesher marching-cubes");

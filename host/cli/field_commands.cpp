@@ -53,7 +53,11 @@ void add_distance_options(CLI::App& command, FieldArgs& args) {
 }
 
 bool is_field_path(const std::string& path) {
-    return oclvox::detail::lowercase_extension(path) == ".npy";
+    return oclvox::detail::lowercase_extension(path) == ".npy" || is_sparse_field_path(path);
+}
+
+bool is_sparse_field_path(const std::string& path) {
+    return oclvox::detail::lowercase_extension(path) == ".vdb";
 }
 
 bool is_mesh_output(const std::string& path, const FileArgs& files) {
@@ -170,6 +174,12 @@ oclvox::ScalarField read_field_input(const std::string& path, InputRecord& recor
     record = {path, occupancy ? "occupancy" : "field", 0};
     if (occupancy) return oclvox::occupancy_to_field(std::get<oclvox::SparseVoxels>(data));
     return std::get<oclvox::ScalarField>(std::move(data));
+}
+
+oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record) {
+    if (path == "-") throw UsageError("a .vdb field cannot be read from stdin");
+    record = {path, "level set", 0};
+    return oclvox::read_sparse_field(path);
 }
 
 void record_field_settings(RunRecord& record, const FieldArgs& args) {

@@ -36,7 +36,9 @@ void add_distance_options(CLI::App& command, FieldArgs& args);
 // sdf and csg pad fitted grids by default (field_fit): say so in their --pad help.
 void describe_field_padding(const std::vector<CLI::Option*>& grid_options);
 
+// A field file: .npy (dense) or .vdb (a level set, read sparse).
 bool is_field_path(const std::string& path);
+bool is_sparse_field_path(const std::string& path);
 bool is_mesh_output(const std::string& path, const FileArgs& files);
 
 // The grid fit of sdf and csg: a fitted grid gets field_padding(band) voxels on every side, so the
@@ -76,6 +78,8 @@ void write_field_output(const std::string& path, const oclvox::SparseField& fiel
 // A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
 // occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record);
+// A .vdb level set as a sparse field (read_sparse_field); the record's kind is "level set".
+oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record);
 
 // The settings every field command reports.
 void record_field_settings(RunRecord& record, const FieldArgs& args);

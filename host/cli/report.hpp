@@ -30,7 +30,7 @@ auto timed(double& seconds, F&& work) {
 // One input as the report names it.
 struct InputRecord {
     std::string path;
-    std::string kind;        // "mesh", "field" or "occupancy" (a .npy from voxelize)
+    std::string kind;        // "mesh", "field", "occupancy" (a .npy from voxelize), "level set"
     uint64_t triangles = 0;  // meshes only
 };
 

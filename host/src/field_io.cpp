@@ -463,4 +463,10 @@ ScalarField read_field(const std::string& path) {
     return std::get<ScalarField>(std::move(data));
 }
 
+SparseField read_sparse_field(const std::string& path) {
+    if (detail::lowercase_extension(path) != ".vdb")
+        throw InputError("cannot read field " + path + ": only .vdb files hold sparse fields");
+    return detail::read_field_vdb(path);
+}
+
 }  // namespace oclvox

@@ -1,10 +1,15 @@
-// OpenVDB level-set output: sample (i, j, k) of the field at OpenVDB index (i, j, k), placed by
+// OpenVDB level-set files: sample (i, j, k) of the field at OpenVDB index (i, j, k), placed by
 // the shared voxel-centre transform (vdb_format.hpp). Dense and sparse fields go through the same
-// writer, which takes the field a leaf of OpenVDB's tree (8x8x8 voxels) at a time.
+// writer, which takes the field a leaf of OpenVDB's tree (8x8x8 voxels) at a time; the reader
+// turns a level set's leaves and tiles into a sparse field the same way round.
 #include "field_vdb.hpp"
 
 #include <openvdb/tools/SignedFloodFill.h>
 
+#include <algorithm>
+#include <cmath>
+
+#include "host_memory.hpp"
 #include "vdb_format.hpp"
 
 namespace oclvox::detail {
@@ -97,6 +102,311 @@ void write_field_vdb(const std::string& path, const SparseField& field, Progress
                             visit(field.leaf_origin(field.leaf_indices()[l]),
                                   field.leaf_samples(l));
                     });
+}
+
+namespace {
+
+[[noreturn]] void bad_vdb(const std::string& path, const std::string& why) {
+    throw InputError("cannot read field " + path + ": " + why);
+}
+
+// The level set to read: the grid named "sdf" (write_field's), else the only float level set.
+openvdb::FloatGrid::ConstPtr pick_level_set(const std::string& path,
+                                            const openvdb::GridPtrVec& grids) {
+    std::vector<openvdb::FloatGrid::ConstPtr> level_sets;
+    for (const openvdb::GridBase::Ptr& grid : grids) {
+        auto floats = openvdb::gridConstPtrCast<openvdb::FloatGrid>(grid);
+        if (!floats) continue;
+        if (floats->getName() == "sdf") return floats;
+        if (floats->getGridClass() == openvdb::GRID_LEVEL_SET) level_sets.push_back(floats);
+    }
+    if (level_sets.size() != 1)
+        bad_vdb(path, level_sets.empty()
+                          ? "it holds no float level set (a FloatGrid named \"sdf\" or of class "
+                            "level set)"
+                          : "it holds " + std::to_string(level_sets.size()) +
+                                " float level sets and none named \"sdf\"; which one is meant "
+                                "is unclear");
+    return level_sets[0];
+}
+
+// The grid of the field and the OpenVDB index of its voxel (0, 0, 0). Our own files say their grid
+// in metadata; for others it is the box of the leaves and inside tiles, one voxel wider (so the
+// border is outside), its low corner on a multiple of the leaf size (so leaves stay leaves).
+Grid field_grid(const std::string& path, const openvdb::FloatGrid& vdb,
+                const openvdb::CoordBBox& used, openvdb::Coord& shift) {
+    const openvdb::math::Transform& transform = vdb.transform();
+    const openvdb::Vec3d zero = transform.indexToWorld(openvdb::Vec3d(0, 0, 0));
+    const double voxel = transform.voxelSize()[0];
+    for (int a = 0; a < 3; ++a) {
+        openvdb::Vec3d step(0, 0, 0);
+        step[a] = 1;
+        const openvdb::Vec3d d = transform.indexToWorld(step) - zero;
+        for (int b = 0; b < 3; ++b)
+            if (!transform.isLinear() || !(std::abs(d[b] - (a == b ? voxel : 0.0)) <= 1e-9 * voxel))
+                bad_vdb(path,
+                        "its transform is not a uniform scale and translation (axis-aligned "
+                        "cubic voxels), which a field's grid needs");
+    }
+    if (!(voxel > 0) || !std::isfinite(voxel) || !std::isfinite(zero[0]) ||
+        !std::isfinite(zero[1]) || !std::isfinite(zero[2]))
+        bad_vdb(path, "its transform is not finite");
+
+    Grid grid;
+    grid.voxel_size = voxel;
+    const auto dims = vdb.getMetadata<openvdb::Vec3IMetadata>("oclvox_dims");
+    if (dims) {
+        shift = openvdb::Coord(0, 0, 0);
+        for (int a = 0; a < 3; ++a) grid.dims[a] = dims->value()[a];
+    } else {
+        if (used.empty()) bad_vdb(path, "its level set has no leaves, so it has no surface");
+        const int leaf = SparseField::kLeaf;
+        for (int a = 0; a < 3; ++a) {
+            const int64_t lo = int64_t(used.min()[a]) - 1, hi = int64_t(used.max()[a]) + 2;
+            const int64_t aligned = lo >= 0 ? lo / leaf * leaf : -((-lo + leaf - 1) / leaf) * leaf;
+            shift[a] = int(aligned);
+            grid.dims[a] = hi - aligned;
+        }
+    }
+    // Sample (i, j, k) sits at index (i, j, k) + shift, i.e. at world zero + (index) * voxel,
+    // which is the centre origin + (i + 0.5) * voxel of our voxel (i, j, k). Our own files keep
+    // the exact origin and voxel size, which the transform gives only up to rounding.
+    for (int a = 0; a < 3; ++a) grid.origin[a] = zero[a] + (double(shift[a]) - 0.5) * voxel;
+    const auto origin = vdb.getMetadata<openvdb::Vec3DMetadata>("oclvox_origin");
+    const auto size = vdb.getMetadata<openvdb::DoubleMetadata>("oclvox_voxel_size");
+    if (dims && origin && size) {
+        for (int a = 0; a < 3; ++a)
+            if (!(std::abs(origin->value()[a] - grid.origin[a]) <=
+                  1e-9 * (std::abs(grid.origin[a]) + voxel)) ||
+                !(std::abs(size->value() - voxel) <= 1e-9 * voxel))
+                bad_vdb(path, "its oclvox metadata does not match its transform");
+        for (int a = 0; a < 3; ++a) grid.origin[a] = origin->value()[a];
+        grid.voxel_size = size->value();
+    }
+    try {
+        validate_grid(grid);
+    } catch (const GridError& e) {
+        bad_vdb(path, e.what());
+    }
+    return grid;
+}
+
+// The bits of a 4x4x4 word whose coordinate along `axis` lies in [from, to] (0..3).
+uint64_t word_mask(int axis, int64_t from, int64_t to) {
+    uint64_t mask = 0;
+    for (int bit = 0; bit < 64; ++bit) {
+        const int64_t c = axis == 0 ? (bit & 3) : axis == 1 ? (bit >> 2 & 3) : (bit >> 4);
+        if (c >= from && c <= to) mask |= uint64_t(1) << bit;
+    }
+    return mask;
+}
+
+// Sets the voxels of the box [lo, hi) (grid voxels, clipped to the grid) in `inside`, a brick at
+// a time and a whole 4x4x4 word at a time, so a large tile costs its words, not its voxels.
+void mark_box_inside(SparseVoxels& inside, const std::array<int64_t, 3>& lo,
+                     const std::array<int64_t, 3>& hi) {
+    static const auto masks = [] {
+        std::array<std::array<std::array<uint64_t, 4>, 4>, 3> m{};
+        for (int a = 0; a < 3; ++a)
+            for (int from = 0; from < 4; ++from)
+                for (int to = from; to < 4; ++to) m[a][from][to] = word_mask(a, from, to);
+        return m;
+    }();
+    const int64_t size = inside.brick_size(), per_axis = inside.blocks_per_brick_axis();
+    const auto& dims = inside.grid().dims;
+    const std::array<int64_t, 3> bricks = inside.brick_dims();
+    std::array<int64_t, 3> first, last;  // inclusive voxels
+    for (int a = 0; a < 3; ++a) {
+        first[a] = std::max<int64_t>(lo[a], 0);
+        last[a] = std::min(hi[a], dims[a]) - 1;
+        if (last[a] < first[a]) return;
+    }
+    std::vector<uint64_t> words(inside.blocks_per_brick());
+    for (int64_t bz = first[2] / size; bz <= last[2] / size; ++bz)
+        for (int64_t by = first[1] / size; by <= last[1] / size; ++by)
+            for (int64_t bx = first[0] / size; bx <= last[0] / size; ++bx) {
+                const std::array<int64_t, 3> b = {bx, by, bz};
+                std::fill(words.begin(), words.end(), 0);
+                std::array<int64_t, 3> w_first, w_last;
+                for (int a = 0; a < 3; ++a) {
+                    w_first[a] = (std::max(first[a], b[a] * size) - b[a] * size) / 4;
+                    w_last[a] = (std::min(last[a], b[a] * size + size - 1) - b[a] * size) / 4;
+                }
+                for (int64_t wz = w_first[2]; wz <= w_last[2]; ++wz)
+                    for (int64_t wy = w_first[1]; wy <= w_last[1]; ++wy)
+                        for (int64_t wx = w_first[0]; wx <= w_last[0]; ++wx) {
+                            const std::array<int64_t, 3> w = {wx, wy, wz};
+                            uint64_t mask = ~uint64_t(0);
+                            for (int a = 0; a < 3; ++a) {
+                                const int64_t base = b[a] * size + w[a] * 4;
+                                mask &= masks[size_t(a)][size_t(std::max(first[a], base) - base)]
+                                             [size_t(std::min(last[a], base + 3) - base)];
+                            }
+                            words[size_t(wx + per_axis * (wy + per_axis * wz))] |= mask;
+                        }
+                inside.merge_brick(
+                    uint64_t(bx) +
+                        uint64_t(bricks[0]) * (uint64_t(by) + uint64_t(bricks[1]) * uint64_t(bz)),
+                    words.data());
+            }
+}
+
+}  // namespace
+
+SparseField read_field_vdb(const std::string& path) {
+    openvdb::initialize();
+    // Phase 1: the file and its level set.
+    openvdb::GridPtrVecPtr grids;
+    try {
+        openvdb::io::File file(path);
+        file.open(false);
+        grids = file.getGrids();
+        file.close();
+    } catch (const std::exception& e) {
+        bad_vdb(path, std::string("not a readable .vdb file (") + e.what() + ")");
+    }
+    const openvdb::FloatGrid::ConstPtr vdb = pick_level_set(path, *grids);
+    const openvdb::FloatTree& tree = vdb->tree();
+    const float background = vdb->background();
+    if (!(background > 0) || !std::isfinite(background))
+        bad_vdb(path, "its background " + std::to_string(background) +
+                          " is not positive and finite, as a level set's is");
+
+    // Phase 2: what the field will hold: the leaves and the tiles below zero (inside), never an
+    // active tile (a narrow band's values are all in leaves).
+    openvdb::CoordBBox used;
+    std::vector<openvdb::CoordBBox> inside_tiles;
+    for (auto it = tree.cbeginLeaf(); it; ++it) used.expand(it->getNodeBoundingBox());
+    {
+        auto tile = tree.cbeginValueAll();
+        tile.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);
+        for (; tile; ++tile) {
+            if (tile.isVoxelValue()) continue;
+            if (tile.isValueOn())
+                bad_vdb(path,
+                        "it has active tiles; a narrow-band level set keeps its values in "
+                        "leaves");
+            if (!(*tile < 0)) continue;
+            openvdb::CoordBBox box;
+            tile.getBoundingBox(box);
+            inside_tiles.push_back(box);
+            used.expand(box);
+        }
+    }
+    openvdb::Coord shift;
+    const Grid grid = field_grid(path, *vdb, used, shift);
+    auto to_grid = [&](const openvdb::Coord& c) {
+        return std::array<int64_t, 3>{int64_t(c[0]) - shift[0], int64_t(c[1]) - shift[1],
+                                      int64_t(c[2]) - shift[2]};
+    };
+
+    // Before allocating: the leaves' samples and the inside bits of the tiles within the grid.
+    uint64_t inside_voxels = 0;
+    for (const openvdb::CoordBBox& box : inside_tiles) {
+        uint64_t volume = 1;
+        const auto lo = to_grid(box.min()), hi = to_grid(box.max());
+        for (int a = 0; a < 3; ++a)
+            volume *= uint64_t(std::max<int64_t>(
+                0, std::min(hi[a] + 1, grid.dims[a]) - std::max<int64_t>(lo[a], 0)));
+        inside_voxels += volume;
+    }
+    try {
+        check_host_memory(
+            tree.leafCount() * (SparseField::kLeafSamples * sizeof(float) + 64) + inside_voxels / 8,
+            default_host_budget(), "the field's leaves and inside voxels");
+    } catch (const GridError& e) {
+        bad_vdb(path, e.what());
+    }
+
+    // Phase 3: the leaves, in our leaf order, as samples (OpenVDB stores z fastest, we x fastest)
+    // and their voxels below zero as inside voxels.
+    const std::array<int64_t, 3> leaf_dims = {
+        (grid.dims[0] + SparseField::kLeaf - 1) / SparseField::kLeaf,
+        (grid.dims[1] + SparseField::kLeaf - 1) / SparseField::kLeaf,
+        (grid.dims[2] + SparseField::kLeaf - 1) / SparseField::kLeaf};
+    std::vector<std::pair<uint64_t, const openvdb::FloatTree::LeafNodeType*>> leaves;
+    leaves.reserve(tree.leafCount());
+    for (auto it = tree.cbeginLeaf(); it; ++it) {
+        const auto o = to_grid(it->origin());
+        for (int a = 0; a < 3; ++a)
+            if (o[a] < 0 || o[a] >= grid.dims[a])
+                bad_vdb(path, "a leaf at index (" + std::to_string(it->origin()[0]) + ", " +
+                                  std::to_string(it->origin()[1]) + ", " +
+                                  std::to_string(it->origin()[2]) +
+                                  ") lies outside the grid its oclvox_dims metadata gives");
+        const int64_t leaf = SparseField::kLeaf;
+        leaves.push_back(
+            {uint64_t(o[0] / leaf) +
+                 uint64_t(leaf_dims[0]) *
+                     (uint64_t(o[1] / leaf) + uint64_t(leaf_dims[1]) * uint64_t(o[2] / leaf)),
+             it.getLeaf()});
+    }
+    std::sort(leaves.begin(), leaves.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+
+    // The inside voxels: the tiles below zero, then each leaf's voxels below zero.
+    constexpr int64_t kBrick = 32;
+    SparseVoxels inside(grid, kBrick);
+    for (const openvdb::CoordBBox& box : inside_tiles) {
+        const auto lo = to_grid(box.min()), last = to_grid(box.max());
+        mark_box_inside(inside, lo, {last[0] + 1, last[1] + 1, last[2] + 1});
+    }
+    // A leaf lies in one brick (bricks are whole leaves), so each brick's leaves are gathered
+    // into its words and merged once.
+    const std::array<int64_t, 3> bricks = inside.brick_dims();
+    std::vector<std::pair<uint64_t, size_t>> by_brick;  // (brick, position in leaves)
+    by_brick.reserve(leaves.size());
+    for (size_t l = 0; l < leaves.size(); ++l) {
+        const auto o = to_grid(leaves[l].second->origin());
+        by_brick.push_back(
+            {uint64_t(o[0] / kBrick) +
+                 uint64_t(bricks[0]) *
+                     (uint64_t(o[1] / kBrick) + uint64_t(bricks[1]) * uint64_t(o[2] / kBrick)),
+             l});
+    }
+    std::sort(by_brick.begin(), by_brick.end());
+    std::vector<uint64_t> words(inside.blocks_per_brick());
+    const int64_t per_axis = inside.blocks_per_brick_axis();
+    for (size_t i = 0; i < by_brick.size();) {
+        const uint64_t brick = by_brick[i].first;
+        std::fill(words.begin(), words.end(), 0);
+        for (; i < by_brick.size() && by_brick[i].first == brick; ++i) {
+            const openvdb::FloatTree::LeafNodeType& leaf = *leaves[by_brick[i].second].second;
+            const auto o = to_grid(leaf.origin());
+            for (int z = 0; z < SparseField::kLeaf; ++z)
+                for (int y = 0; y < SparseField::kLeaf; ++y)
+                    for (int x = 0; x < SparseField::kLeaf; ++x) {
+                        const std::array<int64_t, 3> v = {o[0] + x, o[1] + y, o[2] + z};
+                        if (v[0] >= grid.dims[0] || v[1] >= grid.dims[1] || v[2] >= grid.dims[2] ||
+                            !(leaf.getValue(openvdb::Index((x << 6) | (y << 3) | z)) < 0))
+                            continue;
+                        const int64_t lx = v[0] % kBrick, ly = v[1] % kBrick, lz = v[2] % kBrick;
+                        words[size_t(lx / 4 + per_axis * (ly / 4 + per_axis * (lz / 4)))] |=
+                            uint64_t(1) << (lx % 4 + 4 * (ly % 4 + 4 * (lz % 4)));
+                    }
+        }
+        inside.merge_brick(brick, words.data());
+    }
+
+    // Phase 4: the field.
+    SparseField field(grid, double(background) / grid.voxel_size, std::move(inside));
+    field.reserve_leaves(leaves.size());
+    float samples[SparseField::kLeafSamples];
+    for (const auto& [key, leaf] : leaves) {
+        for (int z = 0; z < SparseField::kLeaf; ++z)
+            for (int y = 0; y < SparseField::kLeaf; ++y)
+                for (int x = 0; x < SparseField::kLeaf; ++x) {
+                    const float value = leaf->getValue(openvdb::Index((x << 6) | (y << 3) | z));
+                    if (!std::isfinite(value))
+                        bad_vdb(path, "a sample of the leaf at index (" +
+                                          std::to_string(leaf->origin()[0]) + ", " +
+                                          std::to_string(leaf->origin()[1]) + ", " +
+                                          std::to_string(leaf->origin()[2]) + ") is not finite");
+                    samples[x + SparseField::kLeaf * (y + SparseField::kLeaf * z)] = value;
+                }
+        field.append_leaf(key, samples);
+    }
+    return field;
 }
 
 }  // namespace oclvox::detail

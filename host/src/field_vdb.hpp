@@ -1,4 +1,5 @@
-// The OpenVDB writer behind write_field (kept apart so only one file needs OpenVDB's headers).
+// The OpenVDB writer behind write_field and the reader behind read_sparse_field (kept apart so
+// only one file needs OpenVDB's headers).
 #pragma once
 
 #include <string>
@@ -13,5 +14,7 @@ void write_field_vdb(const std::string& path, const ScalarField& field, double b
                      ProgressPhases& progress);
 // The same from a sparse field's leaves, its band field.band_voxels().
 void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress);
+// See read_sparse_field (oclvox/sdf.hpp). Throws InputError.
+SparseField read_field_vdb(const std::string& path);
 
 }  // namespace oclvox::detail

@@ -85,6 +85,8 @@ void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
                           int64_t(brick / uint64_t(bricks[0]) % uint64_t(bricks[1])),
                           int64_t(brick / (uint64_t(bricks[0]) * uint64_t(bricks[1])))};
         const uint64_t* words = voxels.brick_blocks(brick);
+        const size_t stride[3] = {1, size_t(words_per_axis),
+                                  size_t(words_per_axis * words_per_axis)};
         size_t i = 0;
         for (int64_t wz = 0; wz < words_per_axis; ++wz)
             for (int64_t wy = 0; wy < words_per_axis; ++wy)
@@ -98,7 +100,12 @@ void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
                             Index3 beside = w;
                             beside[a] += step;
                             if (beside[a] < 0 || beside[a] * word >= n[a]) continue;
-                            if (word_at(beside) != ~uint64_t(0)) border = true;
+                            const int64_t local = (a == 0 ? wx : a == 1 ? wy : wz) + step;
+                            const uint64_t value =
+                                local >= 0 && local < words_per_axis  // in this brick
+                                    ? words[i + size_t(step) * stride[a]]
+                                    : word_at(beside);
+                            if (value != ~uint64_t(0)) border = true;
                         }
                     if (border) f(Index3{w[0] * word, w[1] * word, w[2] * word});
                 }

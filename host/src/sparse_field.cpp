@@ -68,33 +68,47 @@ void SparseField::copy_box(const std::array<int64_t, 3>& lo, const std::array<in
         if (lo[a] < 0 || lo[a] > hi[a] || hi[a] > grid_.dims[a])
             throw GridError("box [" + std::to_string(lo[a]) + ", " + std::to_string(hi[a]) +
                             ") on axis " + std::to_string(a) + " is not inside the field's grid");
-    const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1], wz = hi[2] - lo[2];
-    const size_t samples = size_t(wx) * size_t(wy) * size_t(wz);
-    if (samples == 0) return;
+    const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1];
+    if (wx == 0 || wy == 0 || hi[2] == lo[2]) return;
 
-    // Phase 1: the background, signed by the inside voxels.
-    std::vector<uint8_t> inside(samples, 0);
-    inside_.mark_box(lo, hi, {1, wx, wx * wy}, inside.data());
-    for (size_t s = 0; s < samples; ++s) out[s] = inside[s] ? -background_ : background_;
-
-    // Phase 2: the stored leaves over it, a row of leaves (fixed ly, lz) at a time: the leaves of
-    // a row are consecutive in index order, so one search finds the first of them.
+    // Leaf by leaf over the box: a stored leaf's rows are copied; elsewhere the background,
+    // signed by the inside voxels (marked only there, since leaves are most of a box near the
+    // surface). The leaves of a row (fixed ly, lz) are consecutive in index order, so one search
+    // finds the first of them.
     const auto n = leaf_dims();
+    uint8_t inside[kLeafSamples];
     for (int64_t lz = lo[2] / kLeaf; lz <= (hi[2] - 1) / kLeaf; ++lz)
         for (int64_t ly = lo[1] / kLeaf; ly <= (hi[1] - 1) / kLeaf; ++ly) {
             const uint64_t row = uint64_t(n[0]) * (uint64_t(ly) + uint64_t(n[1]) * uint64_t(lz));
-            const uint64_t last = row + uint64_t((hi[0] - 1) / kLeaf);
             auto it = std::lower_bound(leaf_keys_.begin(), leaf_keys_.end(),
                                        row + uint64_t(lo[0] / kLeaf));
-            for (; it != leaf_keys_.end() && *it <= last; ++it) {
-                const float* leaf = leaf_samples(size_t(it - leaf_keys_.begin()));
-                const int64_t ox = int64_t(*it - row) * kLeaf, oy = ly * kLeaf, oz = lz * kLeaf;
-                const int64_t x0 = std::max(lo[0], ox), x1 = std::min(hi[0], ox + kLeaf);
-                for (int64_t z = std::max(lo[2], oz); z < std::min(hi[2], oz + kLeaf); ++z)
-                    for (int64_t y = std::max(lo[1], oy); y < std::min(hi[1], oy + kLeaf); ++y)
-                        std::memcpy(out + (x0 - lo[0]) + wx * ((y - lo[1]) + wy * (z - lo[2])),
-                                    leaf + (x0 - ox) + kLeaf * ((y - oy) + kLeaf * (z - oz)),
-                                    size_t(x1 - x0) * sizeof(float));
+            for (int64_t lx = lo[0] / kLeaf; lx <= (hi[0] - 1) / kLeaf; ++lx) {
+                const int64_t ox = lx * kLeaf, oy = ly * kLeaf, oz = lz * kLeaf;
+                const std::array<int64_t, 3> a = {std::max(lo[0], ox), std::max(lo[1], oy),
+                                                  std::max(lo[2], oz)};
+                const std::array<int64_t, 3> b = {std::min(hi[0], ox + kLeaf),
+                                                  std::min(hi[1], oy + kLeaf),
+                                                  std::min(hi[2], oz + kLeaf)};
+                float* first = out + (a[0] - lo[0]) + wx * ((a[1] - lo[1]) + wy * (a[2] - lo[2]));
+                const int64_t sx = b[0] - a[0], sy = b[1] - a[1], sz = b[2] - a[2];
+                if (it != leaf_keys_.end() && *it == row + uint64_t(lx)) {
+                    const float* leaf = leaf_samples(size_t(it - leaf_keys_.begin()));
+                    for (int64_t z = 0; z < sz; ++z)
+                        for (int64_t y = 0; y < sy; ++y)
+                            std::memcpy(first + wx * (y + wy * z),
+                                        leaf + (a[0] - ox) +
+                                            kLeaf * ((a[1] - oy + y) + kLeaf * (a[2] - oz + z)),
+                                        size_t(sx) * sizeof(float));
+                    ++it;
+                    continue;
+                }
+                std::fill_n(inside, size_t(sx * sy * sz), uint8_t(0));
+                inside_.mark_box(a, b, {1, sx, sx * sy}, inside);
+                for (int64_t z = 0; z < sz; ++z)
+                    for (int64_t y = 0; y < sy; ++y)
+                        for (int64_t x = 0; x < sx; ++x)
+                            first[x + wx * (y + wy * z)] =
+                                inside[size_t(x + sx * (y + sy * z))] ? -background_ : background_;
             }
         }
 }

@@ -4,54 +4,101 @@
 // OBJ and PLY keep the double coordinates exactly (shortest round-trip decimal text; 64-bit
 // floats); STL is single precision by definition, with each facet's normal computed from its
 // corners. Indices are checked first so a bad mesh fails before anything is written.
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <vector>
 
 #include "atomic_file.hpp"
 #include "file_names.hpp"
 #include "little_endian.hpp"
-#include "number_text.hpp"
 #include "oclvox/field.hpp"
 
 namespace oclvox {
 
 namespace {
 
-void write_obj(std::ostream& out, const Mesh& mesh) {
-    out << "# oclvox: " << mesh.positions.size() << " vertices, " << mesh.triangles.size()
-        << " triangles\n";
-    for (const auto& p : mesh.positions) {
-        out << 'v';
-        for (double c : p) {
-            out << ' ';
-            detail::write_shortest_number(out, c);
-        }
-        out << '\n';
+// Bytes gathered into blocks of about a megabyte before they reach the stream: a stream call per
+// value costs several times what formatting it does. flush() writes the rest.
+class BlockWriter {
+  public:
+    explicit BlockWriter(std::ostream& out) : out_(out) { buffer_.reserve(kBlock + 64); }
+    void bytes(const char* data, size_t size) {
+        buffer_.insert(buffer_.end(), data, data + size);
+        if (buffer_.size() >= kBlock) flush();
     }
-    for (const auto& t : mesh.triangles)  // OBJ indices start at 1
-        out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+    void text(const std::string& s) { bytes(s.data(), s.size()); }
+    void character(char c) { bytes(&c, 1); }
+    template <typename T>
+    void little_endian(T value) {
+        char data[sizeof(T)];
+        detail::store_le(data, value);
+        bytes(data, sizeof data);
+    }
+    // Shortest round-trip decimal text (doubles) or plain decimal (integers).
+    template <typename T>
+    void number(T value) {
+        char data[32];
+        const auto result = std::to_chars(data, data + sizeof data, value);
+        bytes(data, size_t(result.ptr - data));
+    }
+    void flush() {
+        out_.write(buffer_.data(), std::streamsize(buffer_.size()));
+        buffer_.clear();
+    }
+
+  private:
+    static constexpr size_t kBlock = size_t(1) << 20;
+    std::ostream& out_;
+    std::vector<char> buffer_;
+};
+
+void write_obj(std::ostream& out, const Mesh& mesh) {
+    BlockWriter w(out);
+    w.text("# oclvox: " + std::to_string(mesh.positions.size()) + " vertices, " +
+           std::to_string(mesh.triangles.size()) + " triangles\n");
+    for (const auto& p : mesh.positions) {
+        w.character('v');
+        for (double c : p) {
+            w.character(' ');
+            w.number(c);
+        }
+        w.character('\n');
+    }
+    for (const auto& t : mesh.triangles) {  // OBJ indices start at 1
+        w.character('f');
+        for (uint32_t index : t) {
+            w.character(' ');
+            w.number(uint64_t(index) + 1);
+        }
+        w.character('\n');
+    }
+    w.flush();
 }
 
 void write_ply(std::ostream& out, const Mesh& mesh) {
-    out << "ply\nformat binary_little_endian 1.0\ncomment oclvox iso-surface\n"
-        << "element vertex " << mesh.positions.size() << '\n'
-        << "property double x\nproperty double y\nproperty double z\n"
-        << "element face " << mesh.triangles.size() << '\n'
-        << "property list uchar int vertex_indices\nend_header\n";
+    BlockWriter w(out);
+    w.text("ply\nformat binary_little_endian 1.0\ncomment oclvox iso-surface\nelement vertex " +
+           std::to_string(mesh.positions.size()) +
+           "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+           std::to_string(mesh.triangles.size()) +
+           "\nproperty list uchar int vertex_indices\nend_header\n");
     for (const auto& p : mesh.positions)
-        for (double c : p) detail::write_le(out, c);
+        for (double c : p) w.little_endian(c);
     for (const auto& t : mesh.triangles) {
-        out.put(char(3));
-        for (uint32_t index : t) detail::write_le(out, index);
+        w.character(char(3));
+        for (uint32_t index : t) w.little_endian(index);
     }
+    w.flush();
 }
 
 void write_stl(std::ostream& out, const Mesh& mesh) {
+    BlockWriter w(out);
     char header[80] = {};
     std::strncpy(header, "oclvox iso-surface", sizeof header);
-    out.write(header, sizeof header);
-    detail::write_le(out, uint32_t(mesh.triangles.size()));
+    w.bytes(header, sizeof header);
+    w.little_endian(uint32_t(mesh.triangles.size()));
     for (const auto& t : mesh.triangles) {
         const auto& a = mesh.positions[t[0]];
         const auto& b = mesh.positions[t[1]];
@@ -62,11 +109,12 @@ void write_stl(std::ostream& out, const Mesh& mesh) {
                        u[0] * v[1] - u[1] * v[0]};
         const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         for (double& x : n) x = length > 0 ? x / length : 0.0;  // degenerate facets: zero normal
-        for (double x : n) detail::write_le(out, float(x));
+        for (double x : n) w.little_endian(float(x));
         for (const auto* p : {&a, &b, &c})
-            for (double x : *p) detail::write_le(out, float(x));
-        detail::write_le(out, uint16_t(0));
+            for (double x : *p) w.little_endian(float(x));
+        w.little_endian(uint16_t(0));
     }
+    w.flush();
 }
 
 }  // namespace

@@ -245,16 +245,25 @@ def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, r
          progress=None):
     """Triangulates a field's iso-surface; returns (vertices float64 (N, 3), faces int64 (M, 3)).
 
-    field: a Field, a .npy field file, or a VoxelGrid (turned into a field with `smoothing`
-    box-filter passes). method: "marching-cubes" or "surface-nets". Samples < iso are inside;
-    triangles are wound counter-clockwise seen from outside. progress: as for sdf.
+    field: a Field, a SparseField, a field file (.npy, or a .vdb level set, read sparse), or a
+    VoxelGrid (turned into a field with `smoothing` box-filter passes). method: "marching-cubes"
+    or "surface-nets". Samples < iso are inside; triangles are wound counter-clockwise seen from
+    outside. progress: as for sdf. A SparseField is meshed on the host's cores, without a dense
+    copy, into the mesh its dense copy gives (so `device` and `reference` apply to dense fields
+    only, and naming a device for a SparseField is an error).
     """
     if isinstance(field, VoxelGrid):
         field = field.to_field(smoothing=smoothing)
     elif isinstance(field, (str, os.PathLike)):
         field = load_field(field)
-    elif not isinstance(field, Field):
-        raise TypeError(f"mesh takes a Field, a VoxelGrid or a .npy path; got "
+    if isinstance(field, SparseField):
+        if device is not None:
+            raise ValueError("a SparseField is meshed on the host; device applies to dense "
+                             "fields (SparseField.to_field() gives one)")
+        surface = _oclvox.mesh_sparse(field, iso=iso, method=method, progress=progress)
+        return surface.vertices, surface.faces
+    if not isinstance(field, Field):
+        raise TypeError(f"mesh takes a Field, a SparseField, a VoxelGrid or a field path; got "
                         f"{type(field).__name__}")
     surface = _oclvox.mesh(field, iso=iso, method=method, device=_selector(device),
                            reference=reference, progress=progress)
@@ -276,11 +285,15 @@ def _grid_mesh(self, method="marching-cubes", *, smoothing=1, device=None, refer
 
 
 Field.mesh = _field_mesh
+SparseField.mesh = _field_mesh
 VoxelGrid.mesh = _grid_mesh
 
 
 def load_field(path):
-    """Reads a .npy field (with its JSON sidecar) as written by Field.save or the CLI."""
+    """Reads a field file: a .npy field (with its JSON sidecar) as a Field, a .vdb level set
+    (ours, or any OpenVDB narrow-band level set) as a SparseField, without a dense copy."""
+    if os.fspath(path).lower().endswith(".vdb"):
+        return _oclvox.load_sparse_field(path)
     return _oclvox.load_field(path)
 
 

@@ -393,6 +393,20 @@ oclvox::Mesh extract_surface(const Field& field, float iso, const std::string& m
     });
 }
 
+// A sparse field's iso-surface, on the host (the sparse mesher has no device path).
+oclvox::Mesh extract_sparse_surface(const SparseField& field, float iso, const std::string& method,
+                                    py::object progress) {
+    const bool marching_cubes = method == "marching-cubes";
+    if (!marching_cubes && method != "surface-nets")
+        throw oclvox::GridError("unknown meshing method '" + method +
+                                "' (expected marching-cubes or surface-nets)");
+    ProgressBridge bridge(std::move(progress));
+    return bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+        return marching_cubes ? oclvox::marching_cubes(field.field, iso, callback)
+                              : oclvox::surface_nets(field.field, iso, callback);
+    });
+}
+
 py::list devices() {
     std::vector<oclvox::DeviceInfo> infos;
     {
@@ -628,6 +642,15 @@ PYBIND11_MODULE(_oclvox, m) {
         },
         "path"_a);
     m.def(
+        "load_sparse_field",
+        [](const std::filesystem::path& path) {
+            SparseField result;
+            py::gil_scoped_release release;
+            result.field = oclvox::read_sparse_field(path.string());
+            return result;
+        },
+        "path"_a);
+    m.def(
         "voxelize",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const std::string& mode,
            const std::string& test, const std::string& inside, const std::string& boundary,
@@ -715,6 +738,7 @@ PYBIND11_MODULE(_oclvox, m) {
     m.def("csg_voxels", &csg_voxels, "a"_a, "op"_a, "b"_a);
     m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a,
           "progress"_a);
+    m.def("mesh_sparse", &extract_sparse_surface, "field"_a, "iso"_a, "method"_a, "progress"_a);
     m.def("devices", &devices);
     m.def("field_padding", &oclvox::field_padding, "band_voxels"_a);
     // The grid a call with this fit works on, without the work: (origin, voxel_size, dims). For

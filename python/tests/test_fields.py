@@ -158,3 +158,27 @@ def test_sparse_fields_refuse_full_grids_and_layers():
         oclvox.sdf(*box_mesh(*BOX_A), **GRID, full_grid=True, sparse=True)
     with pytest.raises(oclvox.GridError):
         oclvox.sdf(*box_mesh(*BOX_A), **GRID, layers=(0, 8), sparse=True)
+
+
+@pytest.mark.parametrize("method", ["marching-cubes", "surface-nets"])
+def test_sparse_field_meshes_as_its_dense_copy_and_reads_back_from_vdb(method, tmp_path):
+    # Meshed without a dense copy, the same vertices (in the same order) and faces as the dense
+    # copy's mesh; saved as .vdb and loaded back (sparse), the same mesh again.
+    sparse = oclvox.csg(box_mesh(*BOX_A), "difference", box_mesh(*BOX_B), band=BAND,
+                        resolution=40, sparse=True)
+    vertices, faces = sparse.mesh(method)
+    dense_vertices, dense_faces = oclvox.mesh(sparse.to_field(), method=method, reference=True)
+    assert len(faces) > 100
+    np.testing.assert_array_equal(vertices, dense_vertices)
+    np.testing.assert_array_equal(faces, dense_faces)
+    sparse.save(tmp_path / "difference.vdb")
+    loaded = oclvox.load_field(tmp_path / "difference.vdb")
+    assert isinstance(loaded, oclvox.SparseField)
+    assert loaded.dims == sparse.dims and loaded.origin == sparse.origin
+    np.testing.assert_array_equal(loaded.to_field().to_numpy(), sparse.to_field().to_numpy())
+    np.testing.assert_array_equal(oclvox.mesh(tmp_path / "difference.vdb", method=method)[1], faces)
+    with pytest.raises(ValueError):
+        sparse.mesh(method, device="any")
+    (tmp_path / "bad.vdb").write_bytes(b"not a vdb")
+    with pytest.raises(oclvox.InputError):
+        oclvox.load_field(tmp_path / "bad.vdb")

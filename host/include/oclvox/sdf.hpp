@@ -182,4 +182,16 @@ std::variant<ScalarField, SparseVoxels> read_npy(const std::string& path);
 // read_npy for a field only: an occupancy .npy is an InputError.
 ScalarField read_field(const std::string& path);
 
+// Reads an OpenVDB level set (.vdb) as a sparse field, without a dense copy: the FloatGrid named
+// "sdf" (as write_field writes), else the file's only float grid of class level set. Its leaves
+// become the field's leaves (every value, active or not), its tiles below zero and its leaves'
+// values below zero the inside voxels, and the band is its background / voxel size. Files
+// write_field wrote keep their grid (from their oclvox metadata), so a field written and read
+// back meshes to the same surface; for other files the grid is the box of the leaves and inside
+// tiles, one voxel wider on every side, aligned to their leaves, with the file's voxel size and
+// placement. Throws InputError naming the file and the problem: not a readable .vdb, no such grid,
+// a transform other than axis-aligned cubic voxels, a background that is not positive, active
+// tiles, non-finite values, or a field beyond the host memory budget.
+SparseField read_sparse_field(const std::string& path);
+
 }  // namespace oclvox
