@@ -405,6 +405,7 @@ void expect_sparse_meshes_dense(const SparseField& field, float iso, const std::
     const Mesh nets = surface_nets(field, iso), cubes = marching_cubes(field, iso);
     expect_identical(nets, surface_nets(dense, iso));
     expect_identical(cubes, marching_cubes(dense, iso));
+    EXPECT_EQ(border_samples_inside(field, iso), border_samples_inside(dense, iso));
 }
 
 // Distance fields of a sphere off the origin (parity sign), the scan (parity) and open random

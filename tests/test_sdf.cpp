@@ -1126,6 +1126,25 @@ TEST(LevelSetFiles, FilesThatAreNotNarrowBandLevelSetsAreInputErrorsNamingTheFil
     for (const auto& p : {garbage, path}) std::remove(p.c_str());
 }
 
+// The outer layer of a 2^20 x 2^20 x 16 grid holds 2^41 samples: counted from the leaves and the
+// inside voxels without reading a face whole.
+TEST(SparseField, BorderCountOfAHugeGridReadsNoFaceWhole) {
+    Grid g;
+    g.dims = {int64_t(1) << 20, int64_t(1) << 20, 16};
+    SparseVoxels inside(g, 32);
+    inside.set_box({0, 0, 0}, {10, 20, 16});  // reaches the faces x = 0, y = 0, z = 0 and z = 15
+    SparseField f(g, 2.0, inside);
+    const std::vector<float> leaf(SparseField::kLeafSamples, -0.25f);
+    f.append_leaf(1000 / 8, leaf.data());  // voxels [1000, 1008) x [0, 8) x [0, 8)
+    // Inside voxels on the border: all 3200 of the box but its 9 x 19 x 14 interior; the leaf's
+    // border samples (y = 0 or z = 0): 64 + 64 - 8.
+    EXPECT_EQ(border_samples_inside(f), 3200u - 9u * 19u * 14u + 120u);
+    EXPECT_EQ(border_samples_inside(f, -3.0f), 0u);  // below every value
+    const uint64_t n[3] = {uint64_t(1) << 20, uint64_t(1) << 20, 16};
+    EXPECT_EQ(border_samples_inside(f, 3.0f),  // above every value: the whole layer
+              n[0] * n[1] * n[2] - (n[0] - 2) * (n[1] - 2) * (n[2] - 2));
+}
+
 TEST(SparseField, BoxesAndSamplesReadTheLeavesAndTheInsideVoxels) {
     // A hand-built field: one leaf, inside voxels in and out of it.
     Grid g;

@@ -1126,3 +1126,56 @@ TEST_F(WriterTest, GridTooLargeForADenseCopyStillWritesVdb) {
 }
 
 }  // namespace
+
+// ---- boxes of the sparse storage (the windows writers and sparse fields read) -------------------
+
+namespace {
+
+// Random voxels in a grid of 8^3 bricks, and random boxes, some reaching beyond the grid:
+// count_box is the voxel-by-voxel count of get(), set_box sets exactly the box's voxels.
+TEST(SparseVoxelBoxes, CountAndSetAgreeWithVoxelByVoxelReadsOnRandomBoxes) {
+    Grid g;
+    g.dims = {37, 29, 41};
+    std::mt19937 rng(3);
+    SparseVoxels voxels(g, 8);
+    for (int n = 0; n < 3000; ++n)
+        voxels.set(int64_t(rng() % 37), int64_t(rng() % 29), int64_t(rng() % 41));
+    for (int trial = 0; trial < 200; ++trial) {
+        std::array<int64_t, 3> lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = int64_t(rng() % uint32_t(g.dims[a] + 6)) - 3;
+            hi[a] = lo[a] + int64_t(rng() % 20);
+        }
+        uint64_t expected = 0;
+        for (int64_t k = lo[2]; k < hi[2]; ++k)
+            for (int64_t j = lo[1]; j < hi[1]; ++j)
+                for (int64_t i = lo[0]; i < hi[0]; ++i) expected += voxels.get(i, j, k);
+        ASSERT_EQ(voxels.count_box(lo, hi), expected) << trial;
+        if (trial % 20) continue;
+        SparseVoxels filled = voxels;
+        filled.set_box(lo, hi);
+        for (int64_t k = 0; k < g.dims[2]; ++k)
+            for (int64_t j = 0; j < g.dims[1]; ++j)
+                for (int64_t i = 0; i < g.dims[0]; ++i) {
+                    const bool in_box = i >= lo[0] && i < hi[0] && j >= lo[1] && j < hi[1] &&
+                                        k >= lo[2] && k < hi[2];
+                    ASSERT_EQ(filled.get(i, j, k), in_box || voxels.get(i, j, k)) << trial;
+                }
+    }
+}
+
+// A face of a grid of 2^20 x 2^20 x 3 voxels meets 2^30 bricks; counting it walks the few stored
+// bricks instead.
+TEST(SparseVoxelBoxes, CountOfAHugeThinBoxWalksTheStoredBricks) {
+    Grid g;
+    g.dims = {int64_t(1) << 20, int64_t(1) << 20, 3};
+    SparseVoxels voxels(g, 32);
+    voxels.set(5, 7, 0);
+    voxels.set((int64_t(1) << 20) - 1, 123456, 0);
+    voxels.set(99, 99, 1);
+    voxels.set_box({1000, 1000, 0}, {1010, 1020, 1});
+    EXPECT_EQ(voxels.count_box({0, 0, 0}, {g.dims[0], g.dims[1], 1}), 2u + 200u);
+    EXPECT_EQ(voxels.count(), 203u);
+}
+
+}  // namespace

@@ -191,66 +191,6 @@ Grid field_grid(const std::string& path, const openvdb::FloatGrid& vdb,
     return grid;
 }
 
-// The bits of a 4x4x4 word whose coordinate along `axis` lies in [from, to] (0..3).
-uint64_t word_mask(int axis, int64_t from, int64_t to) {
-    uint64_t mask = 0;
-    for (int bit = 0; bit < 64; ++bit) {
-        const int64_t c = axis == 0 ? (bit & 3) : axis == 1 ? (bit >> 2 & 3) : (bit >> 4);
-        if (c >= from && c <= to) mask |= uint64_t(1) << bit;
-    }
-    return mask;
-}
-
-// Sets the voxels of the box [lo, hi) (grid voxels, clipped to the grid) in `inside`, a brick at
-// a time and a whole 4x4x4 word at a time, so a large tile costs its words, not its voxels.
-void mark_box_inside(SparseVoxels& inside, const std::array<int64_t, 3>& lo,
-                     const std::array<int64_t, 3>& hi) {
-    static const auto masks = [] {
-        std::array<std::array<std::array<uint64_t, 4>, 4>, 3> m{};
-        for (int a = 0; a < 3; ++a)
-            for (int from = 0; from < 4; ++from)
-                for (int to = from; to < 4; ++to) m[a][from][to] = word_mask(a, from, to);
-        return m;
-    }();
-    const int64_t size = inside.brick_size(), per_axis = inside.blocks_per_brick_axis();
-    const auto& dims = inside.grid().dims;
-    const std::array<int64_t, 3> bricks = inside.brick_dims();
-    std::array<int64_t, 3> first, last;  // inclusive voxels
-    for (int a = 0; a < 3; ++a) {
-        first[a] = std::max<int64_t>(lo[a], 0);
-        last[a] = std::min(hi[a], dims[a]) - 1;
-        if (last[a] < first[a]) return;
-    }
-    std::vector<uint64_t> words(inside.blocks_per_brick());
-    for (int64_t bz = first[2] / size; bz <= last[2] / size; ++bz)
-        for (int64_t by = first[1] / size; by <= last[1] / size; ++by)
-            for (int64_t bx = first[0] / size; bx <= last[0] / size; ++bx) {
-                const std::array<int64_t, 3> b = {bx, by, bz};
-                std::fill(words.begin(), words.end(), 0);
-                std::array<int64_t, 3> w_first, w_last;
-                for (int a = 0; a < 3; ++a) {
-                    w_first[a] = (std::max(first[a], b[a] * size) - b[a] * size) / 4;
-                    w_last[a] = (std::min(last[a], b[a] * size + size - 1) - b[a] * size) / 4;
-                }
-                for (int64_t wz = w_first[2]; wz <= w_last[2]; ++wz)
-                    for (int64_t wy = w_first[1]; wy <= w_last[1]; ++wy)
-                        for (int64_t wx = w_first[0]; wx <= w_last[0]; ++wx) {
-                            const std::array<int64_t, 3> w = {wx, wy, wz};
-                            uint64_t mask = ~uint64_t(0);
-                            for (int a = 0; a < 3; ++a) {
-                                const int64_t base = b[a] * size + w[a] * 4;
-                                mask &= masks[size_t(a)][size_t(std::max(first[a], base) - base)]
-                                             [size_t(std::min(last[a], base + 3) - base)];
-                            }
-                            words[size_t(wx + per_axis * (wy + per_axis * wz))] |= mask;
-                        }
-                inside.merge_brick(
-                    uint64_t(bx) +
-                        uint64_t(bricks[0]) * (uint64_t(by) + uint64_t(bricks[1]) * uint64_t(bz)),
-                    words.data());
-            }
-}
-
 }  // namespace
 
 SparseField read_field_vdb(const std::string& path) {
@@ -349,7 +289,7 @@ SparseField read_field_vdb(const std::string& path) {
     SparseVoxels inside(grid, kBrick);
     for (const openvdb::CoordBBox& box : inside_tiles) {
         const auto lo = to_grid(box.min()), last = to_grid(box.max());
-        mark_box_inside(inside, lo, {last[0] + 1, last[1] + 1, last[2] + 1});
+        inside.set_box(lo, {last[0] + 1, last[1] + 1, last[2] + 1});
     }
     // A leaf lies in one brick (bricks are whole leaves), so each brick's leaves are gathered
     // into its words and merged once.

@@ -167,12 +167,39 @@ uint64_t border_samples_inside(const SparseField& field, float iso) {
             {{i, 1, 1}, {i + 1, std::max<int64_t>(1, d[1] - 1), std::max<int64_t>(1, d[2] - 1)}});
         if (d[0] == 1) break;
     }
+    // A face of a sparse grid can hold far more samples than memory, so none is read whole: the
+    // stored leaves that meet it are read sample by sample, and every other sample is
+    // -background at an inside voxel and +background elsewhere, so those are counted from the
+    // inside voxels.
+    const float background = field.background();
+    const bool negative_inside = -background < iso, positive_inside = background < iso;
     uint64_t inside = 0;
-    std::vector<float> samples;
     for (const auto& [lo, hi] : faces) {
-        samples.resize(size_t((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2])));
-        field.copy_box(lo, hi, samples.data());
-        for (float v : samples) inside += v < iso;
+        uint64_t leaf_samples = 0, leaf_voxels_inside = 0;
+        for (size_t n = 0; n < field.leaf_count(); ++n) {
+            const auto o = field.leaf_origin(field.leaf_indices()[n]);
+            std::array<int64_t, 3> a, b;
+            bool meets = true;
+            for (int k = 0; k < 3; ++k) {
+                a[k] = std::max(lo[k], o[k]);
+                b[k] = std::min(hi[k], o[k] + kLeaf);
+                meets = meets && a[k] < b[k];
+            }
+            if (!meets) continue;
+            const float* leaf = field.leaf_samples(n);
+            for (int64_t z = a[2]; z < b[2]; ++z)
+                for (int64_t y = a[1]; y < b[1]; ++y)
+                    for (int64_t x = a[0]; x < b[0]; ++x)
+                        inside +=
+                            leaf[(x - o[0]) + kLeaf * ((y - o[1]) + kLeaf * (z - o[2]))] < iso;
+            leaf_samples += uint64_t((b[0] - a[0]) * (b[1] - a[1]) * (b[2] - a[2]));
+            leaf_voxels_inside += field.inside().count_box(a, b);
+        }
+        const uint64_t others =
+            uint64_t((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2])) - leaf_samples;
+        const uint64_t others_inside = field.inside().count_box(lo, hi) - leaf_voxels_inside;
+        inside +=
+            (negative_inside ? others_inside : 0) + (positive_inside ? others - others_inside : 0);
     }
     return inside;
 }

@@ -139,16 +139,55 @@ const uint64_t* SparseVoxels::brick_blocks(uint64_t brick_index) const {
     return it == bricks_.end() ? nullptr : it->second.data();
 }
 
-void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
-                            const std::array<int64_t, 3>& strides, uint8_t* out) const {
-    std::array<int64_t, 3> first{}, last{};  // inclusive voxel range, clipped to the grid
+namespace {
+
+// The inclusive voxel range [first, last] of the box [lo, hi) clipped to the grid; false if empty.
+bool clip_box(const Grid& grid, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
+              std::array<int64_t, 3>& first, std::array<int64_t, 3>& last) {
     for (int a = 0; a < 3; ++a) {
         first[a] = std::max<int64_t>(lo[a], 0);
-        last[a] = std::min(hi[a], grid_.dims[a]) - 1;
-        if (last[a] < first[a]) return;
+        last[a] = std::min(hi[a], grid.dims[a]) - 1;
+        if (last[a] < first[a]) return false;
     }
+    return true;
+}
+
+// Calls f(word, mask, block_origin) for every 4^3 block of the brick at `brick_origin` (of `size`
+// voxels, `per_axis` blocks along an axis) that meets the inclusive voxel range [first, last],
+// `mask` holding the block's bits inside the range.
+template <typename F>
+void for_each_block_in(const std::array<int64_t, 3>& brick_origin, int64_t size, int64_t per_axis,
+                       const std::array<int64_t, 3>& first, const std::array<int64_t, 3>& last,
+                       F f) {
+    constexpr int64_t kBlock = SparseVoxels::kBlock;
+    std::array<int64_t, 3> block_first{}, block_last{};
+    for (int a = 0; a < 3; ++a) {
+        block_first[a] = std::max<int64_t>(first[a] - brick_origin[a], 0) / kBlock;
+        block_last[a] = std::min<int64_t>(last[a] - brick_origin[a], size - 1) / kBlock;
+        if (block_last[a] < block_first[a]) return;
+    }
+    for (int64_t wz = block_first[2]; wz <= block_last[2]; ++wz)
+        for (int64_t wy = block_first[1]; wy <= block_last[1]; ++wy)
+            for (int64_t wx = block_first[0]; wx <= block_last[0]; ++wx) {
+                const std::array<int64_t, 3> o{brick_origin[0] + wx * kBlock,
+                                               brick_origin[1] + wy * kBlock,
+                                               brick_origin[2] + wz * kBlock};
+                uint64_t mask = ~uint64_t(0);
+                for (int a = 0; a < 3; ++a)
+                    if (o[a] < first[a] || o[a] + kBlock - 1 > last[a])
+                        mask &= block_mask_within(a, first[a] - o[a], last[a] - o[a]);
+                f(size_t(wx + per_axis * (wy + per_axis * wz)), mask, o);
+            }
+}
+
+}  // namespace
+
+void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
+                            const std::array<int64_t, 3>& strides, uint8_t* out) const {
+    std::array<int64_t, 3> first{}, last{};
+    if (!clip_box(grid_, lo, hi, first, last)) return;
     const auto nbricks = brick_dims();
-    const int64_t b = brick_size_, nb = blocks_per_brick_axis();
+    const int64_t b = brick_size_;
     // Phase 1: the bricks the box touches, found by lookup rather than by scanning all bricks.
     for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
         for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
@@ -158,36 +197,76 @@ void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<i
                     uint64_t(nbricks[0]) * (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz)));
                 if (it == bricks_.end()) continue;
                 const uint64_t* blocks = it->second.data();
-                // Phase 2: the brick's blocks inside the box; a block partly outside it keeps
-                // only its bits inside.
-                const std::array<int64_t, 3> brick_origin{bx * b, by * b, bz * b};
-                std::array<int64_t, 3> block_first{}, block_last{};
-                for (int a = 0; a < 3; ++a) {
-                    block_first[a] = std::max<int64_t>(first[a] - brick_origin[a], 0) / kBlock;
-                    block_last[a] = std::min<int64_t>(last[a] - brick_origin[a], b - 1) / kBlock;
-                }
-                for (int64_t wz = block_first[2]; wz <= block_last[2]; ++wz)
-                    for (int64_t wy = block_first[1]; wy <= block_last[1]; ++wy)
-                        for (int64_t wx = block_first[0]; wx <= block_last[0]; ++wx) {
-                            uint64_t mask = blocks[size_t(wx + nb * (wy + nb * wz))];
-                            if (!mask) continue;
-                            const std::array<int64_t, 3> o{brick_origin[0] + wx * kBlock,
-                                                           brick_origin[1] + wy * kBlock,
-                                                           brick_origin[2] + wz * kBlock};
-                            for (int a = 0; a < 3; ++a)
-                                if (o[a] < first[a] || o[a] + kBlock - 1 > last[a])
-                                    mask &= block_mask_within(a, first[a] - o[a], last[a] - o[a]);
-                            // Phase 3: one byte per set voxel.
-                            uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
-                                            (o[1] - lo[1]) * strides[1] +
-                                            (o[2] - lo[2]) * strides[2];
-                            while (mask) {
-                                const int bit = __builtin_ctzll(mask);
-                                mask &= mask - 1;
-                                base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
-                                     (bit >> 4) * strides[2]] = 1;
-                            }
+                // Phase 2: the brick's blocks inside the box, then one byte per set voxel.
+                for_each_block_in(
+                    {bx * b, by * b, bz * b}, b, blocks_per_brick_axis(), first, last,
+                    [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
+                        mask &= blocks[word];
+                        uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
+                                        (o[1] - lo[1]) * strides[1] + (o[2] - lo[2]) * strides[2];
+                        while (mask) {
+                            const int bit = __builtin_ctzll(mask);
+                            mask &= mask - 1;
+                            base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
+                                 (bit >> 4) * strides[2]] = 1;
                         }
+                    });
+            }
+}
+
+uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
+                                 const std::array<int64_t, 3>& hi) const {
+    std::array<int64_t, 3> first{}, last{};
+    if (!clip_box(grid_, lo, hi, first, last)) return 0;
+    const auto nbricks = brick_dims();
+    const int64_t b = brick_size_;
+    uint64_t count = 0;
+    auto count_brick = [&](uint64_t index, const std::vector<uint64_t>& blocks) {
+        const std::array<int64_t, 3> origin = {
+            int64_t(index % uint64_t(nbricks[0])) * b,
+            int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1])) * b,
+            int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1]))) * b};
+        for_each_block_in(origin, b, blocks_per_brick_axis(), first, last,
+                          [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
+                              count += uint64_t(__builtin_popcountll(blocks[word] & mask));
+                          });
+    };
+    // The box's bricks looked up, or every stored brick when they are fewer (a thin slab across
+    // a huge sparse grid touches far more bricks than are stored).
+    uint64_t touched = 1;
+    for (int a = 0; a < 3; ++a) touched *= uint64_t(last[a] / b - first[a] / b + 1);
+    if (touched > bricks_.size()) {
+        for (const auto& [index, blocks] : bricks_) count_brick(index, blocks);
+        return count;
+    }
+    for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
+        for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
+            for (int64_t bx = first[0] / b; bx <= last[0] / b; ++bx) {
+                const uint64_t index =
+                    uint64_t(bx) +
+                    uint64_t(nbricks[0]) * (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz));
+                const auto it = bricks_.find(index);
+                if (it != bricks_.end()) count_brick(index, it->second);
+            }
+    return count;
+}
+
+void SparseVoxels::set_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi) {
+    std::array<int64_t, 3> first{}, last{};
+    if (!clip_box(grid_, lo, hi, first, last)) return;
+    const auto nbricks = brick_dims();
+    const int64_t b = brick_size_;
+    for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
+        for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
+            for (int64_t bx = first[0] / b; bx <= last[0] / b; ++bx) {
+                auto& blocks = bricks_[uint64_t(bx) +
+                                       uint64_t(nbricks[0]) *
+                                           (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz))];
+                if (blocks.empty()) blocks.assign(blocks_per_brick(), 0);
+                for_each_block_in({bx * b, by * b, bz * b}, b, blocks_per_brick_axis(), first, last,
+                                  [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
+                                      blocks[word] |= mask;
+                                  });
             }
 }
 

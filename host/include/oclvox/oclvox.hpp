@@ -165,6 +165,12 @@ class SparseVoxels {
     void mark_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
                   const std::array<int64_t, 3>& strides, uint8_t* out) const;
 
+    // The number of set voxels in the box [lo, hi) (clipped to the grid): a popcount per 4x4x4
+    // block of the stored bricks it meets, whatever the box's size.
+    uint64_t count_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi) const;
+    // Sets every voxel of the box [lo, hi) (clipped to the grid), a 4x4x4 block at a time.
+    void set_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi);
+
     // Same grid and same set voxels (brick size may differ).
     bool same_voxels(const SparseVoxels& other) const;
 
