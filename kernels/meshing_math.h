@@ -203,9 +203,15 @@ OM_FN float om_divide_from(float n, float d, float q) {
     }
 }
 
-// n / d, correctly rounded, on any device (domain as om_divide_from).
+// n / d, correctly rounded, on any device (domain as om_divide_from). The host's division is
+// IEEE's, correctly rounded already, so there the walk would only confirm it (at a cost that
+// showed in the host meshers' profiles).
 OM_FN float om_divide(float n, float d) {
+#ifdef __OPENCL_VERSION__
     return om_divide_from(n, d, n / d);
+#else
+    return n / d;
+#endif
 }
 
 // Where along an edge from value a to value b the linear interpolant reaches iso. Called only

@@ -20,6 +20,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -42,9 +43,10 @@ constexpr size_t kBlockSamples = SparseField::kLeafSamples;
 constexpr int64_t kBelow = 1, kAbove = 2;
 
 struct Block {
-    Index3 origin{};            // lowest sample
-    Index3 box_lo{}, box_hi{};  // the box read, clipped to the grid
-    std::vector<float> box;     // its samples, x fastest
+    Index3 origin{};               // lowest sample
+    Index3 box_lo{}, box_hi{};     // the box read, clipped to the grid
+    std::vector<float> box;        // its samples, x fastest
+    std::vector<uint16_t> owners;  // the slots of its samples that own vertices or triangles
 };
 
 // The blocks of one z that own vertices or triangles, by (y, x), with kBlockSamples slots each
@@ -112,9 +114,74 @@ void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
     }
 }
 
-// Phase 1: the indices (bx + nbx * (by + nby * bz), increasing) of the blocks that may own part
-// of the surface.
-std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso) {
+// Which sides of iso samples lie on, as bits.
+constexpr uint8_t kInsideSide = 1, kOutsideSide = 2, kBothSides = 3;
+
+uint8_t side_of(float value, float iso) {
+    return detail::om_inside(value, iso) ? kInsideSide : kOutsideSide;
+}
+
+// A block's samples with their halo, [o, o + 8] on each axis, lie in the 2x2x2 leaves from its
+// own up: all of its own leaf, and of the leaf one above along the axes in a mask d only the
+// samples at that leaf's low face along those axes. Part d of a leaf is that set of samples.
+using PartSides = std::array<uint8_t, 8>;
+
+// The sides of every part of each stored leaf's samples within the grid. The dense field holds
+// no non-finite sample, so neither may a meshed sparse one.
+std::vector<PartSides> leaf_sides(const SparseField& field, float iso, const char* who) {
+    std::vector<PartSides> sides(field.leaf_count());
+    const auto& n = field.grid().dims;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, sides.size(), 64), [&](const auto& r) {
+        for (size_t l = r.begin(); l != r.end(); ++l) {
+            const Index3 o = field.leaf_origin(field.leaf_indices()[l]);
+            const float* samples = field.leaf_samples(l);
+            PartSides parts{};
+            for (int64_t z = 0; z < std::min<int64_t>(kBlock, n[2] - o[2]); ++z)
+                for (int64_t y = 0; y < std::min<int64_t>(kBlock, n[1] - o[1]); ++y)
+                    for (int64_t x = 0; x < std::min<int64_t>(kBlock, n[0] - o[0]); ++x) {
+                        const float value = samples[x + kBlock * (y + kBlock * z)];
+                        if (!std::isfinite(value))
+                            throw InputError(
+                                std::string(who) + ": sample (" + std::to_string(o[0] + x) + ", " +
+                                std::to_string(o[1] + y) + ", " + std::to_string(o[2] + z) +
+                                ") of the field is not finite");
+                        const uint8_t side = side_of(value, iso);
+                        const int at_low = int(x == 0) | int(y == 0) << 1 | int(z == 0) << 2;
+                        for (int d = 0; d < 8; ++d)
+                            if ((d & ~at_low) == 0) parts[size_t(d)] |= side;
+                    }
+            sides[l] = parts;
+        }
+    });
+    return sides;
+}
+
+// The sides of part d of leaf cell c: a stored leaf's from `sides`; otherwise those of the
+// backgrounds its inside voxels give it.
+uint8_t part_sides(const SparseField& field, float iso, const std::vector<PartSides>& sides,
+                   const Index3& c, int d) {
+    const Index3 nb = field.leaf_dims();
+    const uint64_t key =
+        uint64_t(c[0]) + uint64_t(nb[0]) * (uint64_t(c[1]) + uint64_t(nb[1]) * uint64_t(c[2]));
+    const auto& keys = field.leaf_indices();
+    const auto it = std::lower_bound(keys.begin(), keys.end(), key);
+    if (it != keys.end() && *it == key) return sides[size_t(it - keys.begin())][size_t(d)];
+    const auto& n = field.grid().dims;
+    Index3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = c[a] * kBlock;
+        hi[a] = std::min(lo[a] + ((d >> a) & 1 ? 1 : kBlock), n[a]);
+    }
+    const uint64_t inside = field.inside().count_box(lo, hi);
+    const uint64_t volume = uint64_t((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+    return uint8_t((inside ? side_of(-field.background(), iso) : 0) |
+                   (inside < volume ? side_of(field.background(), iso) : 0));
+}
+
+// Phase 1: the indices (bx + nbx * (by + nby * bz), increasing) of the blocks whose samples, with
+// the one-sample halo above them, lie on both sides of iso: those that may own part of the
+// surface.
+std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso, const char* who) {
     const Index3 nb = field.leaf_dims();  // blocks tile the grid as the leaves do
     const auto& n = field.grid().dims;
     std::vector<uint64_t> blocks;
@@ -126,7 +193,10 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso) {
                                      uint64_t(nb[0]) *
                                          (uint64_t(y) + uint64_t(nb[1]) * uint64_t(z)));
     };
-    // A stored leaf reaches its own block and, through their halo, the seven below it.
+    // Where a change may be: a stored leaf reaches its own block and, through their halo, the
+    // seven below it.
+    const std::vector<PartSides> sides = leaf_sides(field, iso, who);
+    blocks.reserve(8 * field.leaf_count());
     for (uint64_t leaf : field.leaf_indices()) {
         const Index3 l = {int64_t(leaf % uint64_t(nb[0])),
                           int64_t(leaf / uint64_t(nb[0]) % uint64_t(nb[1])),
@@ -135,8 +205,8 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso) {
                    std::max<int64_t>(l[2] - 1, 0)},
                   l);
     }
-    // Changes of the inside voxels matter only when the two backgrounds lie on either side of iso.
-    // An edge with an end in the word at p is owned by a sample in [p - 1, p + 3].
+    // Changes of the inside voxels matter only when the two backgrounds lie on either side of
+    // iso. An edge with an end in the word at p is owned by a sample in [p - 1, p + 3].
     const float background = field.background();
     if (detail::om_inside(-background, iso) != detail::om_inside(background, iso))
         for_each_inside_boundary(field.inside(), [&](const Index3& p) {
@@ -147,8 +217,32 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso) {
             }
             add_range(lo, hi);
         });
-    std::sort(blocks.begin(), blocks.end());
+    tbb::parallel_sort(blocks.begin(), blocks.end());
     blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+
+    // Kept: the blocks whose samples and halo (parts of the 2x2x2 leaves from their own up) lie on
+    // both sides of iso, told from the leaves' parts and, where no leaf is stored, from the
+    // inside voxels.
+    std::vector<uint8_t> keep(blocks.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const auto& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+            const uint64_t b = blocks[i];
+            const Index3 c = {int64_t(b % uint64_t(nb[0])),
+                              int64_t(b / uint64_t(nb[0]) % uint64_t(nb[1])),
+                              int64_t(b / (uint64_t(nb[0]) * uint64_t(nb[1])))};
+            uint8_t both = 0;
+            for (int d = 0; d < 8 && both != kBothSides; ++d) {
+                const Index3 cell = {c[0] + (d & 1), c[1] + (d >> 1 & 1), c[2] + (d >> 2 & 1)};
+                if (cell[0] < nb[0] && cell[1] < nb[1] && cell[2] < nb[2])
+                    both |= part_sides(field, iso, sides, cell, d);
+            }
+            keep[i] = both == kBothSides;
+        }
+    });
+    size_t kept = 0;
+    for (size_t i = 0; i < blocks.size(); ++i)
+        if (keep[i]) blocks[kept++] = blocks[i];
+    blocks.resize(kept);
     return blocks;
 }
 
@@ -199,8 +293,9 @@ class SparseMesher {
                     else
                         detail::om_mc_count(block.box.data(), table_, local, lx, ly, lz,
                                             &vertices[s], &triangles[s]);
-                    owns[b] = owns[b] || vertices[s] || triangles[s];
+                    if (vertices[s] || triangles[s]) block.owners.push_back(uint16_t(s));
                 });
+                owns[b] = !block.owners.empty();
             }
         });
         // Only the blocks that own something stay.
@@ -242,10 +337,11 @@ class SparseMesher {
                 BoxOffsets& box = scratch.local();
                 for (size_t b = range.begin(); b != range.end(); ++b) {
                     const Block& block = slab.blocks[b];
-                    // The global offsets of the box's samples that own something; one brick covers
-                    // the box, so a slot in it is the sample's index in the box.
-                    box.vertex.assign(block.box.size(), 0);
-                    box.triangle.assign(block.box.size(), 0);
+                    // The global offsets of the box's samples that own something (the only ones
+                    // read); one brick covers the box, so a slot in it is the sample's index in
+                    // the box.
+                    box.vertex.resize(std::max(box.vertex.size(), block.box.size()));
+                    box.triangle.resize(box.vertex.size());
                     for (const Slab* from : {below, &slab, above})
                         if (from) copy_offsets(*from, block, box.vertex, box.triangle);
                     const detail::OmField local = local_field(block);
@@ -253,7 +349,10 @@ class SparseMesher {
                     tiling.size = std::max({local.n[0], local.n[1], local.n[2]});
                     tiling.count[0] = tiling.count[1] = tiling.count[2] = 1;
                     const uint32_t box_base[1] = {0};
-                    for_each_changing_sample(block, [&](int64_t x, int64_t y, int64_t z) {
+                    for (const uint16_t owner : block.owners) {
+                        const int64_t x = block.origin[0] + owner % kBlock,
+                                      y = block.origin[1] + owner / kBlock % kBlock,
+                                      z = block.origin[2] + owner / (kBlock * kBlock);
                         const int lx = int(x - block.box_lo[0]), ly = int(y - block.box_lo[1]),
                                   lz = int(z - block.box_lo[2]);
                         if (nets_)
@@ -269,13 +368,13 @@ class SparseMesher {
                                                vertex_sample.data(), vertex_local.data(),
                                                triangles.data());
                         // The sample's vertex records as world positions.
-                        const size_t s = b * kBlockSamples + slot_in_block(block.origin, x, y, z);
+                        const size_t s = b * kBlockSamples + owner;
                         const uint32_t first = slab.vertex_offset[s];
                         for (uint32_t v = first; v < first + slab.vertex_count[s]; ++v)
                             mesh.positions[v] = detail::vertex_position(
                                 field_.grid(), {uint64_t(x), uint64_t(y), uint64_t(z)},
                                 &vertex_local[3 * size_t(v - slab.first_vertex)]);
-                    });
+                    }
                 }
             });
         for (size_t t = 0; t < triangles.size(); t += 3)
@@ -326,19 +425,11 @@ class SparseMesher {
         return local;
     }
 
-    // The dense field does not hold a non-finite sample, so neither may the meshed one; every
-    // stored sample lies in the box of its own leaf's block, which is a candidate.
     void read_box(Block& block) const {
         block.box.resize(
             size_t((block.box_hi[0] - block.box_lo[0]) * (block.box_hi[1] - block.box_lo[1]) *
                    (block.box_hi[2] - block.box_lo[2])));
         field_.copy_box(block.box_lo, block.box_hi, block.box.data());
-        for (float value : block.box)
-            if (!std::isfinite(value))
-                throw InputError(std::string(who_) + ": a sample of the field near voxel (" +
-                                 std::to_string(block.origin[0]) + ", " +
-                                 std::to_string(block.origin[1]) + ", " +
-                                 std::to_string(block.origin[2]) + ") is not finite");
     }
 
     // Phase 3: the slab's counts become offsets, walking its samples in global order (z, then
@@ -376,7 +467,7 @@ class SparseMesher {
         slab.end_triangle = uint32_t(triangles_);
     }
 
-    // The offsets of the samples of `from`'s blocks that lie in `block`'s box.
+    // The offsets of the owners of `from`'s blocks that lie in `block`'s box.
     void copy_offsets(const Slab& from, const Block& block, std::vector<uint32_t>& box_vertex,
                       std::vector<uint32_t>& box_triangle) const {
         const Index3& lo = block.box_lo;
@@ -391,16 +482,16 @@ class SparseMesher {
                 if (it == from.keys.end() || *it != key) continue;
                 const size_t b = size_t(it - from.keys.begin());
                 const Index3& o = from.blocks[b].origin;
-                for (int64_t z = std::max(lo[2], o[2]); z < std::min(hi[2], o[2] + kBlock); ++z)
-                    for (int64_t y = std::max(lo[1], o[1]); y < std::min(hi[1], o[1] + kBlock); ++y)
-                        for (int64_t x = std::max(lo[0], o[0]); x < std::min(hi[0], o[0] + kBlock);
-                             ++x) {
-                            const size_t s = b * kBlockSamples + slot_in_block(o, x, y, z);
-                            const size_t at =
-                                size_t((x - lo[0]) + wx * ((y - lo[1]) + wy * (z - lo[2])));
-                            box_vertex[at] = from.vertex_offset[s];
-                            box_triangle[at] = from.triangle_offset[s];
-                        }
+                for (const uint16_t owner : from.blocks[b].owners) {
+                    const int64_t x = o[0] + owner % kBlock, y = o[1] + owner / kBlock % kBlock,
+                                  z = o[2] + owner / (kBlock * kBlock);
+                    if (x < lo[0] || y < lo[1] || z < lo[2] || x >= hi[0] || y >= hi[1] ||
+                        z >= hi[2])
+                        continue;
+                    const size_t at = size_t((x - lo[0]) + wx * ((y - lo[1]) + wy * (z - lo[2])));
+                    box_vertex[at] = from.vertex_offset[b * kBlockSamples + owner];
+                    box_triangle[at] = from.triangle_offset[b * kBlockSamples + owner];
+                }
             }
     }
 
@@ -428,7 +519,7 @@ Mesh mesh_sparse(const SparseField& field, float iso, detail::MeshingMethod meth
     }
 
     // Phase 1: candidates.
-    const std::vector<uint64_t> candidates = candidate_blocks(field, iso);
+    const std::vector<uint64_t> candidates = candidate_blocks(field, iso, who);
     progress.report(phases.scan, 1, 1);
 
     // Phases 2 to 4, a slab at a time: slab i is emitted once slab i + 1 is counted.
