@@ -65,7 +65,8 @@ size_t slot_in_block(const Index3& origin, int64_t x, int64_t y, int64_t z) {
 
 // Calls f(origin) for every 4^3 word of the voxels that may hold or border a change: a word with
 // both set and unset voxels, or a full one beside one that is not (stored or not). Neighbours
-// beyond the grid's faces hold no samples, so they border nothing.
+// beyond the grid's faces hold no samples, so they border nothing. Bricks are visited in
+// parallel, so f must be safe to call from several threads.
 template <typename F>
 void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
     const int64_t words_per_axis = voxels.blocks_per_brick_axis(), word = SparseVoxels::kBlock;
@@ -82,36 +83,40 @@ void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
                      words_per_axis *
                          ((w[1] % words_per_axis) + words_per_axis * (w[2] % words_per_axis))];
     };
-    for (uint64_t brick : voxels.brick_indices()) {
-        const Index3 b = {int64_t(brick % uint64_t(bricks[0])),
-                          int64_t(brick / uint64_t(bricks[0]) % uint64_t(bricks[1])),
-                          int64_t(brick / (uint64_t(bricks[0]) * uint64_t(bricks[1])))};
-        const uint64_t* words = voxels.brick_blocks(brick);
-        const size_t stride[3] = {1, size_t(words_per_axis),
-                                  size_t(words_per_axis * words_per_axis)};
-        size_t i = 0;
-        for (int64_t wz = 0; wz < words_per_axis; ++wz)
-            for (int64_t wy = 0; wy < words_per_axis; ++wy)
-                for (int64_t wx = 0; wx < words_per_axis; ++wx, ++i) {
-                    if (words[i] == 0) continue;
-                    const Index3 w = {b[0] * words_per_axis + wx, b[1] * words_per_axis + wy,
-                                      b[2] * words_per_axis + wz};
-                    bool border = words[i] != ~uint64_t(0);
-                    for (int a = 0; a < 3 && !border; ++a)
-                        for (int64_t step : {-1, 1}) {
-                            Index3 beside = w;
-                            beside[a] += step;
-                            if (beside[a] < 0 || beside[a] * word >= n[a]) continue;
-                            const int64_t local = (a == 0 ? wx : a == 1 ? wy : wz) + step;
-                            const uint64_t value =
-                                local >= 0 && local < words_per_axis  // in this brick
-                                    ? words[i + size_t(step) * stride[a]]
-                                    : word_at(beside);
-                            if (value != ~uint64_t(0)) border = true;
-                        }
-                    if (border) f(Index3{w[0] * word, w[1] * word, w[2] * word});
-                }
-    }
+    const std::vector<uint64_t> stored = voxels.brick_indices();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, stored.size(), 16), [&](const auto& r) {
+        for (size_t s = r.begin(); s != r.end(); ++s) {
+            const uint64_t brick = stored[s];
+            const Index3 b = {int64_t(brick % uint64_t(bricks[0])),
+                              int64_t(brick / uint64_t(bricks[0]) % uint64_t(bricks[1])),
+                              int64_t(brick / (uint64_t(bricks[0]) * uint64_t(bricks[1])))};
+            const uint64_t* words = voxels.brick_blocks(brick);
+            const size_t stride[3] = {1, size_t(words_per_axis),
+                                      size_t(words_per_axis * words_per_axis)};
+            size_t i = 0;
+            for (int64_t wz = 0; wz < words_per_axis; ++wz)
+                for (int64_t wy = 0; wy < words_per_axis; ++wy)
+                    for (int64_t wx = 0; wx < words_per_axis; ++wx, ++i) {
+                        if (words[i] == 0) continue;
+                        const Index3 w = {b[0] * words_per_axis + wx, b[1] * words_per_axis + wy,
+                                          b[2] * words_per_axis + wz};
+                        bool border = words[i] != ~uint64_t(0);
+                        for (int a = 0; a < 3 && !border; ++a)
+                            for (int64_t step : {-1, 1}) {
+                                Index3 beside = w;
+                                beside[a] += step;
+                                if (beside[a] < 0 || beside[a] * word >= n[a]) continue;
+                                const int64_t local = (a == 0 ? wx : a == 1 ? wy : wz) + step;
+                                const uint64_t value =
+                                    local >= 0 && local < words_per_axis  // in this brick
+                                        ? words[i + size_t(step) * stride[a]]
+                                        : word_at(beside);
+                                if (value != ~uint64_t(0)) border = true;
+                            }
+                        if (border) f(Index3{w[0] * word, w[1] * word, w[2] * word});
+                    }
+        }
+    });
 }
 
 // Which sides of iso samples lie on, as bits.
@@ -135,21 +140,27 @@ std::vector<PartSides> leaf_sides(const SparseField& field, float iso, const cha
         for (size_t l = r.begin(); l != r.end(); ++l) {
             const Index3 o = field.leaf_origin(field.leaf_indices()[l]);
             const float* samples = field.leaf_samples(l);
-            PartSides parts{};
+            // Each sample's side (0 beyond the grid), then each part's.
+            uint8_t side[kBlockSamples] = {};
             for (int64_t z = 0; z < std::min<int64_t>(kBlock, n[2] - o[2]); ++z)
                 for (int64_t y = 0; y < std::min<int64_t>(kBlock, n[1] - o[1]); ++y)
                     for (int64_t x = 0; x < std::min<int64_t>(kBlock, n[0] - o[0]); ++x) {
-                        const float value = samples[x + kBlock * (y + kBlock * z)];
-                        if (!std::isfinite(value))
+                        const size_t at = size_t(x + kBlock * (y + kBlock * z));
+                        if (!std::isfinite(samples[at]))
                             throw InputError(
                                 std::string(who) + ": sample (" + std::to_string(o[0] + x) + ", " +
                                 std::to_string(o[1] + y) + ", " + std::to_string(o[2] + z) +
                                 ") of the field is not finite");
-                        const uint8_t side = side_of(value, iso);
-                        const int at_low = int(x == 0) | int(y == 0) << 1 | int(z == 0) << 2;
-                        for (int d = 0; d < 8; ++d)
-                            if ((d & ~at_low) == 0) parts[size_t(d)] |= side;
+                        side[at] = side_of(samples[at], iso);
                     }
+            PartSides parts{};
+            for (int d = 0; d < 8; ++d) {
+                const int ex = d & 1 ? 1 : kBlock, ey = d & 2 ? 1 : kBlock, ez = d & 4 ? 1 : kBlock;
+                for (int z = 0; z < ez; ++z)
+                    for (int y = 0; y < ey; ++y)
+                        for (int x = 0; x < ex; ++x)
+                            parts[size_t(d)] |= side[size_t(x + kBlock * (y + kBlock * z))];
+            }
             sides[l] = parts;
         }
     });
@@ -208,15 +219,25 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso, cons
     // Changes of the inside voxels matter only when the two backgrounds lie on either side of
     // iso. An edge with an end in the word at p is owned by a sample in [p - 1, p + 3].
     const float background = field.background();
-    if (detail::om_inside(-background, iso) != detail::om_inside(background, iso))
+    if (detail::om_inside(-background, iso) != detail::om_inside(background, iso)) {
+        tbb::enumerable_thread_specific<std::vector<uint64_t>> found;
         for_each_inside_boundary(field.inside(), [&](const Index3& p) {
+            std::vector<uint64_t>& local = found.local();
             Index3 lo, hi;
             for (int k = 0; k < 3; ++k) {
                 lo[k] = std::max<int64_t>(p[k] - 1, 0) / kBlock;
                 hi[k] = std::min<int64_t>(p[k] + SparseVoxels::kBlock - 1, n[k] - 1) / kBlock;
             }
-            add_range(lo, hi);
+            for (int64_t z = lo[2]; z <= hi[2]; ++z)
+                for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                    for (int64_t x = lo[0]; x <= hi[0]; ++x)
+                        local.push_back(uint64_t(x) +
+                                        uint64_t(nb[0]) *
+                                            (uint64_t(y) + uint64_t(nb[1]) * uint64_t(z)));
         });
+        for (const std::vector<uint64_t>& local : found)
+            blocks.insert(blocks.end(), local.begin(), local.end());
+    }
     tbb::parallel_sort(blocks.begin(), blocks.end());
     blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
 
@@ -342,7 +363,7 @@ class SparseMesher {
                     // the box.
                     box.vertex.resize(std::max(box.vertex.size(), block.box.size()));
                     box.triangle.resize(box.vertex.size());
-                    for (const Slab* from : {below, &slab, above})
+                    for (const Slab* from : {nets_ ? below : above, &slab})
                         if (from) copy_offsets(*from, block, box.vertex, box.triangle);
                     const detail::OmField local = local_field(block);
                     detail::OmTiling tiling{};
@@ -467,12 +488,18 @@ class SparseMesher {
         slab.end_triangle = uint32_t(triangles_);
     }
 
-    // The offsets of the owners of `from`'s blocks that lie in `block`'s box.
+    // The offsets of the owners of `from`'s blocks whose vertices `block`'s samples may use:
+    // Surface Nets' quads join cells down to one sample below, Marching Cubes' triangles use
+    // edges owned up to one sample above.
     void copy_offsets(const Slab& from, const Block& block, std::vector<uint32_t>& box_vertex,
                       std::vector<uint32_t>& box_triangle) const {
-        const Index3& lo = block.box_lo;
-        const Index3& hi = block.box_hi;
-        const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1];
+        const Index3& box = block.box_lo;
+        const int64_t wx = block.box_hi[0] - box[0], wy = block.box_hi[1] - box[1];
+        Index3 lo, hi;  // the samples whose offsets are used
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::max<int64_t>(block.origin[a] - (nets_ ? 1 : 0), 0);
+            hi[a] = std::min<int64_t>(block.origin[a] + kBlock + (nets_ ? 0 : 1), n_[a]);
+        }
         for (int64_t by = lo[1] / kBlock; by <= (hi[1] - 1) / kBlock; ++by)
             for (int64_t bx = lo[0] / kBlock; bx <= (hi[0] - 1) / kBlock; ++bx) {
                 const uint64_t key =
@@ -482,13 +509,13 @@ class SparseMesher {
                 if (it == from.keys.end() || *it != key) continue;
                 const size_t b = size_t(it - from.keys.begin());
                 const Index3& o = from.blocks[b].origin;
-                for (const uint16_t owner : from.blocks[b].owners) {
+                for (const uint16_t owner : from.blocks[b].owners) {  // in z, y, x order
                     const int64_t x = o[0] + owner % kBlock, y = o[1] + owner / kBlock % kBlock,
                                   z = o[2] + owner / (kBlock * kBlock);
-                    if (x < lo[0] || y < lo[1] || z < lo[2] || x >= hi[0] || y >= hi[1] ||
-                        z >= hi[2])
-                        continue;
-                    const size_t at = size_t((x - lo[0]) + wx * ((y - lo[1]) + wy * (z - lo[2])));
+                    if (z >= hi[2]) break;
+                    if (x < lo[0] || y < lo[1] || z < lo[2] || x >= hi[0] || y >= hi[1]) continue;
+                    const size_t at =
+                        size_t((x - box[0]) + wx * ((y - box[1]) + wy * (z - box[2])));
                     box_vertex[at] = from.vertex_offset[b * kBlockSamples + owner];
                     box_triangle[at] = from.triangle_offset[b * kBlockSamples + owner];
                 }
