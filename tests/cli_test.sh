@@ -406,6 +406,8 @@ else
 fi
 expect_failure "csg of a .npy and a .vdb field" "$WORK/mixed.npy" 'two \.npy fields or two \.vdb' \
     csg "$WORK/csg_narrow.npy" union "$WORK/csg_a.vdb" -o "$WORK/mixed.npy"
+expect_failure "mesh of a .vdb on a named device" "$WORK/vdb_on_device.obj" 'host.*--device' \
+    mesh "$WORK/level_set.vdb" --device 0 -o "$WORK/vdb_on_device.obj"
 printf 'not a vdb' >"$WORK/not_vdb.vdb"
 expect_failure "mesh of a file that is not a .vdb" "$WORK/from_not_vdb.obj" 'not_vdb\.vdb.*not a readable' \
     mesh "$WORK/not_vdb.vdb" -o "$WORK/from_not_vdb.obj"

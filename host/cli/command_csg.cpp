@@ -62,6 +62,10 @@ int run(const FieldArgs& args) {
     const bool level_sets_in = fields_in && is_sparse_field_path(args.input);
     if (fields_in && level_sets_in != is_sparse_field_path(args.input_b))
         throw UsageError("csg takes two .npy fields or two .vdb level sets, not one of each");
+    if (level_sets_in && !args.device.selector.empty())
+        throw UsageError(
+            "two .vdb level sets are combined and meshed on the host's cores; "
+            "--device applies to meshes and .npy fields");
     if (fields_in && any_given(args.grid_options))
         throw UsageError("grid options do not apply to field inputs (their grids are used)");
     const OutputTarget output(args.output, output_extension(args.output, args.files));

@@ -58,6 +58,10 @@ int run(const FieldArgs& args) {
     const bool field_in = is_field_path(args.input);
     if (field_in && any_given(args.grid_options))
         throw UsageError("grid options do not apply to a field input (its grid is used)");
+    if (is_sparse_field_path(args.input) && !args.device.selector.empty())
+        throw UsageError(
+            "a .vdb level set is meshed sparse on the host's cores; --device applies "
+            "to .npy fields and meshes");
     if (field_in && !args.files.input_format.empty())
         throw UsageError("--input-format applies to a mesh read from stdin (-) only");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
