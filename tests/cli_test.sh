@@ -180,13 +180,13 @@ if command -v script >/dev/null; then
             sed -n 's/^\([a-z ]*\) \[[#.]*\].*/\1/p' | sort -u | tr '\n' ,
     }
     bars=$(tty_bars "'$OCLVOX' voxelize '$MESH' -r 32 -o '$WORK/tty.binvox'")
-    [ "$bars" = "voxelizing,writing," ] && pass "progress bars on a terminal" ||
+    [ "$bars" = "loading,voxelizing,writing," ] && pass "progress bars on a terminal (loading, voxelizing, writing)" ||
         fail "progress bar on a terminal" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' sdf '$MESH' -r 64 -o '$WORK/tty.npy' --mesh '$WORK/tty.obj'")
-    [ "$bars" = "distance field,meshing,writing," ] && pass "sdf --mesh: distance field, meshing and writing bars" ||
+    [ "$bars" = "distance field,loading,meshing,writing," ] && pass "sdf --mesh: loading, distance field, meshing and writing bars" ||
         fail "sdf --mesh progress bars" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' csg '$MESH' union '$MESH' -r 48 -o '$WORK/tty_csg.obj'")
-    [ "$bars" = "distance fields,meshing," ] && pass "csg: distance fields and meshing bars" ||
+    [ "$bars" = "distance fields,loading,meshing," ] && pass "csg: loading, distance fields and meshing bars" ||
         fail "csg progress bars" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' sdf '$MESH' -r 64 -o '$WORK/tty.npy' --quiet")
     [ -z "$bars" ] && pass "--quiet draws no progress bar" || fail "--quiet progress bar" "$bars"

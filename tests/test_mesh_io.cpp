@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -18,6 +19,7 @@
 #include <fstream>
 #include <new>
 #include <sstream>
+#include <thread>
 #include <vector>
 
 #include "oclvox/oclvox.hpp"
@@ -1378,6 +1380,63 @@ TEST(Submesh, IndexOutOfRangeIsAnInputError) {
     Mesh broken = one_triangle();
     broken.triangles[0][2] = 7;
     EXPECT_THROW(oclvox::submesh(broken, {0}), oclvox::InputError);
+}
+
+// An n x n sheet of quads as triangles: 2 n^2 triangles on (n + 1)^2 vertices, enough records
+// for the readers to report their parse several times.
+Mesh sheet(int n) {
+    Mesh mesh;
+    for (int j = 0; j <= n; ++j)
+        for (int i = 0; i <= n; ++i)
+            mesh.positions.push_back({i * 0.5, j * 0.25, (i * j) % 7 * 0.125});
+    const auto at = [&](int i, int j) { return uint32_t(i + (n + 1) * j); };
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            mesh.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+            mesh.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+        }
+    return mesh;
+}
+
+// Progress while loading keeps the runs' contract (one total, never back, ending at it) in every
+// format, reports inside the parse, changes nothing loaded, and a false answer cancels.
+TEST_F(MeshFiles, LoadingReportsProgressInEveryFormatAndCancels) {
+    const Mesh mesh = sheet(100);
+    const std::vector<std::pair<std::string, std::string>> files = {
+        {"sheet.obj", obj_text(mesh)},
+        {"sheet-ascii.stl", ascii_stl_text(mesh)},
+        {"sheet-binary.stl", binary_stl_bytes(mesh)},
+        {"sheet-ascii.ply", ply_bytes(mesh, PlyEncoding::Ascii, true)},
+        {"sheet-binary.ply", ply_bytes(mesh, PlyEncoding::BinaryLittleEndian, true)},
+        {"sheet.off", off_text(mesh)},
+    };
+    for (const auto& [name, bytes] : files) {
+        const std::string path = write(name, bytes);
+        const Mesh plain = oclvox::load_mesh(path);
+        std::vector<std::pair<uint64_t, uint64_t>> calls;
+        auto log = [&](uint64_t done, uint64_t total) {
+            calls.push_back({done, total});
+            std::this_thread::sleep_for(std::chrono::milliseconds(55));  // past the thinning
+            return true;
+        };
+        const Mesh reported = oclvox::load_mesh(path, log);
+        EXPECT_EQ(reported.positions, plain.positions) << name;
+        EXPECT_EQ(reported.triangles, plain.triangles) << name;
+        ASSERT_FALSE(calls.empty()) << name;
+        size_t inside_the_parse = 0;
+        for (size_t i = 0; i < calls.size(); ++i) {
+            EXPECT_EQ(calls[i].second, calls[0].second) << name;
+            if (i) EXPECT_GE(calls[i].first, calls[i - 1].first) << name;
+            // The parse is the first 4/7 of the total.
+            inside_the_parse += calls[i].first > 0 && calls[i].first * 7 < calls[i].second * 4;
+        }
+        EXPECT_EQ(calls.back().first, calls.back().second) << name;
+        EXPECT_GE(inside_the_parse, 2u) << name;
+        for (double at : {0.0, 0.3}) {
+            auto cancel = [&](uint64_t done, uint64_t total) { return done < at * total; };
+            EXPECT_THROW(oclvox::load_mesh(path, cancel), oclvox::Cancelled) << name << " " << at;
+        }
+    }
 }
 
 }  // namespace

@@ -109,8 +109,8 @@ int run(const FieldArgs& args) {
         const MeshInput input_b(args.input_b, args.input_b == "-" ? args.files.input_format : "");
         oclvox::Mesh mesh_a, mesh_b;
         timed(record.seconds.load, [&] {
-            mesh_a = load_mesh_input(input_a);
-            mesh_b = load_mesh_input(input_b);
+            mesh_a = load_mesh_input(input_a, args.reporting);
+            mesh_b = load_mesh_input(input_b, args.reporting);
             return 0;
         });
         record.grid = timed(record.seconds.fit,

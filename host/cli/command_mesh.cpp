@@ -84,7 +84,7 @@ int run(const FieldArgs& args) {
     } else {
         const MeshInput input(args.input, args.files.input_format);
         const oclvox::Mesh mesh =
-            timed(record.seconds.load, [&] { return load_mesh_input(input); });
+            timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
         const oclvox::Grid grid =
             timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
         record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};

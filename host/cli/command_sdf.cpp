@@ -61,7 +61,8 @@ int run(const SdfArgs& args) {
 
     // Phase 2: the mesh, its grid, the device.
     const MeshInput input(args.input, args.files.input_format);
-    const oclvox::Mesh mesh = timed(record.seconds.load, [&] { return load_mesh_input(input); });
+    const oclvox::Mesh mesh =
+        timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
     const oclvox::Grid grid =
         timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, field_fit(args)); });
     stop_if_interrupted();

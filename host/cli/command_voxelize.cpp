@@ -87,7 +87,8 @@ int run(const VoxelizeArgs& args) {
 
     // Phase 2: the mesh and the grid around it.
     const MeshInput input(args.input, args.files.input_format);
-    const oclvox::Mesh mesh = timed(record.seconds.load, [&] { return load_mesh_input(input); });
+    const oclvox::Mesh mesh =
+        timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
     const oclvox::Grid grid =
         timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
     stop_if_interrupted();

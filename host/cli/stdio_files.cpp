@@ -14,6 +14,7 @@
 #include "file_names.hpp"
 #include "interrupt.hpp"
 #include "options.hpp"
+#include "progress_bar.hpp"
 
 namespace oclvox_cli {
 
@@ -102,10 +103,11 @@ MeshInput::MeshInput(const std::string& given, const std::string& input_format) 
     if (!out) throw oclvox::Error("cannot stage stdin in " + staged_->path());
 }
 
-oclvox::Mesh load_mesh_input(const MeshInput& input) {
-    if (input.path() == input.name()) return oclvox::load_mesh(input.path());
+oclvox::Mesh load_mesh_input(const MeshInput& input, const ReportingArgs& reporting) {
+    ProgressBar bar("loading", "", reporting);
+    if (input.path() == input.name()) return oclvox::load_mesh(input.path(), bar.callback());
     try {
-        return oclvox::load_mesh(input.path());
+        return oclvox::load_mesh(input.path(), bar.callback());
     } catch (const oclvox::InputError& e) {
         throw oclvox::InputError(replace_all(e.what(), input.path(), "stdin"));
     }

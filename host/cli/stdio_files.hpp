@@ -8,6 +8,7 @@
 #include <string>
 
 #include "oclvox/oclvox.hpp"
+#include "report.hpp"
 
 namespace oclvox_cli {
 
@@ -43,8 +44,9 @@ class MeshInput {
     std::optional<StagedFile> staged_;
 };
 
-// load_mesh for an input as given; errors about a staged stdin copy name stdin.
-oclvox::Mesh load_mesh_input(const MeshInput& input);
+// load_mesh for an input as given, with a "loading" progress bar (and Ctrl-C checked through it);
+// errors about a staged stdin copy name stdin.
+oclvox::Mesh load_mesh_input(const MeshInput& input, const ReportingArgs& reporting);
 
 // An output as given: a file name, or "-" for stdout (written to a staged file with `extension`,
 // copied to stdout by finish()).

@@ -11,6 +11,7 @@
 #include "file_names.hpp"
 #include "mesh_reading.hpp"
 #include "oclvox/oclvox.hpp"
+#include "progress.hpp"
 
 namespace oclvox {
 
@@ -137,20 +138,24 @@ Mesh submesh(const Mesh& mesh, const std::vector<uint32_t>& triangles) {
     return out;
 }
 
-Mesh load_mesh(const std::string& path) {
+Mesh load_mesh(const std::string& path, const ProgressCallback& callback) {
     // Phase 1: read the file as it is, with its own vertex numbering, so that problems are
-    // reported in the file's terms.
+    // reported in the file's terms. As measured on OBJ files (motorBike, buildings), parsing is
+    // about four times the triangulation and about twice the weld.
     constexpr const char* kExpected = "expected .obj, .stl, .ply, .off, .gltf, .glb or .3mf";
+    detail::ProgressPhases progress(callback, "loading " + path);
+    const size_t parse = progress.add(4), triangulate = progress.add(1), weld = progress.add(2);
+    const mesh_reading::ParseReport report = progress.reporter(parse);
     const std::string extension = detail::lowercase_extension(path);
     mesh_reading::Polygons polygons;
     if (extension == ".obj")
-        polygons = mesh_reading::read_obj(path);
+        polygons = mesh_reading::read_obj(path, report);
     else if (extension == ".stl")
-        polygons = mesh_reading::read_stl(path);
+        polygons = mesh_reading::read_stl(path, report);
     else if (extension == ".ply")
-        polygons = mesh_reading::read_ply(path);
+        polygons = mesh_reading::read_ply(path, report);
     else if (extension == ".off")
-        polygons = mesh_reading::read_off(path);
+        polygons = mesh_reading::read_off(path, report);
     else if (extension == ".gltf" || extension == ".glb" || extension == ".3mf")
         polygons = mesh_reading::read_scene_assimp(path);
     else if (extension.empty())
@@ -159,6 +164,7 @@ Mesh load_mesh(const std::string& path) {
         fail(path, "unknown extension '" + extension + "'; " + kExpected);
 
     // Phase 2: triangulate (checking every index), check, then weld.
+    progress.report(triangulate, 0, 1);
     const Mesh raw = mesh_reading::triangulated(path, std::move(polygons));
     if (raw.triangles.empty()) fail(path, "the file contains no triangles");
     try {
@@ -166,7 +172,10 @@ Mesh load_mesh(const std::string& path) {
     } catch (const InputError& error) {
         fail(path, error.what());
     }
-    return welded(raw);
+    progress.report(weld, 0, 1);
+    Mesh mesh = welded(raw);
+    progress.finish();
+    return mesh;
 }
 
 }  // namespace oclvox

@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -38,11 +39,28 @@ inline constexpr const char* kAxisCoordinate[3] = {"x coordinate", "y coordinate
 // face in a hostile file would otherwise take hours.
 constexpr uint32_t kMaxPolygonCorners = 4096;
 
-// The readers, one per file. Each throws InputError naming the file.
-Polygons read_obj(const std::string& path);
-Polygons read_stl(const std::string& path);
-Polygons read_ply(const std::string& path);
-Polygons read_off(const std::string& path);
+// How far a reader has parsed its file's bytes: report(done, total), called every kStride steps
+// of its parse loop, so the loop pays a counter per record. The report may throw (Cancelled).
+using ParseReport = std::function<void(uint64_t done, uint64_t total)>;
+class ParseProgress {
+  public:
+    ParseProgress(const ParseReport& report, uint64_t total) : report_(report), total_(total) {}
+    void at(uint64_t offset) {
+        if (report_ && ++steps_ % kStride == 0) report_(offset, total_);
+    }
+
+  private:
+    static constexpr uint64_t kStride = 4096;
+    const ParseReport& report_;
+    uint64_t total_, steps_ = 0;
+};
+
+// The readers, one per file. Each throws InputError naming the file, and reports its parse
+// (assimp's scenes only when done).
+Polygons read_obj(const std::string& path, const ParseReport& report = {});
+Polygons read_stl(const std::string& path, const ParseReport& report = {});
+Polygons read_ply(const std::string& path, const ParseReport& report = {});
+Polygons read_off(const std::string& path, const ParseReport& report = {});
 Polygons read_scene_assimp(const std::string& path);  // glTF 2.0, GLB, 3MF
 
 // Checks every index and splits every polygon into triangles that cover exactly the polygon (ear

@@ -43,9 +43,10 @@ int64_t corner_index(const TextCursor& line, std::string_view corner, size_t ver
 
 }  // namespace
 
-Polygons read_obj(const std::string& path) {
+Polygons read_obj(const std::string& path, const ParseReport& report) {
     const std::string bytes = read_whole_file(path);
     const std::string_view text(bytes);
+    ParseProgress progress(report, text.size());
     Polygons out;
     out.first_index = 1;
 
@@ -82,6 +83,7 @@ Polygons read_obj(const std::string& path) {
         }
         at = line_end;
         if (at < text.size() && text[at++] == '\r' && at < text.size() && text[at] == '\n') ++at;
+        progress.at(at);
     }
     return out;
 }

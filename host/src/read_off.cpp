@@ -36,8 +36,9 @@ std::string_view next_header_word(TextCursor& text, const char* what) {
 
 }  // namespace
 
-Polygons read_off(const std::string& path) {
+Polygons read_off(const std::string& path, const ParseReport& report) {
     const std::string bytes = read_whole_file(path);
+    ParseProgress progress(report, bytes.size());
     TextCursor text(path, bytes, '#');
 
     // Phase 1: the header: an optional keyword, then the vertex, face and (optional) edge
@@ -83,6 +84,7 @@ Polygons read_off(const std::string& path) {
             p[axis] = text.to_double(text.word_on_line(), kAxisCoordinate[axis]);
         out.positions.push_back(p);
         text.skip_line();
+        progress.at(text.offset());
     }
 
     // Phase 4: faces. Indices are checked (negative, past the end) when they are triangulated.
@@ -97,6 +99,7 @@ Polygons read_off(const std::string& path) {
             out.corners.push_back(text.to_integer(text.word_on_line(), "vertex index"));
         out.corner_counts.push_back(uint32_t(corners));
         text.skip_line();
+        progress.at(text.offset());
     }
     return out;
 }

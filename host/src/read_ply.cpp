@@ -240,7 +240,7 @@ std::string record_name(const Element& element, uint64_t record) {
 }
 
 void read_binary_body(const std::string& path, const Header& header, const std::string& bytes,
-                      Polygons& out) {
+                      Polygons& out, ParseProgress& progress) {
     const bool big_endian = header.format == Format::BinaryBigEndian;
     const char* at = bytes.data() + header.body_offset;
     const char* const end = bytes.data() + bytes.size();
@@ -280,6 +280,7 @@ void read_binary_body(const std::string& path, const Header& header, const std::
                 at += uint64_t(length) * entry_size;
             }
             if (element.name == "vertex") out.positions.push_back(position);
+            progress.at(uint64_t(at - bytes.data()));
         }
     }
 }
@@ -287,7 +288,7 @@ void read_binary_body(const std::string& path, const Header& header, const std::
 // One record per line, as the format's reference implementation reads it: a line with fewer or
 // more values than the header declares is an error, not a shifted read.
 void read_ascii_body(const std::string& path, const Header& header, const std::string& bytes,
-                     Polygons& out) {
+                     Polygons& out, ParseProgress& progress) {
     TextCursor text(path, std::string_view(bytes).substr(header.body_offset), 0, header.body_line);
     const auto value = [&](std::string_view word, Scalar type, std::string_view what) {
         return is_floating(type) ? text.to_double(word, what) : double(text.to_integer(word, what));
@@ -328,15 +329,17 @@ void read_ascii_body(const std::string& path, const Header& header, const std::s
                           " has more values than the header declares");
             text.skip_line();
             if (element.name == "vertex") out.positions.push_back(position);
+            progress.at(header.body_offset + text.offset());
         }
     }
 }
 
 }  // namespace
 
-Polygons read_ply(const std::string& path) {
+Polygons read_ply(const std::string& path, const ParseReport& report) {
     // Phase 1: the header, and the declared counts against the file size.
     const std::string bytes = read_whole_file(path);
+    ParseProgress progress(report, bytes.size());
     const Header header = read_header(path, bytes);
     check_counts_fit(path, header, bytes.size() - header.body_offset);
     Polygons out;
@@ -349,9 +352,9 @@ Polygons read_ply(const std::string& path) {
 
     // Phase 2: the body, in element order (faces may come before vertices).
     if (header.format == Format::Ascii)
-        read_ascii_body(path, header, bytes, out);
+        read_ascii_body(path, header, bytes, out, progress);
     else
-        read_binary_body(path, header, bytes, out);
+        read_binary_body(path, header, bytes, out, progress);
     return out;
 }
 

@@ -26,7 +26,7 @@ void expect(const TextCursor& text, std::string_view word, std::string_view keyw
 }
 
 // Binary floats are exact in double, so the corners are the file's values bit for bit.
-Polygons read_binary(const std::string& path, const std::string& bytes) {
+Polygons read_binary(const std::string& path, const std::string& bytes, ParseProgress& progress) {
     if (bytes.size() < kBinaryHeaderBytes)
         fail(path, "the file does not start with 'solid' (ASCII STL) and is shorter than the " +
                        std::to_string(kBinaryHeaderBytes) + "-byte header of a binary STL");
@@ -49,6 +49,7 @@ Polygons read_binary(const std::string& path, const std::string& bytes) {
         }
         const int64_t first = int64_t(out.positions.size()) - 3;
         out.add_triangle(first, first + 1, first + 2);
+        progress.at(uint64_t(facet - bytes.data()));
     }
     return out;
 }
@@ -56,7 +57,7 @@ Polygons read_binary(const std::string& path, const std::string& bytes) {
 // solid NAME / facet normal N N N / outer loop / vertex X Y Z (3 or more) / endloop / endfacet
 // ... / endsolid NAME, several solids in a row; keywords in any case. Coordinates are parsed
 // correctly rounded. The normal's words are not parsed: writers put "nan" there for slivers.
-Polygons read_ascii(const std::string& path, const std::string& text) {
+Polygons read_ascii(const std::string& path, const std::string& text, ParseProgress& progress) {
     TextCursor cursor(path, text);
     Polygons out;
     while (!cursor.at_end()) {
@@ -93,6 +94,7 @@ Polygons read_ascii(const std::string& path, const std::string& text) {
             const size_t first = out.positions.size() - corners;
             for (size_t k = first; k < out.positions.size(); ++k) out.corners.push_back(int64_t(k));
             out.corner_counts.push_back(corners);
+            progress.at(cursor.offset());
         }
     }
     return out;
@@ -100,20 +102,21 @@ Polygons read_ascii(const std::string& path, const std::string& text) {
 
 }  // namespace
 
-Polygons read_stl(const std::string& path) {
+Polygons read_stl(const std::string& path, const ParseReport& report) {
     const std::string bytes = read_whole_file(path);
+    ParseProgress progress(report, bytes.size());
     // A binary file is recognised by its size, which its facet count fixes: many binary writers
     // start the header with "solid" too.
     if (bytes.size() >= kBinaryHeaderBytes) {
         const uint64_t facets = load_scalar<uint32_t>(&bytes[80], false);
         if (bytes.size() == kBinaryHeaderBytes + kBinaryFacetBytes * facets)
-            return read_binary(path, bytes);
+            return read_binary(path, bytes, progress);
     }
     const size_t start = bytes.find_first_not_of(" \t\r\n");
     if (start != std::string::npos &&
         same_keyword(std::string_view(bytes).substr(start, 5), "solid"))
-        return read_ascii(path, bytes);
-    return read_binary(path, bytes);
+        return read_ascii(path, bytes, progress);
+    return read_binary(path, bytes, progress);
 }
 
 }  // namespace oclvox::mesh_reading

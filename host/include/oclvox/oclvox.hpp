@@ -17,6 +17,13 @@
 
 namespace oclvox {
 
+// Progress and cancellation of a long run: called on the calling thread as the work goes on with
+// how much is done of a total that does not change during the run, done never going back; return
+// false to cancel (the run throws Cancelled). Voxelization counts bricks and calls it after each
+// batch; mesh loading, the distance fields (SdfOptions) and meshing (field.hpp) count fractions
+// of a fixed total.
+using ProgressCallback = std::function<bool(uint64_t done, uint64_t total)>;
+
 // ---------------------------------------------------------------------------------------------
 // Errors. Every failure names the problem; none is reported as an empty result.
 // ---------------------------------------------------------------------------------------------
@@ -66,8 +73,10 @@ struct Mesh {
 // Loads OBJ, STL (ASCII and binary), PLY (ascii and binary) and OFF exactly in double, and glTF
 // 2.0 (.gltf, .glb) and 3MF through assimp (every node transform applied, all meshes merged).
 // The format follows from the file extension (case-insensitive). Polygons are triangulated and
-// equal positions welded. Throws InputError naming the file and the problem.
-Mesh load_mesh(const std::string& path);
+// equal positions welded. Throws InputError naming the file and the problem. `progress` is called
+// as the file is parsed, triangulated and welded, as SdfOptions::progress is (done / total the
+// fraction of the estimated work; returning false cancels: Cancelled).
+Mesh load_mesh(const std::string& path, const ProgressCallback& progress = {});
 
 // Throws InputError if the mesh has no triangles, an index out of range, or a non-finite
 // coordinate in a used vertex.
@@ -218,13 +227,6 @@ enum class Boundary {
 };
 const char* to_string(Boundary boundary);
 Boundary boundary_from_string(const std::string& name);
-
-// Progress and cancellation of a long run: called on the calling thread as the work goes on with
-// how much is done of a total that does not change during the run, done never going back; return
-// false to cancel (the run throws Cancelled). Voxelization counts bricks and calls it after each
-// batch; the distance fields (SdfOptions) and meshing (field.hpp) count fractions of a fixed
-// total.
-using ProgressCallback = std::function<bool(uint64_t done, uint64_t total)>;
 
 struct VoxelizeOptions {
     VoxelizeMode mode = VoxelizeMode::Surface;
