@@ -186,7 +186,7 @@ if command -v script >/dev/null; then
     [ "$bars" = "distance field,loading,meshing,writing," ] && pass "sdf --mesh: loading, distance field, meshing and writing bars" ||
         fail "sdf --mesh progress bars" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' csg '$MESH' union '$MESH' -r 48 -o '$WORK/tty_csg.obj'")
-    [ "$bars" = "distance fields,loading,meshing," ] && pass "csg: loading, distance fields and meshing bars" ||
+    [ "$bars" = "distance fields,loading,meshing,writing," ] && pass "csg: loading, distance fields, meshing and writing bars" ||
         fail "csg progress bars" "bars: $bars"
     bars=$(tty_bars "'$OCLVOX' sdf '$MESH' -r 64 -o '$WORK/tty.npy' --quiet")
     [ -z "$bars" ] && pass "--quiet draws no progress bar" || fail "--quiet progress bar" "$bars"

@@ -828,5 +828,37 @@ TEST(Meshing, WriteMeshRejectsUnknownExtensionsAndBadIndicesWithoutWriting) {
     EXPECT_FALSE(std::ifstream(obj).good());
 }
 
+// Writing a mesh reports as writing voxels does (one total, never back, the end before the file
+// takes its name); a cancel leaves the file that was there.
+TEST(Meshing, WritingReportsProgressAndACancelKeepsThePreviousFile) {
+    const ScalarField field = sample_field(160, 160, 160, [](const Vec3& p) {
+        return sphere_distance(p, {80.2, 79.6, 80.1}, 70.3);
+    });
+    const Mesh mesh = marching_cubes(field);
+    ASSERT_GT(mesh.positions.size() + mesh.triangles.size(), 2 * 65536u);  // several reports
+    for (const char* extension : {".obj", ".ply", ".stl"}) {
+        const std::string path = temp_path(std::string("progress") + extension);
+        test::ProgressLog log;
+        log.slow = true;
+        bool existed_at_the_end = true;
+        auto callback = log.callback();
+        write_mesh(path, mesh, [&](uint64_t done, uint64_t total) {
+            if (done == total) existed_at_the_end = std::ifstream(path).good();
+            return callback(done, total);
+        });
+        log.expect_contract(extension);
+        EXPECT_FALSE(existed_at_the_end) << extension;
+        if (std::string(extension) != ".stl") EXPECT_GE(log.steps_inside(), 2u) << extension;
+        const std::string written = read_bytes(path);
+        test::ProgressLog cancel;
+        cancel.cancel_from = 0.5;
+        EXPECT_THROW(write_mesh(path, Mesh{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {{0, 1, 2}}},
+                                cancel.callback()),
+                     Cancelled);
+        EXPECT_EQ(read_bytes(path), written) << extension;
+        std::remove(path.c_str());
+    }
+}
+
 }  // namespace
 }  // namespace oclvox

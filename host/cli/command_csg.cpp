@@ -144,7 +144,7 @@ int run(const FieldArgs& args) {
     // Phase 4: the file, then the report.
     timed(record.seconds.write, [&] {
         if (surface)
-            oclvox::write_mesh(output.path(), *surface);
+            write_mesh_output(output.path(), *surface, args);
         else if (sparse)
             write_field_output(output.path(), *sparse, args);
         else

@@ -113,7 +113,7 @@ int run(const FieldArgs& args) {
     });
     stop_if_interrupted();
     timed(record.seconds.write, [&] {
-        oclvox::write_mesh(output.path(), surface);
+        write_mesh_output(output.path(), surface, args);
         output.finish();
         return 0;
     });

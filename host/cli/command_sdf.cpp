@@ -98,7 +98,7 @@ int run(const SdfArgs& args) {
             write_field_output(output.path(), *sparse, args);
         else
             write_field_output(output.path(), *dense, 0.0, args);
-        if (surface) oclvox::write_mesh(args.mesh_output, *surface);
+        if (surface) write_mesh_output(args.mesh_output, *surface, args);
         if (!args.preview.empty())
             write_preview(args.preview, sparse ? sparse->to_dense() : *dense, 0.0f);
         output.finish();

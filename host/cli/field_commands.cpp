@@ -154,6 +154,11 @@ oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& 
                                            : oclvox::surface_nets(field, iso, bar.callback());
 }
 
+void write_mesh_output(const std::string& path, const oclvox::Mesh& mesh, const FieldArgs& args) {
+    ProgressBar bar("writing", "", args.reporting);
+    oclvox::write_mesh(path, mesh, bar.callback());
+}
+
 void write_field_output(const std::string& path, const oclvox::ScalarField& field,
                         double band_voxels, const FieldArgs& args) {
     ProgressBar bar("writing", "", args.reporting);

@@ -69,6 +69,9 @@ oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
 // gives).
 oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& args, float iso);
 
+// write_mesh with a "writing" progress bar (and Ctrl-C checked through it).
+void write_mesh_output(const std::string& path, const oclvox::Mesh& mesh, const FieldArgs& args);
+
 // write_field with a "writing" progress bar (and Ctrl-C checked through it).
 void write_field_output(const std::string& path, const oclvox::ScalarField& field,
                         double band_voxels, const FieldArgs& args);

@@ -14,6 +14,7 @@
 #include "file_names.hpp"
 #include "little_endian.hpp"
 #include "oclvox/field.hpp"
+#include "progress.hpp"
 
 namespace oclvox {
 
@@ -54,7 +55,24 @@ class BlockWriter {
     std::vector<char> buffer_;
 };
 
-void write_obj(std::ostream& out, const Mesh& mesh) {
+// Reports a writer's items (vertices and triangles) as they are formatted, every kStride of
+// them.
+class ItemProgress {
+  public:
+    ItemProgress(detail::ProgressPhases& progress, size_t phase, uint64_t total)
+        : progress_(progress), phase_(phase), total_(total) {}
+    void item() {
+        if (++done_ % kStride == 0) progress_.report(phase_, done_, total_);
+    }
+
+  private:
+    static constexpr uint64_t kStride = 65536;
+    detail::ProgressPhases& progress_;
+    size_t phase_;
+    uint64_t total_, done_ = 0;
+};
+
+void write_obj(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
     BlockWriter w(out);
     w.text("# oclvox: " + std::to_string(mesh.positions.size()) + " vertices, " +
            std::to_string(mesh.triangles.size()) + " triangles\n");
@@ -65,6 +83,7 @@ void write_obj(std::ostream& out, const Mesh& mesh) {
             w.number(c);
         }
         w.character('\n');
+        progress.item();
     }
     for (const auto& t : mesh.triangles) {  // OBJ indices start at 1
         w.character('f');
@@ -73,27 +92,31 @@ void write_obj(std::ostream& out, const Mesh& mesh) {
             w.number(uint64_t(index) + 1);
         }
         w.character('\n');
+        progress.item();
     }
     w.flush();
 }
 
-void write_ply(std::ostream& out, const Mesh& mesh) {
+void write_ply(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
     BlockWriter w(out);
     w.text("ply\nformat binary_little_endian 1.0\ncomment oclvox iso-surface\nelement vertex " +
            std::to_string(mesh.positions.size()) +
            "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
            std::to_string(mesh.triangles.size()) +
            "\nproperty list uchar int vertex_indices\nend_header\n");
-    for (const auto& p : mesh.positions)
+    for (const auto& p : mesh.positions) {
         for (double c : p) w.little_endian(c);
+        progress.item();
+    }
     for (const auto& t : mesh.triangles) {
         w.character(char(3));
         for (uint32_t index : t) w.little_endian(index);
+        progress.item();
     }
     w.flush();
 }
 
-void write_stl(std::ostream& out, const Mesh& mesh) {
+void write_stl(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
     BlockWriter w(out);
     char header[80] = {};
     std::strncpy(header, "oclvox iso-surface", sizeof header);
@@ -113,19 +136,20 @@ void write_stl(std::ostream& out, const Mesh& mesh) {
         for (const auto* p : {&a, &b, &c})
             for (double x : *p) w.little_endian(float(x));
         w.little_endian(uint16_t(0));
+        progress.item();
     }
     w.flush();
 }
 
 }  // namespace
 
-void write_mesh(const std::string& path, const Mesh& mesh) {
+void write_mesh(const std::string& path, const Mesh& mesh, const ProgressCallback& callback) {
     // Phase 1: format and checks, before any file exists.
     const std::string ext = detail::lowercase_extension(path);
-    void (*write)(std::ostream&, const Mesh&) = ext == ".obj"   ? write_obj
-                                                : ext == ".ply" ? write_ply
-                                                : ext == ".stl" ? write_stl
-                                                                : nullptr;
+    void (*write)(std::ostream&, const Mesh&, ItemProgress&) = ext == ".obj"   ? write_obj
+                                                               : ext == ".ply" ? write_ply
+                                                               : ext == ".stl" ? write_stl
+                                                                               : nullptr;
     if (!write)
         throw OutputError("cannot write " + path + ": unknown mesh extension '" + ext +
                           "' (use .obj, .ply or .stl)");
@@ -140,8 +164,16 @@ void write_mesh(const std::string& path, const Mesh& mesh) {
                                   " uses vertex " + std::to_string(index) + " of only " +
                                   std::to_string(mesh.positions.size()));
 
-    // Phase 2: the bytes, through a temporary file renamed into place.
-    detail::write_file_atomically(path, [&](std::ostream& out) { write(out, mesh); });
+    // Phase 2: the bytes, through a temporary file renamed into place; the last report comes
+    // before the rename, so a cancel leaves no file.
+    detail::ProgressPhases progress(callback, "writing " + path);
+    const size_t phase = progress.add(1);
+    ItemProgress items(progress, phase,
+                       (ext == ".stl" ? 0 : mesh.positions.size()) + mesh.triangles.size());
+    detail::write_file_atomically(path, [&](std::ostream& out) {
+        write(out, mesh, items);
+        progress.finish();
+    });
 }
 
 }  // namespace oclvox

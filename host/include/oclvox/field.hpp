@@ -155,7 +155,8 @@ Mesh marching_cubes(const SparseField& field, float iso = 0.0f,
 // Writes a triangle mesh by extension (case-insensitive): .obj (text, exact shortest decimals),
 // .ply (binary little-endian, double vertices, int indices), .stl (binary, float, facet normals).
 // Written to a temporary file and renamed into place. Throws OutputError for an unknown extension,
-// an invalid index, or an I/O failure.
-void write_mesh(const std::string& path, const Mesh& mesh);
+// an invalid index, or an I/O failure. `progress` as for write_field: the fraction written, the
+// last call before the file takes its name, false throwing Cancelled and leaving no file.
+void write_mesh(const std::string& path, const Mesh& mesh, const ProgressCallback& progress = {});
 
 }  // namespace oclvox
