@@ -86,15 +86,17 @@ def _selector(device):
     return device
 
 
-def load_mesh(path):
-    """Reads OBJ, STL, PLY or OFF: returns (vertices float64 (N, 3), faces int64 (M, 3))."""
-    loaded = _oclvox.load_mesh(path)
+def load_mesh(path, *, progress=None):
+    """Reads OBJ, STL, PLY, OFF, glTF or 3MF: returns (vertices float64 (N, 3), faces int64 (M, 3)).
+    progress: as for sdf."""
+    loaded = _oclvox.load_mesh(path, progress=progress)
     return loaded.vertices, loaded.faces
 
 
-def save_mesh(path, vertices, faces=None):
-    """Writes a triangle mesh by extension: .obj, .ply or .stl."""
-    _mesh_and_resolution(vertices, faces, 256)[0].save(path)
+def save_mesh(path, vertices, faces=None, *, progress=None):
+    """Writes a triangle mesh by extension: .obj, .ply or .stl. progress: as for sdf (False
+    cancels and leaves no file)."""
+    _mesh_and_resolution(vertices, faces, 256)[0].save(path, progress=progress)
 
 
 def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat", inside="auto",

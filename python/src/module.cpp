@@ -449,11 +449,15 @@ PYBIND11_MODULE(_oclvox, m) {
             "use (in their order here)")
         .def(
             "save",
-            [](const oclvox::Mesh& mesh, const std::filesystem::path& path) {
-                py::gil_scoped_release release;
-                oclvox::write_mesh(path.string(), mesh);
+            [](const oclvox::Mesh& mesh, const std::filesystem::path& path, py::object progress) {
+                ProgressBridge bridge(std::move(progress));
+                bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                    oclvox::write_mesh(path.string(), mesh, callback);
+                });
             },
-            "path"_a)
+            "path"_a, "progress"_a = py::none(),
+            "Writes .obj, .ply or .stl; progress(done, total) as for sdf, False cancelling with no "
+            "file left")
         .def("__repr__",
              [](const oclvox::Mesh& mesh) {
                  return "<oclvox.Mesh " + std::to_string(mesh.positions.size()) + " vertices, " +
@@ -627,11 +631,13 @@ PYBIND11_MODULE(_oclvox, m) {
 
     m.def(
         "load_mesh",
-        [](const std::filesystem::path& path) {
-            py::gil_scoped_release release;
-            return oclvox::load_mesh(path.string());
+        [](const std::filesystem::path& path, py::object progress) {
+            ProgressBridge bridge(std::move(progress));
+            return bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                return oclvox::load_mesh(path.string(), callback);
+            });
         },
-        "path"_a);
+        "path"_a, "progress"_a = py::none());
     m.def(
         "load_field",
         [](const std::filesystem::path& path) {

@@ -111,6 +111,25 @@ def test_save_progress_and_cancel(spot, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npy", "a.npy.json"]
 
 
+def test_mesh_files_load_and_save_with_progress_and_cancel(spot, tmp_path):
+    vertices, faces = spot
+    calls = []
+    oclvox.save_mesh(tmp_path / "spot.ply", vertices, faces,
+                     progress=lambda done, total: calls.append((done, total)))
+    check_contract(calls)
+    calls = []
+    loaded = oclvox.load_mesh(tmp_path / "spot.ply",
+                              progress=lambda done, total: calls.append((done, total)))
+    check_contract(calls)
+    assert np.array_equal(loaded[1], oclvox.load_mesh(tmp_path / "spot.ply")[1])
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.load_mesh(tmp_path / "spot.ply", progress=lambda done, total: False)
+    with pytest.raises(oclvox.Cancelled):
+        oclvox.save_mesh(tmp_path / "other.obj", vertices, faces,
+                         progress=lambda done, total: False)
+    assert not (tmp_path / "other.obj").exists()
+
+
 def test_cancel_stops_a_long_sdf_promptly(spot):
     # A full-grid 256^3 field takes minutes through PoCL; a callback that says stop after 0.5 s
     # must end it soon after (kernels run in slices of about 0.1 s while a callback is set).
