@@ -234,6 +234,22 @@ TEST(HostMemory, MeshingBuffersOverBudgetAreRefused) {
     EXPECT_GT(surface_nets(gpu, field).triangles.size(), 10000u);
 }
 
+// The sparse meshers hold three slabs of blocks and the mesh, checked as the mesh grows.
+TEST(HostMemory, SparseMeshingOverBudgetIsRefused) {
+    SdfOptions options;
+    options.band_voxels = 2.0;
+    const SparseField field = signed_distance_sparse_reference(
+        icosphere({48.0, 47.5, 47.3}, 40.0, 5), unit_grid(96, 96, 96), options);
+    {
+        ScopedBudget budget("1");
+        expect_refused([&] { surface_nets(field); }, {"surface_nets", budget_of("1 MiB")}, false);
+        expect_refused([&] { marching_cubes(field); }, {"marching_cubes", budget_of("1 MiB")},
+                       false);
+    }
+    ScopedBudget budget("64");
+    EXPECT_GT(marching_cubes(field).triangles.size(), 30000u);
+}
+
 TEST(HostMemory, NpyFieldOverTheDefaultBudgetIsAnInputErrorNamingTheFile) {
     const std::string path =
         ::testing::TempDir() + "oclvox_host_memory_" + std::to_string(getpid()) + ".npy";

@@ -7,9 +7,11 @@
 //
 // Phases:
 //  1. Candidate blocks: the 8^3 blocks of the leaves' tiling whose samples, with the one-sample
-//     halo their cells and edges reach, may not all lie on one side of iso. A sample outside the
+//     halo their cells and edges reach, do not all lie on one side of iso. A sample outside the
 //     leaves is -background where the inside voxels are set and +background elsewhere, so such a
-//     block either reaches a stored leaf or a place where the inside voxels change.
+//     block either reaches a stored leaf or a place where the inside voxels change; of those,
+//     the ones kept are told exactly from per-leaf summaries of the sides of their samples (and
+//     the inside voxels where no leaf is stored), without reading a sample twice.
 //  2. Slab by slab (the blocks of one z), count each sample's vertices and triangles from a box
 //     of its block with a halo; blocks that own nothing are dropped.
 //  3. Exclusive prefix sums over the slab in global sample order, continued from the slab before:
@@ -288,7 +290,6 @@ class SparseMesher {
         slab.blocks.resize(candidates);
         slab.vertex_count.assign(candidates * kBlockSamples, 0);
         slab.triangle_offset.assign(candidates * kBlockSamples, 0);
-        std::vector<uint8_t> owns(candidates, 0);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates, 4), [&](const auto& range) {
             for (size_t b = range.begin(); b != range.end(); ++b) {
                 Block& block = slab.blocks[b];
@@ -316,13 +317,12 @@ class SparseMesher {
                                             &vertices[s], &triangles[s]);
                     if (vertices[s] || triangles[s]) block.owners.push_back(uint16_t(s));
                 });
-                owns[b] = !block.owners.empty();
             }
         });
         // Only the blocks that own something stay.
         size_t kept = 0;
         for (size_t b = 0; b < candidates; ++b) {
-            if (!owns[b]) continue;
+            if (slab.blocks[b].owners.empty()) continue;
             if (kept != b) {
                 slab.blocks[kept] = std::move(slab.blocks[b]);
                 slab.keys[kept] = slab.keys[b];
