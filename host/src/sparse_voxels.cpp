@@ -180,38 +180,49 @@ void for_each_block_in(const std::array<int64_t, 3>& brick_origin, int64_t size,
             }
 }
 
+// Calls f(index, origin) for every brick (of `size` voxels, `nbricks` of them along the axes)
+// that meets the inclusive voxel range [first, last], with its linear index and lowest voxel.
+template <typename F>
+void for_each_brick_in(const std::array<int64_t, 3>& nbricks, int64_t size,
+                       const std::array<int64_t, 3>& first, const std::array<int64_t, 3>& last,
+                       F f) {
+    for (int64_t bz = first[2] / size; bz <= last[2] / size; ++bz)
+        for (int64_t by = first[1] / size; by <= last[1] / size; ++by)
+            for (int64_t bx = first[0] / size; bx <= last[0] / size; ++bx)
+                f(uint64_t(bx) +
+                      uint64_t(nbricks[0]) * (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz)),
+                  std::array<int64_t, 3>{bx * size, by * size, bz * size});
+}
+
 }  // namespace
 
 void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi,
                             const std::array<int64_t, 3>& strides, uint8_t* out) const {
     std::array<int64_t, 3> first{}, last{};
     if (!clip_box(grid_, lo, hi, first, last)) return;
-    const auto nbricks = brick_dims();
-    const int64_t b = brick_size_;
     // Phase 1: the bricks the box touches, found by lookup rather than by scanning all bricks.
-    for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
-        for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
-            for (int64_t bx = first[0] / b; bx <= last[0] / b; ++bx) {
-                const auto it = bricks_.find(
-                    uint64_t(bx) +
-                    uint64_t(nbricks[0]) * (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz)));
-                if (it == bricks_.end()) continue;
-                const uint64_t* blocks = it->second.data();
-                // Phase 2: the brick's blocks inside the box, then one byte per set voxel.
-                for_each_block_in(
-                    {bx * b, by * b, bz * b}, b, blocks_per_brick_axis(), first, last,
-                    [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
-                        mask &= blocks[word];
-                        uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
-                                        (o[1] - lo[1]) * strides[1] + (o[2] - lo[2]) * strides[2];
-                        while (mask) {
-                            const int bit = __builtin_ctzll(mask);
-                            mask &= mask - 1;
-                            base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
-                                 (bit >> 4) * strides[2]] = 1;
-                        }
-                    });
-            }
+    for_each_brick_in(brick_dims(), brick_size_, first, last,
+                      [&](uint64_t index, const std::array<int64_t, 3>& origin) {
+                          const auto it = bricks_.find(index);
+                          if (it == bricks_.end()) return;
+                          const uint64_t* blocks = it->second.data();
+                          // Phase 2: the brick's blocks inside the box, then one byte per set
+                          // voxel.
+                          for_each_block_in(
+                              origin, brick_size_, blocks_per_brick_axis(), first, last,
+                              [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
+                                  mask &= blocks[word];
+                                  uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
+                                                  (o[1] - lo[1]) * strides[1] +
+                                                  (o[2] - lo[2]) * strides[2];
+                                  while (mask) {
+                                      const int bit = __builtin_ctzll(mask);
+                                      mask &= mask - 1;
+                                      base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
+                                           (bit >> 4) * strides[2]] = 1;
+                                  }
+                              });
+                      });
 }
 
 uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
@@ -221,11 +232,8 @@ uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
     const auto nbricks = brick_dims();
     const int64_t b = brick_size_;
     uint64_t count = 0;
-    auto count_brick = [&](uint64_t index, const std::vector<uint64_t>& blocks) {
-        const std::array<int64_t, 3> origin = {
-            int64_t(index % uint64_t(nbricks[0])) * b,
-            int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1])) * b,
-            int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1]))) * b};
+    auto count_brick = [&](const std::array<int64_t, 3>& origin,
+                           const std::vector<uint64_t>& blocks) {
         for_each_block_in(origin, b, blocks_per_brick_axis(), first, last,
                           [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
                               count += uint64_t(__builtin_popcountll(blocks[word] & mask));
@@ -236,38 +244,34 @@ uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
     uint64_t touched = 1;
     for (int a = 0; a < 3; ++a) touched *= uint64_t(last[a] / b - first[a] / b + 1);
     if (touched > bricks_.size()) {
-        for (const auto& [index, blocks] : bricks_) count_brick(index, blocks);
+        for (const auto& [index, blocks] : bricks_)
+            count_brick({int64_t(index % uint64_t(nbricks[0])) * b,
+                         int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1])) * b,
+                         int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1]))) * b},
+                        blocks);
         return count;
     }
-    for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
-        for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
-            for (int64_t bx = first[0] / b; bx <= last[0] / b; ++bx) {
-                const uint64_t index =
-                    uint64_t(bx) +
-                    uint64_t(nbricks[0]) * (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz));
-                const auto it = bricks_.find(index);
-                if (it != bricks_.end()) count_brick(index, it->second);
-            }
+    for_each_brick_in(nbricks, b, first, last,
+                      [&](uint64_t index, const std::array<int64_t, 3>& origin) {
+                          const auto it = bricks_.find(index);
+                          if (it != bricks_.end()) count_brick(origin, it->second);
+                      });
     return count;
 }
 
 void SparseVoxels::set_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& hi) {
     std::array<int64_t, 3> first{}, last{};
     if (!clip_box(grid_, lo, hi, first, last)) return;
-    const auto nbricks = brick_dims();
-    const int64_t b = brick_size_;
-    for (int64_t bz = first[2] / b; bz <= last[2] / b; ++bz)
-        for (int64_t by = first[1] / b; by <= last[1] / b; ++by)
-            for (int64_t bx = first[0] / b; bx <= last[0] / b; ++bx) {
-                auto& blocks = bricks_[uint64_t(bx) +
-                                       uint64_t(nbricks[0]) *
-                                           (uint64_t(by) + uint64_t(nbricks[1]) * uint64_t(bz))];
-                if (blocks.empty()) blocks.assign(blocks_per_brick(), 0);
-                for_each_block_in({bx * b, by * b, bz * b}, b, blocks_per_brick_axis(), first, last,
-                                  [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
-                                      blocks[word] |= mask;
-                                  });
-            }
+    for_each_brick_in(brick_dims(), brick_size_, first, last,
+                      [&](uint64_t index, const std::array<int64_t, 3>& origin) {
+                          auto& blocks = bricks_[index];
+                          if (blocks.empty()) blocks.assign(blocks_per_brick(), 0);
+                          for_each_block_in(
+                              origin, brick_size_, blocks_per_brick_axis(), first, last,
+                              [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
+                                  blocks[word] |= mask;
+                              });
+                      });
 }
 
 std::vector<uint8_t> SparseVoxels::to_dense() const {
