@@ -196,6 +196,33 @@ TEST(Progress, ReportsBatchesAndCancels) {
     EXPECT_THROW(device().voxelize(m, g, o), Cancelled);
 }
 
+// Triangles are prepared in parallel chunks; the error still names the first triangle that does
+// not fit grid coordinates, in a later chunk than the first thousands.
+TEST(Tiling, TheFirstTriangleOutsideGridCoordinatesIsNamed) {
+    Mesh m;
+    for (int t = 0; t < 30000; ++t) {
+        const double x = 1e-3 * (t % 100);
+        add_triangle(m, {x, 0, 0}, {x + 1e-3, 0, 0}, {x, 1e-3, 0});
+    }
+    // (1e10 - 0) / 1e-300 overflows to infinity; triangles 20000 and 10000 reach it.
+    m.positions[m.triangles[20000][1]][2] = 1e10;
+    m.positions[m.triangles[10000][2]][1] = 1e10;
+    Grid g;
+    g.voxel_size = 1e-300;
+    g.dims = {8, 8, 8};
+    for (bool on_device : {false, true}) {
+        try {
+            if (on_device)
+                device().voxelize(m, g, VoxelizeOptions{});
+            else
+                voxelize_reference(m, g, VoxelizeOptions{});
+            ADD_FAILURE() << "no InputError";
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find("triangle 10000 "), std::string::npos) << e.what();
+        }
+    }
+}
+
 TEST(Tiling, AbsurdGridIsRefusedBeforeAllocating) {
     const Grid g = unit_grid(kMaxGridAxis, kMaxGridAxis, kMaxGridAxis);
     const Mesh m = box_mesh({0, 0, 0}, {double(kMaxGridAxis), double(kMaxGridAxis), 1});

@@ -4,6 +4,8 @@
 // surface, not the whole volume of its bounding box.
 #include "binning.hpp"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <unordered_map>
@@ -100,14 +102,27 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
     const uint64_t candidates = candidate_pairs(prepared, grid, brick_size, max_pairs);
 
     // Phase 2: (brick, triangle) pairs of the selected bricks, culling bricks of multi-brick
-    // triangles.
+    // triangles. Triangles are independent, so fixed chunks of them are binned in parallel and
+    // their pairs joined in chunk order: the pairs stay in ascending triangle order, whatever the
+    // threads.
+    constexpr size_t kChunk = 8192;
+    const size_t chunks = (prepared.ranges.size() + kChunk - 1) / kChunk;
+    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> chunk_pairs(chunks);
+    const BrickDivider divider(brick_size);
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        auto& out = chunk_pairs[c];
+        const size_t end = std::min(prepared.ranges.size(), (c + 1) * kChunk);
+        for (size_t t = c * kChunk; t < end; ++t)
+            for_each_brick_of(prepared, t, grid, brick_size, divider, [&](uint64_t brick) {
+                if (selection.contains(brick)) out.emplace_back(brick, uint32_t(t));
+            });
+    });
     std::vector<std::pair<uint64_t, uint32_t>> pairs;
     pairs.reserve(selection.everything() ? candidates : 0);
-    const BrickDivider divider(brick_size);
-    for (size_t t = 0; t < prepared.ranges.size(); ++t)
-        for_each_brick_of(prepared, t, grid, brick_size, divider, [&](uint64_t brick) {
-            if (selection.contains(brick)) pairs.emplace_back(brick, uint32_t(t));
-        });
+    for (auto& chunk : chunk_pairs) {
+        pairs.insert(pairs.end(), chunk.begin(), chunk.end());
+        std::vector<std::pair<uint64_t, uint32_t>>().swap(chunk);
+    }
 
     // Phase 3: group by brick in ascending brick order, triangles ascending within a brick: the
     // order sorting the pairs would give, so every run is deterministic. The pairs come in
