@@ -359,8 +359,17 @@ TEST(Meshing, SlotsCoverOnlyBricksNearTheSurface) {
 TEST(Meshing, DeviceEqualsHostReferenceBitForBit) {
     for (const ScalarField& field : {sphere_field(), torus_field(), noise_field(13, 3)})
         for (const float iso : {0.0f, 0.25f}) {
-            expect_identical(surface_nets(device(), field, iso), surface_nets(field, iso));
-            expect_identical(marching_cubes(device(), field, iso), marching_cubes(field, iso));
+            for (auto method :
+                 {detail::MeshingMethod::SurfaceNets, detail::MeshingMethod::MarchingCubes}) {
+                const Mesh reference = detail::mesh_field_reference(field, iso, method, 32);
+                const bool nets = method == detail::MeshingMethod::SurfaceNets;
+                expect_identical(nets ? surface_nets(device(), field, iso)
+                                      : marching_cubes(device(), field, iso),
+                                 reference);
+                // The host meshers (through the field's meshing view) give it too.
+                expect_identical(nets ? surface_nets(field, iso) : marching_cubes(field, iso),
+                                 reference);
+            }
         }
 }
 
@@ -483,6 +492,35 @@ TEST(SparseMeshing, InsideVoxelsAwayFromTheLeavesAndRandomLeavesMeshAsTheDenseCo
     }
     ASSERT_GT(leaves.leaf_count(), 10u);
     for (float iso : {0.0f, 0.3f, -0.9f}) expect_sparse_meshes_dense(leaves, iso, "random leaves");
+}
+
+// A dense field's meshing view keeps only the values the meshers read as values (the corners of
+// cells on both sides of iso) and the sides of all others, so it meshes as the dense field does:
+// smooth fields, noise full of ambiguous faces, grids not multiples of 8 and thin ones.
+TEST(SparseMeshing, DenseFieldsMeshThroughTheirMeshingViewsAsTheyDo) {
+    const ScalarField thin =
+        sample_field(19, 2, 11, [](const Vec3& p) { return p[0] - 7.3 + p[2] * 0.1; });
+    // Planes crossing just above a leaf's low face (z = 8, y = 16, x = 8): the leaf above holds
+    // the crossing's upper corners while all of its own samples lie on one side.
+    const ScalarField z_plane = sample_field(
+        20, 19, 21, [](const Vec3& p) { return p[2] - 8.25 + 0.01 * p[0] - 0.02 * p[1]; });
+    const ScalarField y_plane =
+        sample_field(18, 25, 17, [](const Vec3& p) { return 16.25 - p[1] + 0.015 * p[2]; });
+    const ScalarField x_plane =
+        sample_field(23, 12, 10, [](const Vec3& p) { return p[0] - 8.2 + 0.01 * p[1]; });
+    for (const ScalarField& field : {sphere_field(), torus_field(), noise_field(13, 3),
+                                     noise_field(21, 8), thin, z_plane, y_plane, x_plane})
+        for (const float iso : {0.0f, 0.25f, -0.3f}) {
+            SCOPED_TRACE(std::to_string(field.grid.dims[0]) + " iso " + std::to_string(iso));
+            const SparseField view = detail::meshing_view(field, iso, "test");
+            for (auto method :
+                 {detail::MeshingMethod::SurfaceNets, detail::MeshingMethod::MarchingCubes}) {
+                const bool nets = method == detail::MeshingMethod::SurfaceNets;
+                expect_identical(nets ? surface_nets(view, iso) : marching_cubes(view, iso),
+                                 detail::mesh_field_reference(field, iso, method, 32));
+            }
+        }
+    EXPECT_THROW(detail::meshing_view(sphere_field(), NAN, "test"), InputError);
 }
 
 TEST(SparseMeshing, ProgressReachesItsTotalAndCancels) {

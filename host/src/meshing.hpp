@@ -76,6 +76,12 @@ inline std::array<double, 3> vertex_position(const Grid& grid, const std::array<
     return p;
 }
 
+// A sparse field that meshes at iso exactly as `field` does (meshing_sparse.cpp): the 8^3 leaves
+// holding a corner of a cell with samples on both sides of iso, and elsewhere only each sample's
+// side (as inside voxels under a background beyond iso). Throws as validate_field, and GridError
+// naming `who` beyond the host memory budget.
+SparseField meshing_view(const ScalarField& field, float iso, const char* who);
+
 // World-space mesh from vertex records (owner sample + position relative to it in voxel units)
 // and triangles.
 Mesh records_to_mesh(const ScalarField& field, const std::vector<uint32_t>& vertex_sample,

@@ -1,9 +1,10 @@
-// Surface Nets and Marching Cubes of a sparse narrow-band field, on the host, without a dense
-// copy. The per-sample functions of the dense reference and the kernels (kernels/meshing_math.h)
-// run on small dense boxes read from the leaves, and the prefix sums follow the same global
-// sample order, so the mesh equals meshing field.to_dense() bit for bit: the same vertices in the
-// same order and the same triangles. Work and memory follow the surface: the blocks near it, three
-// slabs of them at a time, plus the mesh.
+// Surface Nets and Marching Cubes on the host: of a sparse narrow-band field without a dense
+// copy, and of a dense field through its meshing view (the leaves around its sign changes, the
+// sides of its other samples). The per-sample functions of the dense reference and the kernels
+// (kernels/meshing_math.h) run on small dense boxes read from the leaves, and the prefix sums
+// follow the same global sample order, so the mesh equals meshing field.to_dense() bit for bit: the
+// same vertices in the same order and the same triangles. Work and memory follow the surface: the
+// blocks near it, three slabs of them at a time, plus the mesh.
 //
 // Phases:
 //  1. Candidate blocks: the 8^3 blocks of the leaves' tiling whose samples, with the one-sample
@@ -25,9 +26,13 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cfloat>
 #include <cmath>
+#include <limits>
 #include <optional>
 
+#include "host_memory.hpp"
 #include "meshing.hpp"
 
 namespace oclvox {
@@ -578,12 +583,146 @@ Mesh mesh_sparse(const SparseField& field, float iso, detail::MeshingMethod meth
 
 }  // namespace
 
+namespace detail {
+
+SparseField meshing_view(const ScalarField& field, float iso, const char* who) {
+    // validate_field's checks, its pass over every sample made in pass 1 below: a non-finite
+    // sample found there has validate_field name the first one.
+    if (!std::isfinite(iso) || field.values.size() != field.grid.voxel_count() ||
+        field.grid.voxel_count() > std::numeric_limits<uint32_t>::max())
+        validate_field(field, iso, who);
+    validate_grid(field.grid);
+    const Grid& g = field.grid;
+    const auto& n = g.dims;
+    // Every sample outside the leaves becomes a background beyond iso on its side, so only its
+    // side (its inside voxel) is kept; a value must be kept wherever it is read as a value, which
+    // is at the corners of cells with both sides (crossings, face deciders, centres).
+    const float background =
+        std::abs(iso) < FLT_MAX / 2 ? std::max(1.0f, 2.0f * std::abs(iso)) : FLT_MAX;
+    SparseVoxels inside(g, kBlock);
+    const Index3 nb = {(n[0] + kBlock - 1) / kBlock, (n[1] + kBlock - 1) / kBlock,
+                       (n[2] + kBlock - 1) / kBlock};
+    const uint64_t leaves = uint64_t(nb[0]) * uint64_t(nb[1]) * uint64_t(nb[2]);
+    check_host_memory(
+        leaves * (sizeof(std::array<uint64_t, 8>) + 1), default_host_budget(),
+        std::string(who) + ": the inside voxels of " + std::to_string(leaves) + " leaves");
+    // Pass 1, leaf by leaf: each sample's side, as inside bits, and the sides of the leaf and of
+    // its six faces (x = 0, x = 7, y = 0, ...; a face beyond the grid has none).
+    std::vector<std::array<uint64_t, 8>> words(leaves);
+    std::vector<std::array<uint8_t, 7>> sides(leaves);
+    std::atomic<bool> finite{true};
+    auto at = [&](int64_t x, int64_t y, int64_t z) {
+        return field.values[size_t(x + n[0] * (y + n[1] * z))];
+    };
+    auto leaf_origin = [&](uint64_t l) {
+        return Index3{int64_t(l % uint64_t(nb[0])) * kBlock,
+                      int64_t(l / uint64_t(nb[0]) % uint64_t(nb[1])) * kBlock,
+                      int64_t(l / (uint64_t(nb[0]) * uint64_t(nb[1]))) * kBlock};
+    };
+    tbb::parallel_for(uint64_t(0), leaves, [&](uint64_t l) {
+        const Index3 o = leaf_origin(l);
+        const Index3 e = {std::min<int64_t>(kBlock, n[0] - o[0]),
+                          std::min<int64_t>(kBlock, n[1] - o[1]),
+                          std::min<int64_t>(kBlock, n[2] - o[2])};
+        std::array<uint8_t, 7> part{};
+        for (int64_t z = 0; z < e[2]; ++z)
+            for (int64_t y = 0; y < e[1]; ++y) {
+                const float* row =
+                    &field.values[size_t(o[0] + n[0] * (o[1] + y + n[1] * (o[2] + z)))];
+                uint8_t row_sides = 0;
+                for (int64_t x = 0; x < e[0]; ++x) {
+                    if (!std::isfinite(row[x])) finite = false;
+                    const bool in = om_inside(row[x], iso);
+                    row_sides |= in ? kInsideSide : kOutsideSide;
+                    if (in)
+                        words[l][size_t(x / 4 + 2 * (y / 4 + 2 * (z / 4)))] |=
+                            uint64_t(1) << (x % 4 + 4 * (y % 4 + 4 * (z % 4)));
+                }
+                part[0] |= row_sides;
+                part[1] |= side_of(row[0], iso);
+                if (e[0] == kBlock) part[2] |= side_of(row[kBlock - 1], iso);
+                if (y == 0) part[3] |= row_sides;
+                if (y == kBlock - 1) part[4] |= row_sides;
+                if (z == 0) part[5] |= row_sides;
+                if (z == kBlock - 1) part[6] |= row_sides;
+            }
+        sides[l] = part;
+    });
+    if (!finite) validate_field(field, iso, who);
+    // Pass 2: a leaf holds a corner of a cell on both sides iff its samples with the one-sample
+    // halo lie on both sides; the halo is the facing face of each face neighbour and (counted
+    // whole, which only keeps a few leaves more than needed) the edge and corner neighbours.
+    std::vector<uint8_t> keep(leaves, 0);
+    tbb::parallel_for(uint64_t(0), leaves, [&](uint64_t l) {
+        const Index3 c = {int64_t(l % uint64_t(nb[0])),
+                          int64_t(l / uint64_t(nb[0]) % uint64_t(nb[1])),
+                          int64_t(l / (uint64_t(nb[0]) * uint64_t(nb[1])))};
+        uint8_t both = sides[l][0];
+        for (int dz = -1; dz <= 1 && both != kBothSides; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const Index3 m = {c[0] + dx, c[1] + dy, c[2] + dz};
+                    if ((dx | dy | dz) == 0 || m[0] < 0 || m[1] < 0 || m[2] < 0 || m[0] >= nb[0] ||
+                        m[1] >= nb[1] || m[2] >= nb[2])
+                        continue;
+                    const std::array<uint8_t, 7>& s =
+                        sides[uint64_t(m[0]) +
+                              uint64_t(nb[0]) *
+                                  (uint64_t(m[1]) + uint64_t(nb[1]) * uint64_t(m[2]))];
+                    const int axes = (dx != 0) + (dy != 0) + (dz != 0);
+                    if (axes > 1)
+                        both |= s[0];
+                    else if (dx)
+                        both |= s[dx > 0 ? 1 : 2];  // its x = 0 face, or its x = 7 face
+                    else if (dy)
+                        both |= s[dy > 0 ? 3 : 4];
+                    else
+                        both |= s[dz > 0 ? 5 : 6];
+                }
+        keep[l] = both == kBothSides;
+    });
+    for (uint64_t l = 0; l < leaves; ++l) inside.merge_brick(l, words[l].data());
+    std::vector<std::array<uint64_t, 8>>().swap(words);
+
+    // Pass 3: the kept leaves' values, gathered in parallel and appended in order.
+    SparseField view(g, double(background) / g.voxel_size, std::move(inside));
+    std::vector<uint64_t> kept;
+    for (uint64_t l = 0; l < leaves; ++l)
+        if (keep[l]) kept.push_back(l);
+    check_host_memory(
+        2 * kept.size() * kBlockSamples * sizeof(float), default_host_budget(),
+        std::string(who) + ": the values of " + std::to_string(kept.size()) + " leaves");
+    std::vector<float> samples(kept.size() * kBlockSamples, view.background());
+    tbb::parallel_for(size_t(0), kept.size(), [&](size_t k) {
+        const Index3 o = leaf_origin(kept[k]);
+        float* out = &samples[k * kBlockSamples];
+        for (int64_t z = o[2]; z < std::min(o[2] + kBlock, n[2]); ++z)
+            for (int64_t y = o[1]; y < std::min(o[1] + kBlock, n[1]); ++y)
+                for (int64_t x = o[0]; x < std::min(o[0] + kBlock, n[0]); ++x)
+                    out[size_t((x - o[0]) + kBlock * ((y - o[1]) + kBlock * (z - o[2])))] =
+                        at(x, y, z);
+    });
+    view.reserve_leaves(kept.size());
+    for (size_t k = 0; k < kept.size(); ++k) view.append_leaf(kept[k], &samples[k * kBlockSamples]);
+    return view;
+}
+
+}  // namespace detail
+
 Mesh surface_nets(const SparseField& field, float iso, const ProgressCallback& progress) {
     return mesh_sparse(field, iso, detail::MeshingMethod::SurfaceNets, progress);
 }
 
 Mesh marching_cubes(const SparseField& field, float iso, const ProgressCallback& progress) {
     return mesh_sparse(field, iso, detail::MeshingMethod::MarchingCubes, progress);
+}
+
+Mesh surface_nets(const ScalarField& field, float iso, const ProgressCallback& progress) {
+    return surface_nets(detail::meshing_view(field, iso, "surface_nets"), iso, progress);
+}
+
+Mesh marching_cubes(const ScalarField& field, float iso, const ProgressCallback& progress) {
+    return marching_cubes(detail::meshing_view(field, iso, "marching_cubes"), iso, progress);
 }
 
 }  // namespace oclvox

@@ -1,5 +1,6 @@
 // oclvox scalar fields and their iso-surfaces: Naive Surface Nets and Marching Cubes, on the host
-// (the reference) and on an OpenCL device (identical output), plus a mesh writer.
+// and on an OpenCL device (identical output; the brick-tiled reference of the kernels is internal,
+// meshing_reference.cpp), plus a mesh writer.
 //
 // Meshing conventions shared by both methods:
 //  - a sample is inside when its value is < iso, outside when >= iso;
@@ -115,7 +116,8 @@ uint64_t border_samples_inside(const SparseField& field, float iso = 0.0f);
 // interpolated crossings on its sign-changing edges; one quad (two triangles) per sign-changing
 // grid edge, joining the vertices of the four cells around it. Closed and manifold wherever no
 // cell face has four sign changes (true for smooth fields sampled finely enough); at such faces
-// the method is inherently non-manifold. Host reference.
+// the method is inherently non-manifold. On the host's cores (TBB), visiting only the 8x8x8
+// blocks whose samples change side (through the field's meshing view, as for SparseField below).
 // Both meshing functions throw GridError if values.size() does not match the grid and InputError
 // for a non-finite sample or iso. `progress` is called as the work goes on, as SdfOptions::progress
 // is (done / total the fraction of the estimated work, total 1,000,000, and once more at the end
@@ -130,12 +132,13 @@ Mesh surface_nets(const ScalarField& field, float iso = 0.0f,
 // contour loop that cannot be triangulated without a diagonal across a cell face (only in
 // ambiguous configurations, rare on smooth fields) gets one extra vertex at the mean of its
 // crossings, as in Marching Cubes 33. Body (interior) ambiguities are not resolved (no tunnels),
-// which never opens the surface. The case table is derived programmatically. Host reference.
+// which never opens the surface. The case table is derived programmatically. On the host's cores,
+// as surface_nets.
 Mesh marching_cubes(const ScalarField& field, float iso = 0.0f,
                     const ProgressCallback& progress = {});
 
-// The same meshes computed on an OpenCL device: vertex positions equal to the reference bit for
-// bit, same vertex order, same triangles. Also throws DeviceError on OpenCL failures.
+// The same meshes computed on an OpenCL device: vertex positions equal to the host's bit for bit,
+// same vertex order, same triangles. Also throws DeviceError on OpenCL failures.
 Mesh surface_nets(Device& device, const ScalarField& field, float iso = 0.0f,
                   const ProgressCallback& progress = {});
 Mesh marching_cubes(Device& device, const ScalarField& field, float iso = 0.0f,
