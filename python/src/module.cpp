@@ -384,7 +384,8 @@ oclvox::Mesh extract_surface(const Field& field, float iso, const std::string& m
     ProgressBridge bridge(std::move(progress));
     const std::shared_ptr<SharedDevice> device = pick_device(device_selector, reference);
     return bridge.run_released([&](const oclvox::ProgressCallback& callback) {
-        if (!device)
+        // On a CPU the host meshers are faster than the kernels, with the same mesh (as the CLI).
+        if (!device || device->device.info().type == "CPU")
             return marching_cubes ? oclvox::marching_cubes(field.field, iso, callback)
                                   : oclvox::surface_nets(field.field, iso, callback);
         std::lock_guard<std::mutex> lock(device->in_use);
