@@ -867,6 +867,12 @@ verdict=$(check_preview "$WORK/preview_sdf.png" "$WORK/preview_sdf.npy" 2>&1)
 [ "$RC" -eq 0 ] && [ "$verdict" = ok ] &&
     pass "sdf --preview: the PNG's panels are the field's inside projected" ||
     fail "sdf --preview" "rc=$RC $verdict $ERR"
+# The narrow band's preview is drawn from the sparse field (inside voxels and leaves), the full
+# grid's from the dense field: the same inside, so the same image.
+"$OCLVOX" sdf "$MESH" -r 20 -q --full -o "$WORK/preview_full.npy" --preview "$WORK/preview_full.png"
+cmp -s "$WORK/preview_sdf.png" "$WORK/preview_full.png" &&
+    pass "sdf --preview of the sparse band equals the dense full grid's byte for byte" ||
+    fail "sdf --preview sparse vs dense" "the PNGs differ"
 expect_failure "--preview not a .png" "$WORK/p.jpg" 'png' \
     voxelize "$MESH" -r 16 -o "$WORK/p.binvox" --preview "$WORK/p.jpg"
 

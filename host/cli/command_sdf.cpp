@@ -100,7 +100,8 @@ int run(const SdfArgs& args) {
             write_field_output(output.path(), *dense, 0.0, args);
         if (surface) write_mesh_output(args.mesh_output, *surface, args);
         if (!args.preview.empty())
-            write_preview(args.preview, sparse ? sparse->to_dense() : *dense, 0.0f);
+            sparse ? write_preview(args.preview, *sparse, 0.0f)
+                   : write_preview(args.preview, *dense, 0.0f);
         output.finish();
         return 0;
     });

@@ -155,6 +155,36 @@ void write_preview(const std::string& path, const oclvox::SparseVoxels& voxels) 
     write_projections(path, projections);
 }
 
+void write_preview(const std::string& path, const oclvox::SparseField& field, float iso) {
+    const float background = field.background();
+    if (!(-background < iso) || background < iso) {  // every sample outside the leaves alike
+        write_preview(path, field.to_dense(), iso);
+        return;
+    }
+    // The samples outside the stored leaves are inside exactly at the inside voxels; those in
+    // the leaves by their values. A bit per leaf tells the two apart.
+    Projections projections(field.grid());
+    const auto nb = field.leaf_dims();
+    std::vector<bool> stored(size_t(nb[0] * nb[1] * nb[2]), false);
+    for (uint64_t leaf : field.leaf_indices()) stored[size_t(leaf)] = true;
+    const int64_t leaf = oclvox::SparseField::kLeaf;
+    field.inside().for_each([&](int64_t i, int64_t j, int64_t k) {
+        if (!stored[size_t(i / leaf + nb[0] * (j / leaf + nb[1] * (k / leaf)))])
+            projections.mark(i, j, k);
+    });
+    const auto& d = field.grid().dims;
+    for (size_t n = 0; n < field.leaf_count(); ++n) {
+        const auto o = field.leaf_origin(field.leaf_indices()[n]);
+        const float* samples = field.leaf_samples(n);
+        for (int64_t z = 0; z < std::min(leaf, d[2] - o[2]); ++z)
+            for (int64_t y = 0; y < std::min(leaf, d[1] - o[1]); ++y)
+                for (int64_t x = 0; x < std::min(leaf, d[0] - o[0]); ++x)
+                    if (samples[x + leaf * (y + leaf * z)] < iso)
+                        projections.mark(o[0] + x, o[1] + y, o[2] + z);
+    }
+    write_projections(path, projections);
+}
+
 void write_preview(const std::string& path, const oclvox::ScalarField& field, float iso) {
     Projections projections(field.grid);
     const auto& d = field.grid.dims;

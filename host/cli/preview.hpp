@@ -17,5 +17,8 @@ namespace oclvox_cli {
 // Written through libpng and the atomic writer; throws OutputError naming `path`.
 void write_preview(const std::string& path, const oclvox::SparseVoxels& voxels);
 void write_preview(const std::string& path, const oclvox::ScalarField& field, float iso);
+// The same image of a sparse field, without a dense copy: its inside voxels outside the stored
+// leaves, its leaves' samples below iso.
+void write_preview(const std::string& path, const oclvox::SparseField& field, float iso);
 
 }  // namespace oclvox_cli
