@@ -66,6 +66,15 @@ struct Slab {
     uint32_t first_vertex = 0, first_triangle = 0, end_vertex = 0, end_triangle = 0;
 };
 
+// Index x + nx * (y + ny * z) of c in a box of n, and back.
+uint64_t ravel(const Index3& c, const Index3& n) {
+    return uint64_t(c[0]) + uint64_t(n[0]) * (uint64_t(c[1]) + uint64_t(n[1]) * uint64_t(c[2]));
+}
+Index3 unravel(uint64_t index, const Index3& n) {
+    return {int64_t(index % uint64_t(n[0])), int64_t(index / uint64_t(n[0]) % uint64_t(n[1])),
+            int64_t(index / (uint64_t(n[0]) * uint64_t(n[1])))};
+}
+
 size_t slot_in_block(const Index3& origin, int64_t x, int64_t y, int64_t z) {
     return size_t((x - origin[0]) + kBlock * ((y - origin[1]) + kBlock * (z - origin[2])));
 }
@@ -80,11 +89,8 @@ void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
     const Index3 bricks = voxels.brick_dims();
     const auto& n = voxels.grid().dims;
     auto word_at = [&](const Index3& w) {  // w in words of the whole grid, inside it
-        const uint64_t brick =
-            uint64_t(w[0] / words_per_axis) +
-            uint64_t(bricks[0]) * (uint64_t(w[1] / words_per_axis) +
-                                   uint64_t(bricks[1]) * uint64_t(w[2] / words_per_axis));
-        const uint64_t* words = voxels.brick_blocks(brick);
+        const uint64_t* words = voxels.brick_blocks(
+            ravel({w[0] / words_per_axis, w[1] / words_per_axis, w[2] / words_per_axis}, bricks));
         if (!words) return uint64_t(0);
         return words[(w[0] % words_per_axis) +
                      words_per_axis *
@@ -94,9 +100,7 @@ void for_each_inside_boundary(const SparseVoxels& voxels, F f) {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, stored.size(), 16), [&](const auto& r) {
         for (size_t s = r.begin(); s != r.end(); ++s) {
             const uint64_t brick = stored[s];
-            const Index3 b = {int64_t(brick % uint64_t(bricks[0])),
-                              int64_t(brick / uint64_t(bricks[0]) % uint64_t(bricks[1])),
-                              int64_t(brick / (uint64_t(bricks[0]) * uint64_t(bricks[1])))};
+            const Index3 b = unravel(brick, bricks);
             const uint64_t* words = voxels.brick_blocks(brick);
             const size_t stride[3] = {1, size_t(words_per_axis),
                                       size_t(words_per_axis * words_per_axis)};
@@ -179,8 +183,7 @@ std::vector<PartSides> leaf_sides(const SparseField& field, float iso, const cha
 uint8_t part_sides(const SparseField& field, float iso, const std::vector<PartSides>& sides,
                    const Index3& c, int d) {
     const Index3 nb = field.leaf_dims();
-    const uint64_t key =
-        uint64_t(c[0]) + uint64_t(nb[0]) * (uint64_t(c[1]) + uint64_t(nb[1]) * uint64_t(c[2]));
+    const uint64_t key = ravel(c, nb);
     const auto& keys = field.leaf_indices();
     const auto it = std::lower_bound(keys.begin(), keys.end(), key);
     if (it != keys.end() && *it == key) return sides[size_t(it - keys.begin())][size_t(d)];
@@ -206,19 +209,14 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso, cons
     auto add_range = [&](const Index3& lo, const Index3& hi) {  // inclusive block coordinates
         for (int64_t z = lo[2]; z <= hi[2]; ++z)
             for (int64_t y = lo[1]; y <= hi[1]; ++y)
-                for (int64_t x = lo[0]; x <= hi[0]; ++x)
-                    blocks.push_back(uint64_t(x) +
-                                     uint64_t(nb[0]) *
-                                         (uint64_t(y) + uint64_t(nb[1]) * uint64_t(z)));
+                for (int64_t x = lo[0]; x <= hi[0]; ++x) blocks.push_back(ravel({x, y, z}, nb));
     };
     // Where a change may be: a stored leaf reaches its own block and, through their halo, the
     // seven below it.
     const std::vector<PartSides> sides = leaf_sides(field, iso, who);
     blocks.reserve(8 * field.leaf_count());
     for (uint64_t leaf : field.leaf_indices()) {
-        const Index3 l = {int64_t(leaf % uint64_t(nb[0])),
-                          int64_t(leaf / uint64_t(nb[0]) % uint64_t(nb[1])),
-                          int64_t(leaf / (uint64_t(nb[0]) * uint64_t(nb[1])))};
+        const Index3 l = unravel(leaf, nb);
         add_range({std::max<int64_t>(l[0] - 1, 0), std::max<int64_t>(l[1] - 1, 0),
                    std::max<int64_t>(l[2] - 1, 0)},
                   l);
@@ -237,10 +235,7 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso, cons
             }
             for (int64_t z = lo[2]; z <= hi[2]; ++z)
                 for (int64_t y = lo[1]; y <= hi[1]; ++y)
-                    for (int64_t x = lo[0]; x <= hi[0]; ++x)
-                        local.push_back(uint64_t(x) +
-                                        uint64_t(nb[0]) *
-                                            (uint64_t(y) + uint64_t(nb[1]) * uint64_t(z)));
+                    for (int64_t x = lo[0]; x <= hi[0]; ++x) local.push_back(ravel({x, y, z}, nb));
         });
         for (const std::vector<uint64_t>& local : found)
             blocks.insert(blocks.end(), local.begin(), local.end());
@@ -254,10 +249,7 @@ std::vector<uint64_t> candidate_blocks(const SparseField& field, float iso, cons
     std::vector<uint8_t> keep(blocks.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const auto& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
-            const uint64_t b = blocks[i];
-            const Index3 c = {int64_t(b % uint64_t(nb[0])),
-                              int64_t(b / uint64_t(nb[0]) % uint64_t(nb[1])),
-                              int64_t(b / (uint64_t(nb[0]) * uint64_t(nb[1])))};
+            const Index3 c = unravel(blocks[i], nb);
             uint8_t both = 0;
             for (int d = 0; d < 8 && both != kBothSides; ++d) {
                 const Index3 cell = {c[0] + (d & 1), c[1] + (d >> 1 & 1), c[2] + (d >> 2 & 1)};
@@ -289,7 +281,7 @@ class SparseMesher {
     // they are counted in parallel, each into its own slots.
     Slab count(const uint64_t* first, const uint64_t* last) {
         Slab slab;
-        slab.bz = int64_t(*first / (uint64_t(nb_[0]) * uint64_t(nb_[1])));
+        slab.bz = unravel(*first, nb_)[2];
         const size_t candidates = size_t(last - first);
         slab.keys.assign(first, last);
         slab.blocks.resize(candidates);
@@ -298,10 +290,8 @@ class SparseMesher {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, candidates, 4), [&](const auto& range) {
             for (size_t b = range.begin(); b != range.end(); ++b) {
                 Block& block = slab.blocks[b];
-                const uint64_t key = slab.keys[b];
-                block.origin = {int64_t(key % uint64_t(nb_[0])) * kBlock,
-                                int64_t(key / uint64_t(nb_[0]) % uint64_t(nb_[1])) * kBlock,
-                                slab.bz * kBlock};
+                const Index3 c = unravel(slab.keys[b], nb_);
+                block.origin = {c[0] * kBlock, c[1] * kBlock, c[2] * kBlock};
                 for (int k = 0; k < 3; ++k) {
                     block.box_lo[k] = std::max<int64_t>(block.origin[k] - kBelow, 0);
                     block.box_hi[k] = std::min<int64_t>(block.origin[k] + kBlock + kAbove, n_[k]);
@@ -507,9 +497,7 @@ class SparseMesher {
         }
         for (int64_t by = lo[1] / kBlock; by <= (hi[1] - 1) / kBlock; ++by)
             for (int64_t bx = lo[0] / kBlock; bx <= (hi[0] - 1) / kBlock; ++bx) {
-                const uint64_t key =
-                    uint64_t(bx) +
-                    uint64_t(nb_[0]) * (uint64_t(by) + uint64_t(nb_[1]) * uint64_t(from.bz));
+                const uint64_t key = ravel({bx, by, from.bz}, nb_);
                 const auto it = std::lower_bound(from.keys.begin(), from.keys.end(), key);
                 if (it == from.keys.end() || *it != key) continue;
                 const size_t b = size_t(it - from.keys.begin());
@@ -615,9 +603,8 @@ SparseField meshing_view(const ScalarField& field, float iso, const char* who) {
         return field.values[size_t(x + n[0] * (y + n[1] * z))];
     };
     auto leaf_origin = [&](uint64_t l) {
-        return Index3{int64_t(l % uint64_t(nb[0])) * kBlock,
-                      int64_t(l / uint64_t(nb[0]) % uint64_t(nb[1])) * kBlock,
-                      int64_t(l / (uint64_t(nb[0]) * uint64_t(nb[1]))) * kBlock};
+        const Index3 c = unravel(l, nb);
+        return Index3{c[0] * kBlock, c[1] * kBlock, c[2] * kBlock};
     };
     tbb::parallel_for(uint64_t(0), leaves, [&](uint64_t l) {
         const Index3 o = leaf_origin(l);
@@ -654,9 +641,7 @@ SparseField meshing_view(const ScalarField& field, float iso, const char* who) {
     // whole, which only keeps a few leaves more than needed) the edge and corner neighbours.
     std::vector<uint8_t> keep(leaves, 0);
     tbb::parallel_for(uint64_t(0), leaves, [&](uint64_t l) {
-        const Index3 c = {int64_t(l % uint64_t(nb[0])),
-                          int64_t(l / uint64_t(nb[0]) % uint64_t(nb[1])),
-                          int64_t(l / (uint64_t(nb[0]) * uint64_t(nb[1])))};
+        const Index3 c = unravel(l, nb);
         uint8_t both = sides[l][0];
         for (int dz = -1; dz <= 1 && both != kBothSides; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
@@ -665,10 +650,7 @@ SparseField meshing_view(const ScalarField& field, float iso, const char* who) {
                     if ((dx | dy | dz) == 0 || m[0] < 0 || m[1] < 0 || m[2] < 0 || m[0] >= nb[0] ||
                         m[1] >= nb[1] || m[2] >= nb[2])
                         continue;
-                    const std::array<uint8_t, 7>& s =
-                        sides[uint64_t(m[0]) +
-                              uint64_t(nb[0]) *
-                                  (uint64_t(m[1]) + uint64_t(nb[1]) * uint64_t(m[2]))];
+                    const std::array<uint8_t, 7>& s = sides[ravel(m, nb)];
                     const int axes = (dx != 0) + (dy != 0) + (dz != 0);
                     if (axes > 1)
                         both |= s[0];
