@@ -1,16 +1,13 @@
 // Narrow-band distance field and its jump-flooding extension, OpenCL C 1.2.
 //
-// Distances are squared, in voxel units, kept as the bits of non-negative floats in uint buffers:
-// for those, unsigned integer order is float order, so atomic_min on the bits is a float min
-// that is exact and independent of the order work items run in.
+// Distances are squared, in voxel units, kept as the bits of non-negative floats in uint buffers.
 //
-// band_distance: one work item per (triangle, 4x4x4 block) of the voxels near that triangle.
-// band_nearest:  the same items again, recording the lowest triangle index that attains each
-//                voxel's minimum (the seeds of the jump flood; only for full-grid fields).
-// band_leaves:   the same items, marking the 8x8x8 leaf of every block the cull keeps in a bit set
-//                of leaves (a sparse field's leaves).
-// band_distance_leaves: band_distance into the samples of a batch of those leaves only, found
-//                through the bit set and the rank of its words.
+// band_leaf_samples: the samples of a batch of 8x8x8 leaves, each leaf from the triangles the
+//                host binned to it (a gather, one work group per leaf): the band of sparse fields
+//                and of dense ones.
+// band_nearest:  one work item per (triangle, 4x4x4 block) of the voxels near that triangle,
+//                recording the lowest triangle index that attains each voxel's minimum (the seeds
+//                of the jump flood; only for full-grid fields).
 // jump:          one jump-flooding pass: each voxel takes the nearest of the triangles its 26
 //                neighbours at distance `step` (and itself) know about.
 #include "sdf_math.h"
@@ -48,80 +45,35 @@ static int decode_item(__global const OvSdfTriangle* triangles, __global const u
     return ov_block_near(t, block[0], block[1], block[2], band);
 }
 
-__kernel void band_distance(__global const OvSdfTriangle* triangles,
-                            __global const ulong* first_item, uint count, ulong item_base,
-                            ulong item_end, float band, float band2, int nx, int ny,
-                            __global uint* distance2) {
-    OvSdfTriangle t;
-    uint index;
-    int block[3];
-    if (!decode_item(triangles, first_item, count, item_base, item_end, band, &t, &index, block))
-        return;
-    for (int k = max(block[2], t.lo[2]); k <= min(block[2] + 3, t.hi[2]); ++k)
-        for (int j = max(block[1], t.lo[1]); j <= min(block[1] + 3, t.hi[1]); ++j)
-            for (int i = max(block[0], t.lo[0]); i <= min(block[0] + 3, t.hi[0]); ++i) {
-                if (!ov_voxel_near(&t, i, j, k, band)) continue;
-                float d2 = ov_voxel_distance2(&t, i, j, k);
-                if (d2 < band2)
-                    atomic_min(&distance2[(size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * k)],
-                               as_uint(d2));
-            }
-}
-
-// decode_item, and the linear index of the 8x8x8 leaf holding the block's minimum voxel.
-static int decode_leaf_item(__global const OvSdfTriangle* triangles,
-                            __global const ulong* first_item, uint count, ulong item_base,
-                            ulong item_end, float band, int leaves_x, int leaves_y,
-                            OvSdfTriangle* t, int block[3], ulong* leaf) {
-    uint index;
-    if (!decode_item(triangles, first_item, count, item_base, item_end, band, t, &index, block))
-        return 0;
-    *leaf = (ulong)(block[0] >> 3) +
-            (ulong)leaves_x * ((ulong)(block[1] >> 3) + (ulong)leaves_y * (ulong)(block[2] >> 3));
-    return 1;
-}
-
-__kernel void band_leaves(__global const OvSdfTriangle* triangles, __global const ulong* first_item,
-                          uint count, ulong item_base, ulong item_end, float band, int leaves_x,
-                          int leaves_y, __global uint* leaf_bits) {
-    OvSdfTriangle t;
-    int block[3];
-    ulong leaf;
-    if (!decode_leaf_item(triangles, first_item, count, item_base, item_end, band, leaves_x,
-                          leaves_y, &t, block, &leaf))
-        return;
-    uint bit = 1u << (uint)(leaf & 31);
-    // Most blocks find their leaf marked already; reading first spares the atomic.
-    if (!(leaf_bits[leaf >> 5] & bit)) atomic_or(&leaf_bits[leaf >> 5], bit);
-}
-
-// Samples of leaf slots [slot_first, slot_end) at (slot - slot_first) * 512, x fastest in a leaf;
-// a leaf's slot is the number of marked leaves before it (leaf_rank holds that count before each
-// word of leaf_bits).
-__kernel void band_distance_leaves(__global const OvSdfTriangle* triangles,
-                                   __global const ulong* first_item, uint count, ulong item_base,
-                                   ulong item_end, float band, float band2, int leaves_x,
-                                   int leaves_y, __global const uint* leaf_bits,
-                                   __global const uint* leaf_rank, uint slot_first, uint slot_end,
-                                   __global uint* distance2) {
-    OvSdfTriangle t;
-    int block[3];
-    ulong leaf;
-    if (!decode_leaf_item(triangles, first_item, count, item_base, item_end, band, leaves_x,
-                          leaves_y, &t, block, &leaf))
-        return;
-    uint word = (uint)(leaf >> 5);
-    uint slot = leaf_rank[word] + popcount(leaf_bits[word] & ((1u << (uint)(leaf & 31)) - 1u));
-    if (slot < slot_first || slot >= slot_end) return;
-    __global uint* samples = distance2 + (size_t)(slot - slot_first) * 512;
-    for (int k = max(block[2], t.lo[2]); k <= min(block[2] + 3, t.hi[2]); ++k)
-        for (int j = max(block[1], t.lo[1]); j <= min(block[1] + 3, t.hi[1]); ++j)
-            for (int i = max(block[0], t.lo[0]); i <= min(block[0] + 3, t.hi[0]); ++i) {
-                if (!ov_voxel_near(&t, i, j, k, band)) continue;
-                float d2 = ov_voxel_distance2(&t, i, j, k);
-                if (d2 < band2)
-                    atomic_min(&samples[(i & 7) + 8 * ((j & 7) + 8 * (k & 7))], as_uint(d2));
-            }
+// One work group of 64 per leaf of slots [slot_first + group_base, ...): item (y, z) computes the
+// leaf's row of 8 samples along x (ov_row_distance2) against every triangle of the leaf's list
+// (pair_triangle[slot_first_pair[slot] .. slot_first_pair[slot + 1])) and writes it once, at
+// (slot - slot_first) * 512, x fastest in a leaf. A gather: no atomics. A sample takes a triangle
+// only inside the triangle's voxel range, and a row only where the row cull keeps it; the culls
+// are conservative, so the minimum is that of every triangle's band samples.
+__kernel __attribute__((reqd_work_group_size(64, 1, 1))) void band_leaf_samples(
+    __global const OvSdfTriangle* triangles, __global const uint* slot_first_pair,
+    __global const uint* pair_triangle, __global const ulong* slot_leaf, uint slot_first,
+    uint group_base, uint slot_end, int leaves_x, int leaves_y, float band, float band2,
+    __global uint* distance2) {
+    uint batch_slot = group_base + (uint)get_group_id(0);
+    uint slot = slot_first + batch_slot;
+    if (slot >= slot_end) return;
+    ulong leaf = slot_leaf[slot];
+    int y = (int)get_local_id(0) & 7, z = (int)get_local_id(0) >> 3;
+    int i0 = (int)(leaf % (ulong)leaves_x) * 8;
+    int j = (int)(leaf / (ulong)leaves_x % (ulong)leaves_y) * 8 + y;
+    int k = (int)(leaf / ((ulong)leaves_x * (ulong)leaves_y)) * 8 + z;
+    int8 i = (int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    float8 best = (float8)(band2);
+    for (uint p = slot_first_pair[slot]; p < slot_first_pair[slot + 1]; ++p) {
+        OvSdfTriangle t = triangles[pair_triangle[p]];
+        if (j < t.lo[1] || j > t.hi[1] || k < t.lo[2] || k > t.hi[2]) continue;
+        if (!ov_row_near(&t, i0, j, k, band)) continue;
+        float8 d2 = ov_row_distance2(&t, i0, j, k);
+        best = select(best, fmin(best, d2), (i >= t.lo[0]) & (i <= t.hi[0]));
+    }
+    vstore8(as_uint8(best), 0, distance2 + (size_t)batch_slot * 512 + 8 * (y + 8 * z));
 }
 
 __kernel void band_nearest(__global const OvSdfTriangle* triangles,

@@ -133,6 +133,60 @@ OV_SDF_FN int ov_block_near(const OvSdfTriangle* t, int i, int j, int k, float b
     return ov_may_reach(t, from_vertex, from_centre, band + 2.6f);
 }
 
+// Whether the row of 8 voxels (i0..i0+7, j, k) may hold a centre within `band` of the triangle.
+// Its centres are at most 3.5 from the row's middle, which lies on no voxel centre.
+OV_SDF_FN int ov_row_near(const OvSdfTriangle* t, int i0, int j, int k, float band) {
+    float c[3], from_vertex[3], from_centre[3];
+    c[0] = (float)(i0 - t->anchor[0]) + 4.0f;
+    c[1] = (float)(j - t->anchor[1]) + 0.5f;
+    c[2] = (float)(k - t->anchor[2]) + 0.5f;
+    for (int a = 0; a < 3; ++a) {
+        from_vertex[a] = c[a] - t->vertex[0][a];
+        from_centre[a] = c[a] - t->centre[a];
+    }
+    return ov_may_reach(t, from_vertex, from_centre, band + 3.5f);
+}
+
+#ifdef __OPENCL_VERSION__
+// ov_voxel_distance2 of the 8 voxel centres (i0..i0+7, j, k) in the lanes of a float8: lane by
+// lane the same operations in the same order as ov_triangle_distance2, both of its cases computed
+// and one selected, so every lane has the scalar function's bits (the kernels are tested against
+// the reference bit for bit). Along a row only x changes, so the y and z terms are scalars, and a
+// CPU device runs the row in one vector register whatever it makes of the work items.
+OV_SDF_FN float8 ov_row_segment_distance2(const OvSdfTriangle* t, int v, float8 wx, float wy,
+                                          float wz) {
+    float8 s = (wx * t->edge[v][0] + wy * t->edge[v][1] + wz * t->edge[v][2]) * t->inv_len2[v];
+    s = fmin(fmax(s, 0.0f), 1.0f);
+    float8 rx = wx - s * t->edge[v][0];
+    float8 ry = wy - s * t->edge[v][1];
+    float8 rz = wz - s * t->edge[v][2];
+    return rx * rx + ry * ry + rz * rz;
+}
+
+OV_SDF_FN float8 ov_row_distance2(const OvSdfTriangle* t, int i0, int j, int k) {
+    float8 px = convert_float8((int8)(i0 - t->anchor[0]) + (int8)(0, 1, 2, 3, 4, 5, 6, 7)) + 0.5f;
+    float py = (float)(j - t->anchor[1]) + 0.5f;
+    float pz = (float)(k - t->anchor[2]) + 0.5f;
+    float8 wx[3];
+    float wy[3], wz[3];
+    for (int v = 0; v < 3; ++v) {
+        wx[v] = px - t->vertex[v][0];
+        wy[v] = py - t->vertex[v][1];
+        wz[v] = pz - t->vertex[v][2];
+    }
+    float8 d0 = ov_row_segment_distance2(t, 0, wx[0], wy[0], wz[0]);
+    float8 d1 = ov_row_segment_distance2(t, 1, wx[1], wy[1], wz[1]);
+    float8 d2 = ov_row_segment_distance2(t, 2, wx[2], wy[2], wz[2]);
+    float8 edges = fmin(fmin(d0, d1), d2);
+    if (!t->has_face) return edges;
+    int8 inside = (int8)(-1);
+    for (int v = 0; v < 3; ++v)
+        inside &= ~(wx[v] * t->side[v][0] + wy[v] * t->side[v][1] + wz[v] * t->side[v][2] > 0.0f);
+    float8 h = wx[0] * t->normal[0] + wy[0] * t->normal[1] + wz[0] * t->normal[2];
+    return select(edges, h * h, inside);
+}
+#endif
+
 #ifndef __OPENCL_VERSION__
 }  // namespace oclvox::detail
 #endif

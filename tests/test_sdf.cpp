@@ -187,10 +187,10 @@ TEST(Sdf, RealMeshMatchesDoubleBruteForceAndDeviceMatchesReference) {
     EXPECT_EQ(clamped, 50u);
 }
 
-// The band pass skips voxels (and blocks) that the plane and bounding-sphere tests put beyond the
-// band. Those tests only save work: checked against the double-precision distance on random
-// triangles of every size, slivers and collinear ones included, they must keep every voxel within
-// the band, and must actually reject some.
+// The band pass skips voxels (and blocks, and a sparse field's rows of 8) that the plane and
+// bounding-sphere tests put beyond the band. Those tests only save work: checked against the
+// double-precision distance on random triangles of every size, slivers and collinear ones included,
+// they must keep every voxel within the band, and must actually reject some.
 TEST(Sdf, CullingNeverRejectsAVoxelWithinTheBand) {
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
@@ -220,7 +220,8 @@ TEST(Sdf, CullingNeverRejectsAVoxelWithinTheBand) {
                                               closest_point(centre_of(grid, i, j, k), a, b, c)));
                     const bool near =
                         detail::ov_voxel_near(&t, i, j, k, prepared.band) &&
-                        detail::ov_block_near(&t, i / 4 * 4, j / 4 * 4, k / 4 * 4, prepared.band);
+                        detail::ov_block_near(&t, i / 4 * 4, j / 4 * 4, k / 4 * 4, prepared.band) &&
+                        detail::ov_row_near(&t, i / 8 * 8, j, k, prepared.band);
                     if (d < band + 1e-3)
                         ASSERT_TRUE(near) << "triangle " << n << " voxel " << i << " " << j << " "
                                           << k << " at distance " << d;
@@ -825,6 +826,18 @@ std::vector<SparseCase> sparse_cases() {
     Grid rg;
     rg.dims = {29, 34, 27};
     cases.push_back({"random", random_triangles(120, -3.0, 33.0, 5.0, 11), rg});
+    // Triangles without a face, whose distance is their edges': collinear ones, ones with two
+    // corners at one point, and points.
+    Mesh degenerate = random_triangles(60, 2.0, 25.0, 4.0, 5);
+    for (size_t t = 0; t < degenerate.triangles.size(); ++t) {
+        const auto& tri = degenerate.triangles[t];
+        const Vec3d a = degenerate.positions[tri[0]], b = degenerate.positions[tri[1]];
+        Vec3d& c = degenerate.positions[tri[2]];
+        for (int k = 0; k < 3; ++k)
+            c[k] = t % 3 == 0 ? a[k] + 0.375 * (b[k] - a[k]) : t % 3 == 1 ? b[k] : a[k];
+        if (t % 3 == 2) degenerate.positions[tri[1]] = a;
+    }
+    cases.push_back({"degenerate", degenerate, rg});
     return cases;
 }
 
@@ -840,6 +853,7 @@ TEST(SparseSdf, ToDenseIsTheDenseFieldBitForBitOnDeviceAndReference) {
             EXPECT_GT(sparse.leaf_count(), 0u);
             const ScalarField dense = signed_distance(device(), c.mesh, c.grid, o);
             expect_identical(sparse.to_dense(), dense);
+            expect_identical(sparse.to_dense(), reference.to_dense());
             expect_identical(reference.to_dense(), signed_distance_reference(c.mesh, c.grid, o));
             EXPECT_EQ(border_samples_inside(sparse), border_samples_inside(dense));
         }

@@ -30,7 +30,7 @@ size_t voxel_index(const Grid& grid, int i, int j, int k) {
 }
 
 // The band pass: per voxel the least squared distance below band2 and, for full-grid fields,
-// the lowest triangle index attaining it (what band_distance and band_nearest leave behind).
+// the lowest triangle index attaining it (what band_leaf_samples and band_nearest leave behind).
 void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float>& distance2,
                std::vector<uint32_t>* nearest, ProgressPhases& progress, size_t phase) {
     const uint64_t items = prepared.first_item.back();

@@ -115,8 +115,9 @@ FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& option
 
 // The squared distances in voxels of every voxel centre to its nearest prepared triangle, below
 // band2 (else band2), for full-grid fields everywhere; float, as the kernels compute them.
-// Reports the band, seeds and jump phases. The device (sdf_device.cpp) and the host reference
-// (sdf.cpp) return the same values bit for bit; stats get their timings.
+// Reports the band, seeds and jump phases. The device (sdf_device.cpp: the band leaf by leaf, as
+// a sparse field's) and the host reference (sdf.cpp: every triangle's band samples scattered)
+// return the same values bit for bit; stats get their timings.
 std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
                                     const SdfOptions& options, ProgressPhases& progress,
                                     const SdfPhases& phases, VoxelizeStats& stats);
@@ -161,6 +162,11 @@ struct LeafSet {
     }
     // The leaf of a slot below count.
     uint64_t leaf_at(uint64_t slot) const;
+    // The first set leaf from `leaf` on (there must be one): slot after slot, the next leaf.
+    uint64_t set_from(uint64_t leaf) const {
+        while (!(bits[size_t(leaf >> 5)] >> (leaf & 31) & 1)) ++leaf;
+        return leaf;
+    }
     // Counts the set bits into rank and count, once bits are final.
     void rank_bits();
 };
@@ -169,25 +175,29 @@ struct LeafSet {
 // the host memory budget.
 LeafSet empty_leaf_set(const Grid& grid, const SdfOptions& options);
 
-// Orders the prepared triangles by their lowest voxel layer, renumbering their items. The band's
-// minima do not depend on the order; a batch of leaves in a few layers then needs only a run of
-// triangles.
-void order_by_layer(SdfTriangles& prepared);
+// The leaves of a sparse field, and for each set leaf (by slot) the triangles whose block cull
+// keeps a block of it: triangles[first[slot] .. first[slot + 1]), ascending. The culls are
+// conservative, so every sample within the band of a triangle lies in a leaf that lists it.
+struct BandLeaves {
+    LeafSet leaves;
+    std::vector<uint32_t> first;  // one per slot, and the end
+    std::vector<uint32_t> triangles;
+};
 
-// The leaf set of the prepared triangles on the device (as the reference in sdf_sparse.cpp),
-// reported as `phase`.
-LeafSet band_leaves_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
-                           const SdfOptions& options, ProgressPhases& progress, size_t phase,
-                           VoxelizeStats& stats);
+// The band's leaves of the prepared triangles on `grid` (the field's), binned on the host's cores
+// (TBB) in a fixed order, reported to `report` (done, total) when it is not empty. Throws GridError
+// if the lists do not fit the host memory budget, or if there are 2^32 or more (leaf, triangle)
+// pairs.
+BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const SdfOptions& options,
+                       const std::function<void(uint64_t done, uint64_t total)>& report);
 
 // The squared voxel distances of the set leaves' samples (as distance2_device, leaf by leaf, x
 // fastest in a leaf, band2 where no triangle is within the band), in batches of consecutive
 // slots that fit options.device_budget_bytes and at most kMaxBatchLeaves leaves (so the host holds
 // one batch beside the field): on_batch(first_slot, slots, distance2) for each, in slot order.
-// Each batch runs only the items of the triangles that can reach its layers, which is few when
-// the triangles are ordered by layer (order_by_layer). stats.batches counts the batches.
+// Each leaf's samples are the minimum over its listed triangles. stats.batches counts the batches.
 constexpr uint64_t kMaxBatchLeaves = 32768;
-void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const LeafSet& leaves,
+void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const BandLeaves& band,
                            const SdfOptions& options, ProgressPhases& progress, size_t phase,
                            VoxelizeStats& stats,
                            const std::function<void(uint64_t first_slot, uint64_t slots,

@@ -1,10 +1,13 @@
 // Sparse narrow-band distance fields: the band computed only in the 8x8x8 leaves a triangle's band
-// reaches, signed by the solid voxelization, kept as a SparseField. The leaves are found first
-// from the same block culls the band pass makes (so the leaf set is exact, not a guess, and the
-// same on every device), then the band pass runs again writing only into those leaves' samples.
-// The samples equal the dense field's bit for bit: the same prepared triangles, the same squared
-// distances, the same minimum, the same conversion and the same solid. Device side in
-// sdf_sparse_device.cpp, dense fields in sdf.cpp.
+// reaches, signed by the solid voxelization, kept as a SparseField. The leaves, and the triangles
+// reaching each, are binned first on the host from the same block culls the band pass makes (so
+// the leaf set is exact, not a guess, and the same on every device); then each leaf's samples are
+// the minimum over its triangles (on a device, sdf_sparse_device.cpp), or, in the reference here,
+// every triangle scatters its band samples into the leaves. The samples equal the dense field's
+// bit for bit: the same prepared triangles, the same squared distances, the same minimum, the same
+// conversion and the same solid. Dense fields are in sdf.cpp.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -25,22 +28,8 @@ double seconds_since(std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
 }
 
-// The reference of band_leaves: every block the cull keeps marks its leaf.
-LeafSet band_leaves_reference(const SdfTriangles& prepared, const Grid& grid,
-                              const SdfOptions& options, ProgressPhases& progress, size_t phase) {
-    LeafSet leaves = empty_leaf_set(grid, options);
-    for (size_t index = 0; index < prepared.triangles.size(); ++index) {
-        for_each_near_block(prepared.triangles[index], prepared.band, [&](int bx, int by, int bz) {
-            const uint64_t leaf = leaves.leaf_of_block(bx, by, bz);
-            leaves.bits[size_t(leaf >> 5)] |= 1u << (leaf & 31);
-        });
-        progress.report(phase, prepared.first_item[index + 1], prepared.first_item.back());
-    }
-    leaves.rank_bits();
-    return leaves;
-}
-
-// The reference of band_distance_leaves, all leaves in one batch.
+// The reference of band_leaf_samples, all leaves in one batch: every triangle scatters its band
+// samples into the leaves, through the same culls as the dense band pass.
 std::vector<float> leaf_distance2_reference(const SdfTriangles& prepared, const LeafSet& leaves,
                                             ProgressPhases& progress, size_t phase) {
     std::vector<float> distance2(size_t(leaves.count) * kLeafSamples, prepared.band2);
@@ -71,7 +60,7 @@ class LeafWriter {
     void append(SparseField& field, uint64_t slots, const float* distance2) {
         float signs[kLeafSamples], samples[kLeafSamples];
         for (uint64_t s = 0; s < slots; ++s, ++leaf_) {
-            while (!(leaves_.bits[size_t(leaf_ >> 5)] >> (leaf_ & 31) & 1)) ++leaf_;
+            leaf_ = leaves_.set_from(leaf_);
             // The leaf is not stored yet: copy_leaf gives -background at its inside voxels.
             field.copy_leaf(leaf_, signs);
             const float* d2 = distance2 + s * kLeafSamples;
@@ -103,12 +92,10 @@ void validate_sparse(const Grid& grid, const SdfOptions& options) {
             "a sparse field covers the whole grid; layers need the dense signed_distance");
 }
 
-// Prepares a mesh's triangles for a sparse field, ordered by layer, and adds its phases.
+// Prepares a mesh's triangles for a sparse field and adds its phases.
 FieldJob plan_sparse(const Mesh& mesh, const Grid& grid, const SdfOptions& options,
                      ProgressPhases& progress, VoxelizeStats& stats) {
-    FieldJob job = plan_field(mesh, grid, options, true, true, progress, stats);
-    order_by_layer(job.prepared);
-    return job;
+    return plan_field(mesh, grid, options, true, true, progress, stats);
 }
 
 // The job's sparse field on a device, or (device null) the reference.
@@ -118,11 +105,10 @@ SparseField compute_sparse(Device* device, const FieldJob& job, const Grid& grid
     // Phase 1: the leaves the band reaches, and the memory their samples need (the field's
     // samples, and beside them one batch, or the reference's squared distances).
     auto t = std::chrono::steady_clock::now();
-    const LeafSet leaves =
-        device ? band_leaves_device(*device, job.prepared, grid, options, progress,
-                                    job.phases.leaves, stats)
-               : band_leaves_reference(job.prepared, grid, options, progress, job.phases.leaves);
-    if (!device) stats.seconds_kernels += seconds_since(t);
+    const BandLeaves band =
+        band_leaves(job.prepared, grid, options, progress.reporter(job.phases.leaves));
+    const LeafSet& leaves = band.leaves;
+    stats.seconds_binning += seconds_since(t);
     stats.bricks_total =
         uint64_t(leaves.dims[0]) * uint64_t(leaves.dims[1]) * uint64_t(leaves.dims[2]);
     stats.bricks_active = leaves.count;
@@ -146,7 +132,7 @@ SparseField compute_sparse(Device* device, const FieldJob& job, const Grid& grid
         writer.append(field, slots, distance2);
     };
     if (device) {
-        leaf_distance2_device(*device, job.prepared, leaves, options, progress, job.phases.band,
+        leaf_distance2_device(*device, job.prepared, band, options, progress, job.phases.band,
                               stats, append);
     } else {
         const std::vector<float> distance2 =
@@ -200,15 +186,6 @@ uint64_t LeafSet::leaf_at(uint64_t slot) const {
     return uint64_t(word) * 32 + uint64_t(__builtin_ctz(bits_left));
 }
 
-void order_by_layer(SdfTriangles& prepared) {
-    std::stable_sort(
-        prepared.triangles.begin(), prepared.triangles.end(),
-        [](const OvSdfTriangle& a, const OvSdfTriangle& b) { return a.lo[2] < b.lo[2]; });
-    prepared.first_item.assign(1, 0);
-    for (const OvSdfTriangle& t : prepared.triangles)
-        prepared.first_item.push_back(prepared.first_item.back() + item_count(t));
-}
-
 void LeafSet::rank_bits() {
     rank.resize(bits.size());
     count = 0;
@@ -232,6 +209,65 @@ LeafSet empty_leaf_set(const Grid& grid, const SdfOptions& options) {
                       "the leaf bits of a sparse distance field");
     leaves.bits.assign(size_t(words), 0);
     return leaves;
+}
+
+BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const SdfOptions& options,
+                       const std::function<void(uint64_t done, uint64_t total)>& report) {
+    BandLeaves out;
+    out.leaves = empty_leaf_set(grid, options);
+    LeafSet& leaves = out.leaves;
+    const size_t n = prepared.triangles.size();
+    const uint64_t budget = host_budget(options.host_budget_bytes);
+
+    // Phase 1: each triangle's leaves, those holding a block its cull keeps. Triangles are
+    // independent, so fixed chunks of them run in parallel and are joined in chunk order: the
+    // lists come out in ascending triangle order whatever the threads. Reports (and so a cancel)
+    // come between rounds of chunks, on this thread.
+    constexpr size_t kChunk = 2048, kRound = 32;
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> chunk_pairs(chunks);
+    uint64_t pairs = 0;
+    for (size_t round = 0; round < chunks; round += kRound) {
+        const size_t round_end = std::min(chunks, round + kRound);
+        tbb::parallel_for(round, round_end, [&](size_t c) {
+            auto& chunk = chunk_pairs[c];
+            std::vector<uint64_t> own;
+            for (size_t index = c * kChunk; index < std::min(n, (c + 1) * kChunk); ++index) {
+                own.clear();
+                for_each_near_block(prepared.triangles[index], prepared.band,
+                                    [&](int bx, int by, int bz) {
+                                        own.push_back(leaves.leaf_of_block(bx, by, bz));
+                                    });
+                std::sort(own.begin(), own.end());
+                own.erase(std::unique(own.begin(), own.end()), own.end());
+                for (const uint64_t leaf : own) chunk.emplace_back(leaf, uint32_t(index));
+            }
+        });
+        for (size_t c = round; c < round_end; ++c) pairs += chunk_pairs[c].size();
+        check_host_memory(pairs * (sizeof(chunk_pairs[0][0]) + 2 * sizeof(uint32_t)), budget,
+                          "the triangle lists of the leaves of a sparse distance field");
+        if (report) report(round_end, chunks);
+    }
+    if (pairs >= (uint64_t(1) << 32))
+        throw GridError("a sparse distance field of " + std::to_string(pairs) +
+                        " (leaf, triangle) pairs is over the limit of 2^32: lower the resolution");
+
+    // Phase 2: the leaf bits and their ranks, then the lists by slot (a counting sort, stable, so
+    // each list stays ascending).
+    for (const auto& chunk : chunk_pairs)
+        for (const auto& [leaf, index] : chunk) leaves.bits[size_t(leaf >> 5)] |= 1u << (leaf & 31);
+    leaves.rank_bits();
+    out.first.assign(size_t(leaves.count) + 1, 0);
+    for (const auto& chunk : chunk_pairs)
+        for (const auto& pair : chunk) ++out.first[size_t(leaves.slot(pair.first)) + 1];
+    for (size_t slot = 0; slot < leaves.count; ++slot) out.first[slot + 1] += out.first[slot];
+    out.triangles.resize(size_t(pairs));
+    std::vector<uint32_t> next(out.first.begin(), out.first.end() - 1);
+    for (auto& chunk : chunk_pairs) {
+        for (const auto& [leaf, index] : chunk) out.triangles[next[leaves.slot(leaf)]++] = index;
+        std::vector<std::pair<uint64_t, uint32_t>>().swap(chunk);
+    }
+    return out;
 }
 
 }  // namespace detail
