@@ -409,6 +409,79 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
     return 1;
 }
 
+#ifdef __OPENCL_VERSION__
+// The three predicates for a row of 4 voxels along x, (qx + 0..3, qy, qz), in the lanes of an
+// int4 (-1 where the voxel overlaps): lane by lane the same operations in the same order as the
+// scalar functions above, so every lane is the scalar result (the kernels are tested against the
+// reference bit for bit). A CPU device then tests a row in one vector register, without the
+// branches of voxel-by-voxel early exits; the one exit left is a row the plane test rejects
+// whole. A strict bit of the setup becomes a lane mask.
+OV_FN int4 ov_strict4(int strict, int bit) {
+    return (int4)(-((strict >> bit) & 1));
+}
+
+// The anchor-relative x of the row's 4 voxels, from the first one's.
+OV_FN float4 ov_row4(int qx0) {
+    return convert_float4((int4)(qx0) + (int4)(0, 1, 2, 3));
+}
+
+OV_FN int4 ov_sat_overlaps4(const OvSatTriangle* s, int qx0, float qy, float qz) {
+    float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
+    float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2];
+    int4 m = ~(dn < s->normal_lo) & ~(dn > s->normal_hi);
+    if (!any(m)) return m;
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            int i = 3 * k + j;
+            float4 d = s->axis[i][0] * q[a1] + s->axis[i][1] * q[a2];
+            m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);
+        }
+    }
+    return m;
+}
+
+OV_FN int4 ov_pef_overlaps4(const OvPefTriangle* s, int qx0, float qy, float qz) {
+    float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
+    float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2];
+    float4 e1 = dn + s->d1;
+    float4 e2 = dn + s->d2;
+    int4 m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict4(s->strict, 9)));
+    m &= ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict4(s->strict, 10)));
+    if (!any(m)) return m;
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float4 e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
+                       s->edge_offset[k][j];
+            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(s->strict, 3 * k + j)));
+        }
+    }
+    return m;
+}
+
+OV_FN int4 ov_thin_overlaps4(const OvThinTriangle* s, int qx0, float qy, float qz) {
+    float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
+    float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2] + s->plane_offset;
+    int4 m = ~(dn > s->plane_half) & ~(dn < -s->plane_half);
+    m &= ~(((dn == -s->plane_half) & ov_strict4(s->strict, 9)) |
+           ((dn == s->plane_half) & ov_strict4(s->strict, 10)));
+    if (!any(m)) return m;
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float4 e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
+                       s->edge_offset[k][j];
+            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(s->strict, 3 * k + j)));
+        }
+    }
+    return m;
+}
+#endif
+
 // Bit of voxel (x, y, z) (local to its 4x4x4 block) in the block's 64-bit mask.
 OV_FN int ov_block_bit(int x, int y, int z) {
     return x + 4 * (y + 4 * z);

@@ -2,10 +2,10 @@
 //
 // Two phases. setup_*: one work item per triangle computes the per-triangle constants of the
 // overlap test once. voxelize_*: one work item per (triangle, 4x4x4 block) tests the block's
-// voxels, gathers a 64-bit mask privately and ORs it into the brick's bits with at most two
-// 32-bit atomics. Work items are numbered pair by pair; an item finds its (triangle, brick) pair
-// by binary search in the pairs' first-item offsets, so a huge triangle spreads over many items
-// instead of serialising on one.
+// voxels a row of 4 at a time, gathers a 64-bit mask privately and ORs it into the brick's bits
+// with at most two 32-bit atomics. Work items are numbered pair by pair; an item finds its
+// (triangle, brick) pair by binary search in the pairs' first-item offsets, so a huge triangle
+// spreads over many items instead of serialising on one.
 #include "voxel_math.h"
 #include "work_items.h"
 
@@ -68,45 +68,47 @@ static void store_block(__global uint* bits, const Item* it, int brick_size, uin
     if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
 }
 
-// One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS its
-// per-voxel test.
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS)                                           \
-    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,        \
-                       __global const uint* pair_triangle, __global const uint* pair_slot,  \
-                       __global const uint* pair_first_item, uint pair_count,               \
-                       __global const int* slot_brick, uint item_base, uint item_end,       \
-                       int brick_size, int nx, int ny, int nz, __global uint* bits) {       \
-        Item it;                                                                            \
-        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick, \
-                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))         \
-            return;                                                                         \
-        SETUP s = setups[it.triangle];                                                      \
-        /* Skip the block if it lies entirely on one side of the triangle's plane. */       \
-        float block_dn = s.normal[0] * (float)(it.block[0] * 4 - s.anchor[0]) +             \
-                         s.normal[1] * (float)(it.block[1] * 4 - s.anchor[1]) +             \
-                         s.normal[2] * (float)(it.block[2] * 4 - s.anchor[2]);              \
-        if (block_dn < s.block_lo || block_dn > s.block_hi) return;                         \
-        uint mask_lo = 0, mask_hi = 0;                                                      \
-        int lo[3], hi[3];                                                                   \
-        for (int k = 0; k < 3; ++k) {                                                       \
-            lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                              \
-            hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                          \
-        }                                                                                   \
-        for (int z = lo[2]; z <= hi[2]; ++z)                                                \
-            for (int y = lo[1]; y <= hi[1]; ++y)                                            \
-                for (int x = lo[0]; x <= hi[0]; ++x) {                                      \
-                    if (!OVERLAPS(&s, (float)(x - s.anchor[0]), (float)(y - s.anchor[1]),   \
-                                  (float)(z - s.anchor[2])))                                \
-                        continue;                                                           \
-                    int bit = ov_block_bit(x & 3, y & 3, z & 3);                            \
-                    if (bit < 32)                                                           \
-                        mask_lo |= 1u << bit;                                               \
-                    else                                                                    \
-                        mask_hi |= 1u << (bit - 32);                                        \
-                }                                                                           \
-        store_block(bits, &it, brick_size, mask_lo, mask_hi);                               \
+// One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS4
+// its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside the item's voxel range
+// are dropped.
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS4)                                                 \
+    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,               \
+                       __global const uint* pair_triangle, __global const uint* pair_slot,         \
+                       __global const uint* pair_first_item, uint pair_count,                      \
+                       __global const int* slot_brick, uint item_base, uint item_end,              \
+                       int brick_size, int nx, int ny, int nz, __global uint* bits) {              \
+        Item it;                                                                                   \
+        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick,        \
+                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))                \
+            return;                                                                                \
+        SETUP s = setups[it.triangle];                                                             \
+        /* Skip the block if it lies entirely on one side of the triangle's plane. */              \
+        float block_dn = s.normal[0] * (float)(it.block[0] * 4 - s.anchor[0]) +                    \
+                         s.normal[1] * (float)(it.block[1] * 4 - s.anchor[1]) +                    \
+                         s.normal[2] * (float)(it.block[2] * 4 - s.anchor[2]);                     \
+        if (block_dn < s.block_lo || block_dn > s.block_hi) return;                                \
+        uint mask_lo = 0, mask_hi = 0;                                                             \
+        int lo[3], hi[3];                                                                          \
+        for (int k = 0; k < 3; ++k) {                                                              \
+            lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                                     \
+            hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                                 \
+        }                                                                                          \
+        int4 x = (int4)(it.block[0] * 4) + (int4)(0, 1, 2, 3);                                     \
+        int4 in_range = (x >= lo[0]) & (x <= hi[0]);                                               \
+        for (int z = lo[2]; z <= hi[2]; ++z)                                                       \
+            for (int y = lo[1]; y <= hi[1]; ++y) {                                                 \
+                int4 m = in_range & OVERLAPS4(&s, it.block[0] * 4 - s.anchor[0],                   \
+                                              (float)(y - s.anchor[1]), (float)(z - s.anchor[2])); \
+                uint row = (uint)((m.s0 & 1) | (m.s1 & 2) | (m.s2 & 4) | (m.s3 & 8));              \
+                int bit = ov_block_bit(0, y & 3, z & 3);                                           \
+                if (bit < 32)                                                                      \
+                    mask_lo |= row << bit;                                                         \
+                else                                                                               \
+                    mask_hi |= row << (bit - 32);                                                  \
+            }                                                                                      \
+        store_block(bits, &it, brick_size, mask_lo, mask_hi);                                      \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps)
-OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps4)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps4)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps4)
