@@ -518,6 +518,16 @@ OV_FN int ov_pair_work(OvRange r, int bx, int by, int bz, int brick_size, int nx
     return total;
 }
 
+// A (triangle, brick) pair's blocks are split into work items of up to this many consecutive
+// blocks: enough to share an item's decoding and its triangle's constants among a few blocks, few
+// enough that a huge triangle still spreads over many items.
+#define OV_BLOCKS_PER_ITEM 8
+
+// The work items of a pair of `blocks` blocks (ov_pair_work); host and kernel count with this.
+OV_FN int ov_pair_items(int blocks) {
+    return (blocks + OV_BLOCKS_PER_ITEM - 1) / OV_BLOCKS_PER_ITEM;
+}
+
 #ifndef __OPENCL_VERSION__
 }  // namespace oclvox::detail
 #endif

@@ -1,11 +1,11 @@
 // Conservative (26-separating) surface voxelization, OpenCL C 1.2.
 //
 // Two phases. setup_*: one work item per triangle computes the per-triangle constants of the
-// overlap test once. voxelize_*: one work item per (triangle, 4x4x4 block) tests the block's
-// voxels a row of 4 at a time, gathers a 64-bit mask privately and ORs it into the brick's bits
-// with at most two 32-bit atomics. Work items are numbered pair by pair; an item finds its
-// (triangle, brick) pair by binary search in the pairs' first-item offsets, so a huge triangle
-// spreads over many items instead of serialising on one.
+// overlap test once. voxelize_*: one work item per (triangle, run of up to OV_BLOCKS_PER_ITEM
+// 4x4x4 blocks) tests each block's voxels a row of 4 at a time, gathers a 64-bit mask privately
+// and ORs it into the brick's bits with at most two 32-bit atomics. Work items are numbered pair by
+// pair; an item finds its (triangle, brick) pair by binary search in the pairs' first-item offsets,
+// so a huge triangle spreads over many items instead of serialising on one.
 #include "voxel_math.h"
 #include "work_items.h"
 
@@ -30,8 +30,8 @@ __kernel void setup_thin(__global const OvTriangle* triangles, uint count, int h
 typedef struct {
     uint triangle, slot;
     int brick[3];
-    int block[3];  // global block coordinates
     OvPairWork work;
+    int block_first, block_end;  // this item's blocks, numbered within the pair x fastest
 } Item;
 
 // Returns 0 for the padding items past the end of the launch.
@@ -47,21 +47,27 @@ static int decode_item(__global const uint* pair_triangle, __global const uint* 
     it->slot = pair_slot[p];
     for (int k = 0; k < 3; ++k) it->brick[k] = slot_brick[3 * it->slot + k];
     OvRange r = ranges[it->triangle];
-    ov_pair_work(r, it->brick[0], it->brick[1], it->brick[2], brick_size, nx, ny, nz, &it->work);
-    uint index_in_pair = item - pair_first_item[p];
-    uint cx = (uint)it->work.block_count[0], cy = (uint)it->work.block_count[1];
-    it->block[0] = it->work.block_lo[0] + (int)(index_in_pair % cx);
-    it->block[1] = it->work.block_lo[1] + (int)((index_in_pair / cx) % cy);
-    it->block[2] = it->work.block_lo[2] + (int)(index_in_pair / (cx * cy));
+    int blocks = ov_pair_work(r, it->brick[0], it->brick[1], it->brick[2], brick_size, nx, ny, nz,
+                              &it->work);
+    it->block_first = (int)(item - pair_first_item[p]) * OV_BLOCKS_PER_ITEM;
+    it->block_end = min(it->block_first + OV_BLOCKS_PER_ITEM, blocks);
     return 1;
 }
 
-static void store_block(__global uint* bits, const Item* it, int brick_size, uint mask_lo,
-                        uint mask_hi) {
+// The global coordinates of block b of the item's pair.
+static void item_block(const Item* it, int b, int block[3]) {
+    int cx = it->work.block_count[0], cy = it->work.block_count[1];
+    block[0] = it->work.block_lo[0] + b % cx;
+    block[1] = it->work.block_lo[1] + b / cx % cy;
+    block[2] = it->work.block_lo[2] + b / (cx * cy);
+}
+
+static void store_block(__global uint* bits, const Item* it, const int block[3], int brick_size,
+                        uint mask_lo, uint mask_hi) {
     int nb = brick_size / 4;
-    int bx = it->block[0] - it->brick[0] * nb;
-    int by = it->block[1] - it->brick[1] * nb;
-    int bz = it->block[2] - it->brick[2] * nb;
+    int bx = block[0] - it->brick[0] * nb;
+    int by = block[1] - it->brick[1] * nb;
+    int bz = block[2] - it->brick[2] * nb;
     size_t words_per_brick = 2 * (size_t)nb * nb * nb;
     size_t word = it->slot * words_per_brick + 2 * (size_t)(bx + nb * (by + nb * bz));
     if (mask_lo) atomic_or(&bits[word], mask_lo);
@@ -69,44 +75,49 @@ static void store_block(__global uint* bits, const Item* it, int brick_size, uin
 }
 
 // One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS4
-// its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside the item's voxel range
+// its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside the pair's voxel range
 // are dropped.
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS4)                                                 \
-    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,               \
-                       __global const uint* pair_triangle, __global const uint* pair_slot,         \
-                       __global const uint* pair_first_item, uint pair_count,                      \
-                       __global const int* slot_brick, uint item_base, uint item_end,              \
-                       int brick_size, int nx, int ny, int nz, __global uint* bits) {              \
-        Item it;                                                                                   \
-        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick,        \
-                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))                \
-            return;                                                                                \
-        SETUP s = setups[it.triangle];                                                             \
-        /* Skip the block if it lies entirely on one side of the triangle's plane. */              \
-        float block_dn = s.normal[0] * (float)(it.block[0] * 4 - s.anchor[0]) +                    \
-                         s.normal[1] * (float)(it.block[1] * 4 - s.anchor[1]) +                    \
-                         s.normal[2] * (float)(it.block[2] * 4 - s.anchor[2]);                     \
-        if (block_dn < s.block_lo || block_dn > s.block_hi) return;                                \
-        uint mask_lo = 0, mask_hi = 0;                                                             \
-        int lo[3], hi[3];                                                                          \
-        for (int k = 0; k < 3; ++k) {                                                              \
-            lo[k] = max(it.work.voxel_lo[k], it.block[k] * 4);                                     \
-            hi[k] = min(it.work.voxel_hi[k], it.block[k] * 4 + 3);                                 \
-        }                                                                                          \
-        int4 x = (int4)(it.block[0] * 4) + (int4)(0, 1, 2, 3);                                     \
-        int4 in_range = (x >= lo[0]) & (x <= hi[0]);                                               \
-        for (int z = lo[2]; z <= hi[2]; ++z)                                                       \
-            for (int y = lo[1]; y <= hi[1]; ++y) {                                                 \
-                int4 m = in_range & OVERLAPS4(&s, it.block[0] * 4 - s.anchor[0],                   \
-                                              (float)(y - s.anchor[1]), (float)(z - s.anchor[2])); \
-                uint row = (uint)((m.s0 & 1) | (m.s1 & 2) | (m.s2 & 4) | (m.s3 & 8));              \
-                int bit = ov_block_bit(0, y & 3, z & 3);                                           \
-                if (bit < 32)                                                                      \
-                    mask_lo |= row << bit;                                                         \
-                else                                                                               \
-                    mask_hi |= row << (bit - 32);                                                  \
-            }                                                                                      \
-        store_block(bits, &it, brick_size, mask_lo, mask_hi);                                      \
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS4)                                                \
+    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,              \
+                       __global const uint* pair_triangle, __global const uint* pair_slot,        \
+                       __global const uint* pair_first_item, uint pair_count,                     \
+                       __global const int* slot_brick, uint item_base, uint item_end,             \
+                       int brick_size, int nx, int ny, int nz, __global uint* bits) {             \
+        Item it;                                                                                  \
+        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick,       \
+                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))               \
+            return;                                                                               \
+        SETUP s = setups[it.triangle];                                                            \
+        for (int b = it.block_first; b < it.block_end; ++b) {                                     \
+            int block[3];                                                                         \
+            item_block(&it, b, block);                                                            \
+            /* Skip the block if it lies entirely on one side of the triangle's plane. */         \
+            float block_dn = s.normal[0] * (float)(block[0] * 4 - s.anchor[0]) +                  \
+                             s.normal[1] * (float)(block[1] * 4 - s.anchor[1]) +                  \
+                             s.normal[2] * (float)(block[2] * 4 - s.anchor[2]);                   \
+            if (block_dn < s.block_lo || block_dn > s.block_hi) continue;                         \
+            uint mask_lo = 0, mask_hi = 0;                                                        \
+            int lo[3], hi[3];                                                                     \
+            for (int k = 0; k < 3; ++k) {                                                         \
+                lo[k] = max(it.work.voxel_lo[k], block[k] * 4);                                   \
+                hi[k] = min(it.work.voxel_hi[k], block[k] * 4 + 3);                               \
+            }                                                                                     \
+            int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                   \
+            int4 in_range = (x >= lo[0]) & (x <= hi[0]);                                          \
+            for (int z = lo[2]; z <= hi[2]; ++z)                                                  \
+                for (int y = lo[1]; y <= hi[1]; ++y) {                                            \
+                    int4 m =                                                                      \
+                        in_range & OVERLAPS4(&s, block[0] * 4 - s.anchor[0],                      \
+                                             (float)(y - s.anchor[1]), (float)(z - s.anchor[2])); \
+                    uint row = (uint)((m.s0 & 1) | (m.s1 & 2) | (m.s2 & 4) | (m.s3 & 8));         \
+                    int bit = ov_block_bit(0, y & 3, z & 3);                                      \
+                    if (bit < 32)                                                                 \
+                        mask_lo |= row << bit;                                                    \
+                    else                                                                          \
+                        mask_hi |= row << (bit - 32);                                             \
+                }                                                                                 \
+            store_block(bits, &it, block, brick_size, mask_lo, mask_hi);                          \
+        }                                                                                         \
     }
 
 OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps4)

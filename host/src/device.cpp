@@ -57,8 +57,8 @@ Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles
             const int n = detail::ov_pair_work(prepared.ranges[binning.pair_triangle[p]], brick[0],
                                                brick[1], brick[2], brick_size, int(grid.dims[0]),
                                                int(grid.dims[1]), int(grid.dims[2]), &work);
-            counts.push_back(cl_uint(n));
-            brick_items += uint64_t(n);
+            counts.push_back(cl_uint(detail::ov_pair_items(n)));
+            brick_items += counts.back();
         }
         if (batch.items + brick_items > kMaxItemsPerBatch) {
             if (batch.brick_count == 0)
