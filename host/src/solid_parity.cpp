@@ -1,0 +1,322 @@
+// Solid voxelization by crossing parity. Phases: snap every vertex to fixed point
+// (solid_math.h); bin triangles into the brick columns (brick_size^2 footprints over the whole grid
+// height) their xy boxes reach; then per batch of brick columns that fits the device budget: flip
+// one bit per (triangle, covered voxel column), prefix-XOR every voxel column, pack the bits into
+// bricks and merge the non-empty ones. A voxel column never crosses a batch, so the result cannot
+// depend on the brick size. The host reference does the same flips, prefix and packing.
+#include <algorithm>
+#include <cmath>
+
+#include "brick_selection.hpp"
+#include "device_batches.hpp"
+#include "solid_internal.hpp"
+
+namespace oclvox::detail {
+
+namespace {
+
+constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
+constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
+
+struct Layout {
+    int brick;              // brick edge in voxels
+    int nx, ny, nz;         // grid
+    int64_t nbx, nby, nbz;  // bricks per axis
+    uint32_t words;         // 32-bit words per voxel column
+    size_t blocks_per_brick;
+    uint64_t slot_bytes() const {
+        return uint64_t(brick) * brick * words * 4 + uint64_t(nbz) * blocks_per_brick * 8;
+    }
+};
+
+Layout make_layout(const SparseVoxels& result) {
+    const Grid& g = result.grid();
+    const auto nb = result.brick_dims();
+    return {result.brick_size(),
+            int(g.dims[0]),
+            int(g.dims[1]),
+            int(g.dims[2]),
+            nb[0],
+            nb[1],
+            nb[2],
+            uint32_t((g.dims[2] + 31) / 32),
+            result.blocks_per_brick()};
+}
+
+// Triangles by selected brick column (index bx + nbx * by), only those that can flip a grid voxel.
+struct ColumnBins {
+    std::vector<uint64_t> columns;     // brick columns with at least one triangle, ascending
+    std::vector<uint64_t> first_pair;  // per column, into pair_triangle; one extra at the end
+    std::vector<uint32_t> pair_triangle;
+};
+
+// Calls f(column) for every brick column (index bx + nbx * by) where `tri` can flip a grid voxel.
+template <class F>
+void for_each_column_of(const OvParityTriangle& tri, const Layout& l, F&& f) {
+    // A crossing at or above the centre of the top voxel flips nothing in the grid.
+    const int64_t top_centre = int64_t(l.nz - 1) * OVS_UNITS + OVS_UNITS / 2;
+    if (std::min({tri.v[2], tri.v[5], tri.v[8]}) >= top_centre) return;
+    OvColumnRange r;
+    if (!ovs_column_range(&tri, 0, 0, std::max(l.nx, l.ny), l.nx, l.ny, &r)) return;
+    for (int by = r.lo[1] / l.brick; by <= r.hi[1] / l.brick; ++by)
+        for (int bx = r.lo[0] / l.brick; bx <= r.hi[0] / l.brick; ++bx)
+            f(uint64_t(bx) + uint64_t(l.nbx) * uint64_t(by));
+}
+
+ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l,
+                       const BrickSelection& selection) {
+    std::vector<std::pair<uint64_t, uint32_t>> pairs;
+    for (size_t t = 0; t < triangles.size(); ++t)
+        for_each_column_of(triangles[t], l, [&](uint64_t column) {
+            if (selection.contains_column(column)) pairs.push_back({column, uint32_t(t)});
+        });
+    std::sort(pairs.begin(), pairs.end());
+    ColumnBins bins;
+    for (size_t p = 0; p < pairs.size(); ++p) {
+        if (p == 0 || pairs[p].first != pairs[p - 1].first) {
+            bins.columns.push_back(pairs[p].first);
+            bins.first_pair.push_back(p);
+        }
+        bins.pair_triangle.push_back(pairs[p].second);
+    }
+    bins.first_pair.push_back(pairs.size());
+    return bins;
+}
+
+struct Batch {
+    size_t first_column = 0, column_count = 0;
+    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item;
+    std::vector<cl_int> slot_column;
+    uint64_t items = 0;
+};
+
+// Brick columns [first, ...) into one batch, limited by slots and work items.
+Batch make_batch(const ColumnBins& bins, const std::vector<OvParityTriangle>& triangles,
+                 const Layout& l, size_t first, size_t max_slots) {
+    Batch batch;
+    batch.first_column = first;
+    std::vector<cl_uint> counts;
+    for (size_t c = first; c < bins.columns.size() && batch.column_count < max_slots; ++c) {
+        const int bx = int(bins.columns[c] % uint64_t(l.nbx));
+        const int by = int(bins.columns[c] / uint64_t(l.nbx));
+        uint64_t column_items = 0;
+        counts.clear();
+        for (uint64_t p = bins.first_pair[c]; p < bins.first_pair[c + 1]; ++p) {
+            OvColumnRange r;
+            counts.push_back(cl_uint(ovs_column_range(&triangles[bins.pair_triangle[p]], bx, by,
+                                                      l.brick, l.nx, l.ny, &r)));
+            column_items += counts.back();
+        }
+        if (batch.items + column_items > kMaxItemsPerBatch) {
+            if (batch.column_count == 0)
+                throw GridError("brick column " + std::to_string(bins.columns[c]) + " needs " +
+                                std::to_string(column_items) +
+                                " work items, more than one batch can hold: use smaller bricks");
+            break;
+        }
+        const cl_uint slot = cl_uint(batch.column_count++);
+        batch.slot_column.push_back(bx);
+        batch.slot_column.push_back(by);
+        for (size_t i = 0; i < counts.size(); ++i) {
+            batch.pair_triangle.push_back(bins.pair_triangle[bins.first_pair[c] + i]);
+            batch.pair_slot.push_back(slot);
+            batch.pair_first_item.push_back(cl_uint(batch.items));
+            batch.items += counts[i];
+        }
+    }
+    return batch;
+}
+
+// Merges the bricks of one packed brick column (bricks bottom to top, blocks as 64-bit words).
+void merge_column(SparseVoxels& result, const Layout& l, uint64_t column, const uint64_t* blocks) {
+    for (int64_t row = 0; row < l.nbz; ++row)
+        result.merge_brick(column + uint64_t(l.nbx) * uint64_t(l.nby) * uint64_t(row),
+                           blocks + size_t(row) * l.blocks_per_brick);
+}
+}  // namespace
+
+// Vertices snapped to fixed-point grid units, or false if a vertex lies too far outside the grid
+// for the exact integer arithmetic of solid_math.h.
+bool parity_triangles(const Mesh& mesh, const Grid& grid, std::vector<OvParityTriangle>& out) {
+    const double limit = double(OVS_MAX_UNITS) / OVS_UNITS;
+    const double inv = 1.0 / grid.voxel_size;
+    out.resize(mesh.triangles.size());
+    for (size_t t = 0; t < mesh.triangles.size(); ++t)
+        for (int v = 0; v < 3; ++v)
+            for (int k = 0; k < 3; ++k) {
+                const double g = (mesh.positions[mesh.triangles[t][v]][k] - grid.origin[k]) * inv;
+                if (!(std::fabs(g) < limit)) return false;
+                out[t].v[3 * v + k] = std::llround(g * OVS_UNITS);
+            }
+    return true;
+}
+
+void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triangles,
+                   SparseVoxels& result, const VoxelizeOptions& options, VoxelizeStats& stats) {
+    auto t = SolidClock::now();
+    const Layout l = make_layout(result);
+    const ColumnBins bins = bin_columns(triangles, l, BrickSelection(options.bricks, result));
+    stats.brick_pairs = bins.pair_triangle.size();
+    stats.bricks_active = bins.columns.size() * uint64_t(l.nbz);
+    stats.seconds_binning += seconds_since(t);
+    if (bins.columns.empty()) return;
+    check_solid_memory(result, stats.bricks_active, 0, options, "");
+
+    const uint64_t budget = device_budget(cl, options);
+    if (l.slot_bytes() > budget)
+        throw GridError("one brick column of " + std::to_string(l.brick) + "^2 x " +
+                        std::to_string(l.nz) + " voxels needs " + mib_text(l.slot_bytes()) +
+                        " for parity, over the device budget of " + mib_text(budget) +
+                        ": use smaller bricks");
+    size_t slots = size_t(std::min<uint64_t>(budget / l.slot_bytes(), bins.columns.size()));
+    const size_t column_words = size_t(l.brick) * l.brick * l.words;
+    const size_t block_words = 2 * size_t(l.nbz) * l.blocks_per_brick;
+
+    const cl::Program& program = cl.program(kKernel_solid);
+    t = SolidClock::now();
+    const cl::Buffer tri_buffer = upload(cl.context, cl.queue, triangles);
+    cl.queue.finish();
+    stats.seconds_upload += seconds_since(t);
+    SlotBuffer bits(CL_MEM_READ_WRITE, column_words * sizeof(cl_uint));
+    SlotBuffer blocks(CL_MEM_READ_WRITE, block_words * sizeof(cl_uint));
+
+    cl::Kernel flip(program, "parity_flip"), prefix(program, "parity_prefix"),
+        pack(program, "parity_pack");
+    const size_t flip_group = work_group_size(flip, cl.device);
+    const size_t prefix_group = work_group_size(prefix, cl.device);
+    const size_t pack_group = work_group_size(pack, cl.device);
+    std::vector<cl_uint> host_words;
+    std::vector<uint64_t> host_blocks(block_words / 2);
+
+    // Batches of brick columns, smaller after a device allocation failure (nothing of a failed
+    // batch has been merged).
+    auto run_batch = [&](size_t done, size_t max_columns) {
+        t = SolidClock::now();
+        const cl::Buffer& bit_buffer = bits.get(cl.context, max_columns);
+        const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
+        Batch batch = make_batch(bins, triangles, l, done, max_columns);
+        const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
+        const cl::Buffer pair_triangle = upload(cl.context, cl.queue, batch.pair_triangle);
+        const cl::Buffer pair_slot = upload(cl.context, cl.queue, batch.pair_slot);
+        const cl::Buffer pair_first = upload(cl.context, cl.queue, batch.pair_first_item);
+        const cl::Buffer slot_column = upload(cl.context, cl.queue, batch.slot_column);
+        cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0,
+                                   batch.column_count * column_words * sizeof(cl_uint));
+        cl.queue.finish();
+        stats.seconds_upload += seconds_since(t);
+
+        // Flips, then parity per voxel column, then the brick layout.
+        t = SolidClock::now();
+        flip.setArg(0, tri_buffer);
+        flip.setArg(1, pair_triangle);
+        flip.setArg(2, pair_slot);
+        flip.setArg(3, pair_first);
+        flip.setArg(4, pair_count);
+        flip.setArg(5, slot_column);
+        flip.setArg(7, cl_uint(batch.items));
+        flip.setArg(8, cl_int(l.brick));
+        flip.setArg(9, cl_int(l.nx));
+        flip.setArg(10, cl_int(l.ny));
+        flip.setArg(11, cl_int(l.nz));
+        flip.setArg(12, cl_uint(l.words));
+        flip.setArg(13, bit_buffer);
+        for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
+            flip.setArg(6, cl_uint(base));
+            launch(cl.queue, flip, std::min(kItemsPerLaunch, batch.items - base), flip_group);
+        }
+        const uint64_t columns = uint64_t(batch.column_count) * l.brick * l.brick;
+        prefix.setArg(0, bit_buffer);
+        prefix.setArg(1, cl_uint(columns));
+        prefix.setArg(2, cl_uint(l.words));
+        launch(cl.queue, prefix, columns, prefix_group);
+        const uint64_t pack_items = uint64_t(batch.column_count) * l.nbz * l.blocks_per_brick;
+        pack.setArg(0, bit_buffer);
+        pack.setArg(1, cl_uint(batch.column_count));
+        pack.setArg(2, cl_int(l.brick));
+        pack.setArg(3, cl_int(l.nbz));
+        pack.setArg(4, cl_int(l.nz));
+        pack.setArg(5, cl_uint(l.words));
+        pack.setArg(6, block_buffer);
+        launch(cl.queue, pack, pack_items, pack_group);
+        cl.queue.finish();
+        stats.seconds_kernels += seconds_since(t);
+        stats.work_items += batch.items + columns + pack_items;
+
+        t = SolidClock::now();
+        host_words.resize(batch.column_count * block_words);
+        cl.queue.enqueueReadBuffer(block_buffer, CL_TRUE, 0, host_words.size() * sizeof(cl_uint),
+                                   host_words.data());
+        for (size_t slot = 0; slot < batch.column_count; ++slot) {
+            const cl_uint* w = host_words.data() + slot * block_words;
+            for (size_t b = 0; b < host_blocks.size(); ++b)
+                host_blocks[b] = uint64_t(w[2 * b]) | uint64_t(w[2 * b + 1]) << 32;
+            merge_column(result, l, bins.columns[batch.first_column + slot], host_blocks.data());
+        }
+        stats.seconds_download += seconds_since(t);
+        ++stats.batches;
+        const size_t finished = done + batch.column_count;
+        report_progress(options, finished * uint64_t(l.nbz), bins.columns.size() * uint64_t(l.nbz));
+        return batch.column_count;
+    };
+    run_batches(cl.queue, bins.columns.size(), slots, stats,
+                "computing the parity solid on " + cl.info.name, "brick column", run_batch);
+}
+
+// The same flips, prefix and packing on the host, one brick column at a time.
+void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxels& result,
+                      const VoxelizeOptions& options, VoxelizeStats& stats) {
+    const Layout l = make_layout(result);
+    const ColumnBins bins = bin_columns(triangles, l, BrickSelection({}, result));
+    stats.brick_pairs = bins.pair_triangle.size();
+    stats.bricks_active = bins.columns.size() * uint64_t(l.nbz);
+    check_solid_memory(result, stats.bricks_active, 0, options, "");
+    std::vector<uint32_t> bits(size_t(l.brick) * l.brick * l.words);
+    std::vector<uint64_t> blocks(size_t(l.nbz) * l.blocks_per_brick);
+    const int nb = l.brick / 4;
+    for (size_t c = 0; c < bins.columns.size(); ++c) {
+        const int bx = int(bins.columns[c] % uint64_t(l.nbx));
+        const int by = int(bins.columns[c] / uint64_t(l.nbx));
+        std::fill(bits.begin(), bits.end(), 0u);
+        for (uint64_t p = bins.first_pair[c]; p < bins.first_pair[c + 1]; ++p) {
+            const OvParityTriangle& tri = triangles[bins.pair_triangle[p]];
+            OvColumnRange r;
+            if (!ovs_column_range(&tri, bx, by, l.brick, l.nx, l.ny, &r)) continue;
+            for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+                for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
+                    const int k = ovs_parity_flip(&tri, i, j, l.nz);
+                    if (k < 0 || k >= l.nz) continue;
+                    const size_t column =
+                        size_t(j - by * l.brick) * l.brick + size_t(i - bx * l.brick);
+                    bits[column * l.words + size_t(k >> 5)] ^= 1u << (k & 31);
+                }
+        }
+        std::fill(blocks.begin(), blocks.end(), 0);
+        for (size_t column = 0; column < size_t(l.brick) * l.brick; ++column) {
+            uint32_t carry = 0;
+            const int x = int(column % size_t(l.brick)), y = int(column / size_t(l.brick));
+            for (uint32_t w = 0; w < l.words; ++w) {
+                const uint32_t v = ovs_prefix_xor(bits[column * l.words + w], carry);
+                carry = v >> 31;
+                for (int b = 0; b < 32; ++b) {
+                    const int k = int(w) * 32 + b;
+                    if (k >= l.nz || !(v >> b & 1u)) continue;
+                    const int lz = k % l.brick;
+                    const size_t block = size_t(k / l.brick) * l.blocks_per_brick +
+                                         size_t(x / 4 + nb * (y / 4 + nb * (lz / 4)));
+                    blocks[block] |= uint64_t(1) << ((x & 3) + 4 * ((y & 3) + 4 * (lz & 3)));
+                }
+            }
+        }
+        merge_column(result, l, bins.columns[c], blocks.data());
+    }
+}
+void for_each_parity_column(const Mesh& mesh, const Grid& grid, int brick_size,
+                            const std::function<void(uint32_t, uint64_t)>& f) {
+    std::vector<OvParityTriangle> triangles;
+    if (!parity_triangles(mesh, grid, triangles))
+        throw GridError("parity columns asked for a mesh beyond exact parity arithmetic");
+    const Layout l = make_layout(SparseVoxels(grid, brick_size));
+    for (size_t t = 0; t < triangles.size(); ++t)
+        for_each_column_of(triangles[t], l, [&](uint64_t column) { f(uint32_t(t), column); });
+}
+}  // namespace oclvox::detail

@@ -1,0 +1,1024 @@
+// Solid voxelization by the generalized winding number: a bounding-ball tree over the triangles
+// (Barill et al. 2018, second order); then, from coarse tiles of the mesh's bounding box down to
+// voxels, w at the centres of the tiles the surface does not touch, each deciding its whole tile
+// when the bound on how much w can change inside it allows (see winding_device). The host
+// reference sums every triangle exactly, in double, at every voxel.
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "device_batches.hpp"
+#include "solid_internal.hpp"
+
+namespace oclvox::detail {
+
+namespace {
+
+// A winding item walks the whole tree, so its launches are kept short.
+constexpr uint64_t kWindingItemsPerLaunch = uint64_t(1) << 14;
+// The host reference winding number refuses more triangle evaluations than this.
+constexpr uint64_t kMaxReferenceWindingTerms = uint64_t(1) << 34;
+
+// Voxels whose centres lie in the mesh's bounding box, per axis (empty if lo > hi). Outside it
+// the winding number of a closed mesh is 0; for open meshes oclvox defines the solid to stay
+// within the bounding box.
+struct VoxelBox {
+    int64_t lo[3], hi[3];
+    bool empty() const { return lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2]; }
+};
+
+VoxelBox centre_box(const Mesh& mesh, const Grid& grid) {
+    VoxelBox box;
+    for (int k = 0; k < 3; ++k) {
+        double mn = INFINITY, mx = -INFINITY;
+        for (const auto& tri : mesh.triangles)
+            for (uint32_t v : tri) {
+                const double g = (mesh.positions[v][k] - grid.origin[k]) / grid.voxel_size;
+                mn = std::min(mn, g);
+                mx = std::max(mx, g);
+            }
+        box.lo[k] = std::max<int64_t>(0, int64_t(std::ceil(std::max(mn - 0.5, -1.0))));
+        box.hi[k] = std::min<int64_t>(
+            grid.dims[k] - 1, int64_t(std::floor(std::min(mx - 0.5, double(grid.dims[k])))));
+    }
+    return box;
+}
+
+// Triangles in grid coordinates (voxel units), double.
+std::vector<std::array<double, 9>> grid_triangles(const Mesh& mesh, const Grid& grid) {
+    std::vector<std::array<double, 9>> tri(mesh.triangles.size());
+    for (size_t t = 0; t < tri.size(); ++t)
+        for (int v = 0; v < 3; ++v)
+            for (int k = 0; k < 3; ++k)
+                tri[t][3 * v + k] =
+                    (mesh.positions[mesh.triangles[t][v]][k] - grid.origin[k]) / grid.voxel_size;
+    return tri;
+}
+
+// The winding tree: triangles in leaf order (float voxel units) and the nodes over them.
+struct WindingTree {
+    std::vector<float> vertices;  // 9 per triangle
+    std::vector<OvWindingNode> nodes;
+};
+
+// Leaves small enough that a near leaf costs little to sum exactly.
+constexpr size_t kLeafTriangles = 8;
+
+struct TreeBuilder {
+    const std::vector<std::array<double, 9>>& tri;  // grid coordinates in voxel units
+    std::vector<uint32_t> order;
+    std::vector<OvWindingNode> nodes;
+
+    std::array<double, 3> centroid(uint32_t t) const {
+        return {(tri[t][0] + tri[t][3] + tri[t][6]) / 3, (tri[t][1] + tri[t][4] + tri[t][7]) / 3,
+                (tri[t][2] + tri[t][5] + tri[t][8]) / 3};
+    }
+
+    std::array<double, 3> area_normal(uint32_t t) const {
+        const auto& v = tri[t];
+        const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+        const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+        return {(e1[1] * e2[2] - e1[2] * e2[1]) / 2, (e1[2] * e2[0] - e1[0] * e2[2]) / 2,
+                (e1[0] * e2[1] - e1[1] * e2[0]) / 2};
+    }
+
+    // Builds the subtree of order[lo, hi) at the end of `nodes`.
+    void build(size_t lo, size_t hi) {
+        const size_t index = nodes.size();
+        nodes.emplace_back();
+        // Expansion centre: area-weighted, falling back to the plain centroid mean for zero-area
+        // subtrees.
+        double normal[3] = {0, 0, 0}, weighted[3] = {0, 0, 0}, plain[3] = {0, 0, 0}, area = 0;
+        double box_lo[3] = {INFINITY, INFINITY, INFINITY},
+               box_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (size_t i = lo; i < hi; ++i) {
+            const auto n = area_normal(order[i]);
+            const double a = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            const auto c = centroid(order[i]);
+            for (int k = 0; k < 3; ++k) {
+                normal[k] += n[k];
+                weighted[k] += a * c[k];
+                plain[k] += c[k];
+                box_lo[k] = std::min(box_lo[k], c[k]);
+                box_hi[k] = std::max(box_hi[k], c[k]);
+            }
+            area += a;
+        }
+        double centre[3], radius = 0, moment[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+        for (int k = 0; k < 3; ++k)
+            centre[k] = area > 0 ? weighted[k] / area : plain[k] / double(hi - lo);
+        for (size_t i = lo; i < hi; ++i) {
+            const auto& p = tri[order[i]];
+            for (int v = 0; v < 3; ++v) {
+                const double dx = p[3 * v] - centre[0], dy = p[3 * v + 1] - centre[1],
+                             dz = p[3 * v + 2] - centre[2];
+                radius = std::max(radius, std::sqrt(dx * dx + dy * dy + dz * dz));
+            }
+            const auto n = area_normal(order[i]);
+            const auto c = centroid(order[i]);
+            for (int r = 0; r < 3; ++r)
+                for (int k = 0; k < 3; ++k) moment[3 * r + k] += n[r] * (c[k] - centre[k]);
+        }
+        OvWindingNode node{};
+        for (int k = 0; k < 3; ++k) {
+            node.centre[k] = float(centre[k]);
+            node.area_normal[k] = float(normal[k]);
+        }
+        for (int k = 0; k < 9; ++k) node.moment[k] = float(moment[k]);
+        // Rounded up a little, so the float ball still holds every vertex and the error bound
+        // stays an upper bound.
+        node.radius = float(radius * (1 + 1e-6) + 1e-6);
+        node.abs_area = float(area * (1 + 1e-6));
+
+        // Leaf, or split at the median centroid along the longest axis of the centroids' box.
+        if (hi - lo <= kLeafTriangles) {
+            node.first = uint32_t(lo);
+            node.count = uint32_t(hi - lo);
+        } else {
+            int axis = 0;
+            for (int k = 1; k < 3; ++k)
+                if (box_hi[k] - box_lo[k] > box_hi[axis] - box_lo[axis]) axis = k;
+            const size_t mid = lo + (hi - lo) / 2;
+            std::nth_element(
+                order.begin() + lo, order.begin() + mid, order.begin() + hi,
+                [&](uint32_t a, uint32_t b) { return centroid(a)[axis] < centroid(b)[axis]; });
+            build(lo, mid);
+            build(mid, hi);
+        }
+        node.skip = uint32_t(nodes.size());
+        nodes[index] = node;
+    }
+};
+
+WindingTree build_winding_tree(const std::vector<std::array<double, 9>>& tri) {
+    TreeBuilder builder{tri, std::vector<uint32_t>(tri.size()), {}};
+    for (size_t t = 0; t < tri.size(); ++t) builder.order[t] = uint32_t(t);
+    builder.build(0, tri.size());
+    WindingTree tree;
+    tree.nodes = std::move(builder.nodes);
+    tree.vertices.reserve(tri.size() * 9);
+    for (uint32_t t : builder.order)
+        for (double x : tri[t]) tree.vertices.push_back(float(x));
+    return tree;
+}
+
+// One bit per cell of a dense box of cells, x fastest.
+class BoxBits {
+  public:
+    BoxBits(int64_t nx, int64_t ny, int64_t nz)
+        : n_{nx, ny, nz}, words_((uint64_t(nx) * uint64_t(ny) * uint64_t(nz) + 63) / 64) {}
+    int64_t dim(int k) const { return n_[k]; }
+    bool get(uint64_t i) const { return words_[i >> 6] >> (i & 63) & 1; }
+    void set(uint64_t i) { words_[i >> 6] |= uint64_t(1) << (i & 63); }
+    bool get(int64_t x, int64_t y, int64_t z) const { return get(index(x, y, z)); }
+    void set(int64_t x, int64_t y, int64_t z) { set(index(x, y, z)); }
+    // Sets cells [lo, hi] (inclusive) of every axis.
+    void fill(const int64_t* lo, const int64_t* hi) {
+        for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (int64_t x = lo[0]; x <= hi[0]; ++x) set(x, y, z);
+    }
+    // The cells of this box grouped into 2x2x2 parents: a parent is set if any child is. Visits
+    // the set cells only: these boxes hold surfaces, a few percent of their cells.
+    BoxBits coarser() const {
+        BoxBits up((n_[0] + 1) / 2, (n_[1] + 1) / 2, (n_[2] + 1) / 2);
+        const uint64_t nx = uint64_t(n_[0]), ny = uint64_t(n_[1]);
+        for (size_t w = 0; w < words_.size(); ++w)
+            for (uint64_t bits = words_[w]; bits; bits &= bits - 1) {
+                const uint64_t i = uint64_t(w) * 64 + uint64_t(__builtin_ctzll(bits));
+                up.set(int64_t(i % nx / 2), int64_t(i / nx % ny / 2), int64_t(i / nx / ny / 2));
+            }
+        return up;
+    }
+    // Cells [first, first + count) in index order as the low bits of a word; count in [1, 64].
+    uint64_t bits_at(uint64_t first, int count) const {
+        const uint64_t word = first >> 6;
+        const int shift = int(first & 63);
+        uint64_t bits = words_[word] >> shift;
+        if (shift + count > 64) bits |= words_[word + 1] << (64 - shift);
+        return count == 64 ? bits : bits & ((uint64_t(1) << count) - 1);
+    }
+
+    uint64_t index(int64_t x, int64_t y, int64_t z) const {
+        return uint64_t(x) + uint64_t(n_[0]) * (uint64_t(y) + uint64_t(n_[1]) * uint64_t(z));
+    }
+
+    // Prepares rank(); call it after the last set().
+    void index_ranks() {
+        ranks_.assign(words_.size() + 1, 0);
+        for (size_t w = 0; w < words_.size(); ++w)
+            ranks_[w + 1] = ranks_[w] + uint64_t(__builtin_popcountll(words_[w]));
+    }
+    // The number of set cells before cell i.
+    uint64_t rank(uint64_t i) const {
+        const uint64_t below = words_[i >> 6] & ((uint64_t(1) << (i & 63)) - 1);
+        return ranks_[i >> 6] + uint64_t(__builtin_popcountll(below));
+    }
+
+  private:
+    int64_t n_[3];
+    std::vector<uint64_t> words_;
+    std::vector<uint64_t> ranks_;  // set cells before each word
+};
+
+// The voxels of the box (box-relative) whose closed boxes the surface touches, and the triangles
+// touching each, by the double-precision overlap test.
+struct SurfaceVoxels {
+    BoxBits bits;
+    std::vector<std::pair<uint64_t, uint32_t>> voxel_triangle;  // sorted by voxel index
+    // The pairs of the k-th set voxel (in index order) are [first_pair[k], first_pair[k + 1]).
+    std::vector<size_t> first_pair;
+
+    // The pairs of voxel i, as a range of voxel_triangle: a lookup, not a search.
+    std::pair<size_t, size_t> pairs_of(uint64_t i) const {
+        if (!bits.get(i)) return {0, 0};
+        const uint64_t k = bits.rank(i);
+        return {first_pair[k], first_pair[k + 1]};
+    }
+};
+
+// Marks the voxels of [lo, hi] (box-relative, inclusive) that triangle t touches, recursing from
+// the triangle's voxel range into halves.
+void mark_surface(const std::array<double, 9>& t, uint32_t id, const VoxelBox& box,
+                  const BoxBits& cells, const int64_t* lo, const int64_t* hi,
+                  std::vector<std::pair<uint64_t, uint32_t>>& out) {
+    Vec3d box_lo, box_hi;
+    for (int k = 0; k < 3; ++k) {
+        box_lo[k] = double(box.lo[k] + lo[k]);
+        box_hi[k] = double(box.lo[k] + hi[k] + 1);
+    }
+    if (!triangle_box_overlap_double({t[0], t[1], t[2]}, {t[3], t[4], t[5]}, {t[6], t[7], t[8]},
+                                     box_lo, box_hi))
+        return;
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+        if (hi[k] - lo[k] > hi[axis] - lo[axis]) axis = k;
+    if (hi[axis] == lo[axis]) {
+        out.push_back({cells.index(lo[0], lo[1], lo[2]), id});
+        return;
+    }
+    const int64_t mid = lo[axis] + (hi[axis] - lo[axis]) / 2;
+    int64_t split_hi[3] = {hi[0], hi[1], hi[2]}, split_lo[3] = {lo[0], lo[1], lo[2]};
+    split_hi[axis] = mid;
+    split_lo[axis] = mid + 1;
+    mark_surface(t, id, box, cells, lo, split_hi, out);
+    mark_surface(t, id, box, cells, split_lo, hi, out);
+}
+
+SurfaceVoxels surface_voxels(const std::vector<std::array<double, 9>>& tri, const VoxelBox& box) {
+    SurfaceVoxels out{
+        BoxBits(box.hi[0] - box.lo[0] + 1, box.hi[1] - box.lo[1] + 1, box.hi[2] - box.lo[2] + 1),
+        {},
+        {}};
+    // Triangles are independent, so they are marked in parallel, each thread into a list of its
+    // own; sorting the pairs afterwards makes the result the same for any number of threads.
+    tbb::enumerable_thread_specific<std::vector<std::pair<uint64_t, uint32_t>>> lists;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, tri.size(), 64), [&](const auto& range) {
+        auto& list = lists.local();
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+            const auto& t = tri[i];
+            int64_t lo[3], hi[3];
+            bool empty = false;
+            for (int k = 0; k < 3; ++k) {
+                const double mn = std::min({t[k], t[3 + k], t[6 + k]});
+                const double mx = std::max({t[k], t[3 + k], t[6 + k]});
+                // Voxel i's closed box is [i, i + 1]; clamped first so huge coordinates stay exact.
+                const double below = double(box.lo[k]) - 2, above = double(box.hi[k]) + 2;
+                lo[k] = std::max<int64_t>(
+                    0, int64_t(std::floor(std::clamp(mn, below, above))) - 1 - box.lo[k]);
+                hi[k] = std::min<int64_t>(
+                    out.bits.dim(k) - 1,
+                    int64_t(std::floor(std::clamp(mx, below, above))) - box.lo[k]);
+                empty = empty || lo[k] > hi[k];
+            }
+            if (!empty) mark_surface(t, uint32_t(i), box, out.bits, lo, hi, list);
+        }
+    });
+    for (const auto& list : lists)
+        out.voxel_triangle.insert(out.voxel_triangle.end(), list.begin(), list.end());
+    tbb::parallel_sort(out.voxel_triangle.begin(), out.voxel_triangle.end());
+    for (size_t p = 0; p < out.voxel_triangle.size(); ++p)
+        if (p == 0 || out.voxel_triangle[p].first != out.voxel_triangle[p - 1].first) {
+            out.bits.set(out.voxel_triangle[p].first);
+            out.first_pair.push_back(p);
+        }
+    out.first_pair.push_back(out.voxel_triangle.size());
+    out.bits.index_ranks();
+    return out;
+}
+
+// Whether triangle t may meet the segment from p to p + 1 along `axis`: false only when it
+// certainly does not (double precision with a margin far above its rounding; a triangle
+// parallel to the segment counts as meeting it).
+bool may_cross(const std::array<double, 9>& t, const Vec3d& p, int axis) {
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    double x[3], y[3], z[3];
+    for (int i = 0; i < 3; ++i) {
+        x[i] = t[3 * i + u] - p[u];
+        y[i] = t[3 * i + v] - p[v];
+        z[i] = t[3 * i + axis] - p[axis];
+    }
+    double e[3], scale = 0;
+    for (int i = 0; i < 3; ++i) {
+        const int a = (i + 1) % 3, b = (i + 2) % 3;
+        e[i] = x[a] * y[b] - y[a] * x[b];
+        scale = std::max(scale, std::fabs(x[a] * y[b]) + std::fabs(y[a] * x[b]));
+    }
+    const double tol = 1e-12 * scale;
+    const bool all_up = e[0] >= -tol && e[1] >= -tol && e[2] >= -tol;
+    const bool all_down = e[0] <= tol && e[1] <= tol && e[2] <= tol;
+    if (!all_up && !all_down) return false;
+    const double area = e[0] + e[1] + e[2];
+    if (std::fabs(area) <= 4 * tol) return true;
+    const double h = (e[0] * z[0] + e[1] * z[1] + e[2] * z[2]) / area;
+    return h >= -1e-9 && h <= 1 + 1e-9;
+}
+
+// Signed solid angle of triangle (a, b, c) seen from p, in double (Van Oosterom & Strackee, as
+// in the kernel): positive when p lies behind the triangle.
+double solid_angle_double(const double* a_, const double* b_, const double* c_, const double* p) {
+    double a[3], b[3], c[3];
+    for (int k = 0; k < 3; ++k) {
+        a[k] = a_[k] - p[k];
+        b[k] = b_[k] - p[k];
+        c[k] = c_[k] - p[k];
+    }
+    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
+                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+    const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    const double lb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    const double lc = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    const double den = la * lb * lc + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
+                       (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la +
+                       (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]) * lb;
+    return 2 * std::atan2(det, den);
+}
+
+// Fans that close the mesh's holes. The boundary of the mesh (after welding: each edge carrying
+// the number of triangles running it one way minus the other) splits into connected cycles; a
+// fan of triangles (apex, a, b) from the mean vertex of each cycle has exactly that boundary. So
+// the mesh minus the fans is a closed cycle, and w = n + w_fans where n, the winding number of
+// that cycle, is an integer that changes only across the mesh or a fan. A closed, consistently
+// oriented mesh (or a union of such, duplicated shells included) has no fans.
+struct BoundaryFans {
+    std::vector<std::array<double, 9>> triangles;  // grid coordinates (voxel units)
+    std::vector<double> weight;                    // how many times each counts
+    struct Chunk {
+        Vec3d centre;
+        double radius, area;  // ball holding the chunk's triangles; their weighted area
+        size_t first, count;
+    };
+    std::vector<Chunk> chunks;
+
+    // w of the fans at p, in double.
+    double winding(const Vec3d& p) const {
+        double sum = 0;
+        for (size_t t = 0; t < triangles.size(); ++t)
+            sum += weight[t] * solid_angle_double(&triangles[t][0], &triangles[t][3],
+                                                  &triangles[t][6], p.data());
+        return sum / (4 * M_PI);
+    }
+
+    // An upper bound on |w of the fans| over the ball of radius `reach` around p: a triangle's
+    // solid angle is at most its area over its least distance squared, and at most 2 pi.
+    double bound(const Vec3d& p, double reach) const {
+        double sum = 0;
+        for (const Chunk& c : chunks) {
+            const double gap = distance(p, c.centre) - c.radius - reach;
+            if (gap > c.radius) {
+                sum += c.area / (gap * gap);
+                continue;
+            }
+            for (size_t t = c.first; t < c.first + c.count; ++t) {
+                const Ball ball = ball_of(t);
+                const double d = distance(p, ball.centre) - ball.radius - reach;
+                sum += weight[t] * (d > 0 ? std::min(2 * M_PI, area_of(t) / (d * d)) : 2 * M_PI);
+            }
+        }
+        return sum / (4 * M_PI);
+    }
+
+    // An upper bound on |grad w of the fans| over the ball of radius `reach` around p (infinite
+    // if a fan triangle comes that close): the gradient of a triangle's solid angle is at most
+    // 2 area / distance^3.
+    double gradient_bound(const Vec3d& p, double reach) const {
+        double sum = 0;
+        for (const Chunk& c : chunks) {
+            const double gap = distance(p, c.centre) - c.radius - reach;
+            if (gap > c.radius) {
+                sum += 2 * c.area / (gap * gap * gap);
+                continue;
+            }
+            for (size_t t = c.first; t < c.first + c.count; ++t) {
+                const Ball ball = ball_of(t);
+                const double d = distance(p, ball.centre) - ball.radius - reach;
+                if (!(d > 0)) return INFINITY;
+                sum += 2 * weight[t] * area_of(t) / (d * d * d);
+            }
+        }
+        return sum / (4 * M_PI);
+    }
+
+    struct Ball {
+        Vec3d centre;
+        double radius;
+    };
+    Ball ball_of(size_t t) const {
+        const auto& v = triangles[t];
+        Ball b{{(v[0] + v[3] + v[6]) / 3, (v[1] + v[4] + v[7]) / 3, (v[2] + v[5] + v[8]) / 3}, 0};
+        for (int i = 0; i < 3; ++i)
+            b.radius =
+                std::max(b.radius, distance(b.centre, {v[3 * i], v[3 * i + 1], v[3 * i + 2]}));
+        return b;
+    }
+    double area_of(size_t t) const {
+        const auto& v = triangles[t];
+        const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+        const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+        const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                             e1[0] * e2[1] - e1[1] * e2[0]};
+        return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) / 2;
+    }
+    static double distance(const Vec3d& p, const Vec3d& q) {
+        return std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                         (p[2] - q[2]) * (p[2] - q[2]));
+    }
+};
+
+constexpr size_t kFanTrianglesPerChunk = 16;
+
+// Groups fan triangles [lo, hi) into chunks by recursive median splits of their centroids.
+void build_chunks(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size_t hi) {
+    auto centroid = [&](size_t t, int k) {
+        const auto& v = fans.triangles[t];
+        return (v[k] + v[3 + k] + v[6 + k]) / 3;
+    };
+    if (hi - lo > kFanTrianglesPerChunk) {
+        double extent[3];
+        for (int k = 0; k < 3; ++k) {
+            double mn = INFINITY, mx = -INFINITY;
+            for (size_t i = lo; i < hi; ++i) {
+                mn = std::min(mn, centroid(order[i], k));
+                mx = std::max(mx, centroid(order[i], k));
+            }
+            extent[k] = mx - mn;
+        }
+        const int axis = int(std::max_element(extent, extent + 3) - extent);
+        const size_t mid = lo + (hi - lo) / 2;
+        std::nth_element(order.begin() + lo, order.begin() + mid, order.begin() + hi,
+                         [&](size_t x, size_t y) { return centroid(x, axis) < centroid(y, axis); });
+        build_chunks(fans, order, lo, mid);
+        build_chunks(fans, order, mid, hi);
+        return;
+    }
+    BoundaryFans::Chunk chunk{{0, 0, 0}, 0, 0, lo, hi - lo};
+    for (size_t i = lo; i < hi; ++i)
+        for (int k = 0; k < 3; ++k) chunk.centre[k] += centroid(order[i], k) / double(hi - lo);
+    for (size_t i = lo; i < hi; ++i) {
+        const auto& v = fans.triangles[order[i]];
+        for (int c = 0; c < 3; ++c)
+            chunk.radius = std::max(
+                chunk.radius,
+                BoundaryFans::distance(chunk.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
+        chunk.area += fans.weight[order[i]] * fans.area_of(order[i]);
+    }
+    fans.chunks.push_back(chunk);
+}
+
+BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid) {
+    const WeldedEdges welded = weld_edges(mesh);
+    // Boundary edges (net count != 0), and their connected components by union-find.
+    std::vector<std::pair<std::pair<uint32_t, uint32_t>, int64_t>> edges;
+    for (const auto& [edge, uses] : welded.uses)
+        if (uses[0] != uses[1]) edges.push_back({edge, int64_t(uses[0]) - int64_t(uses[1])});
+    BoundaryFans fans;
+    if (edges.empty()) return fans;
+    std::vector<uint32_t> parent(welded.positions.size());
+    for (size_t v = 0; v < parent.size(); ++v) parent[v] = uint32_t(v);
+    auto find = [&](uint32_t v) {
+        while (parent[v] != v) v = parent[v] = parent[parent[v]];
+        return v;
+    };
+    for (const auto& [edge, net] : edges) parent[find(edge.first)] = find(edge.second);
+    // Apex per component: the mean of its vertices (each edge end counted once per edge).
+    std::map<uint32_t, std::array<double, 4>> apex;
+    for (const auto& [edge, net] : edges)
+        for (uint32_t v : {edge.first, edge.second}) {
+            auto& a = apex[find(v)];
+            for (int k = 0; k < 3; ++k) a[k] += welded.positions[v][k];
+            a[3] += 1;
+        }
+    auto to_grid = [&](const std::array<double, 3>& p, int k) {
+        return (p[k] - grid.origin[k]) / grid.voxel_size;
+    };
+    for (const auto& [edge, net] : edges) {
+        const auto& a = apex[find(edge.first)];
+        const std::array<double, 3> centre{a[0] / a[3], a[1] / a[3], a[2] / a[3]};
+        // The fan triangle's boundary runs low -> high `net` times, like the mesh's.
+        const uint32_t from = net > 0 ? edge.first : edge.second;
+        const uint32_t to = net > 0 ? edge.second : edge.first;
+        std::array<double, 9> t;
+        for (int k = 0; k < 3; ++k) {
+            t[k] = to_grid(centre, k);
+            t[3 + k] = to_grid(welded.positions[from], k);
+            t[6 + k] = to_grid(welded.positions[to], k);
+        }
+        fans.triangles.push_back(t);
+        fans.weight.push_back(double(net > 0 ? net : -net));
+    }
+    std::vector<size_t> order(fans.triangles.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    build_chunks(fans, order, 0, order.size());
+    // Store the triangles in chunk order.
+    BoundaryFans sorted;
+    sorted.chunks = std::move(fans.chunks);
+    for (size_t i : order) {
+        sorted.triangles.push_back(fans.triangles[i]);
+        sorted.weight.push_back(fans.weight[i]);
+    }
+    return sorted;
+}
+
+// Evaluates the winding number at points on the device, in launches short enough for a GPU's
+// watchdog.
+class WindingEvaluator {
+  public:
+    WindingEvaluator(Device::Impl& cl, const WindingTree& tree, VoxelizeStats& stats)
+        : cl_(cl), stats_(stats), kernel_(cl.program(kKernel_solid), "winding_points") {
+        auto t = SolidClock::now();
+        vertices_ = upload(cl.context, cl.queue, tree.vertices);
+        nodes_ = upload(cl.context, cl.queue, tree.nodes);
+        node_count_ = cl_uint(tree.nodes.size());
+        cl.queue.finish();
+        stats.seconds_upload += seconds_since(t);
+        group_ = work_group_size(kernel_, cl.device);
+    }
+
+    // w and its expansion error bound at each point (x y z triples), subtrees beyond far_ratio
+    // radii taken as expansions.
+    void evaluate(const std::vector<float>& points, float far_ratio, float node_tolerance,
+                  std::vector<float>& w, std::vector<float>& error) {
+        const size_t count = points.size() / 3;
+        w.resize(count);
+        error.resize(count);
+        // Batches of points, smaller after a device allocation failure (a failed batch's results
+        // are written again by its retry).
+        auto run_batch = [&](size_t done, size_t max_points) {
+            const size_t n = std::min(max_points, count - done);
+            auto t = SolidClock::now();
+            const cl::Buffer point_buffer =
+                batch_buffer(cl_.context, CL_MEM_READ_ONLY, 3 * n * sizeof(float));
+            cl::Buffer w_buffer = batch_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
+            cl::Buffer error_buffer =
+                batch_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
+            cl_.queue.enqueueWriteBuffer(point_buffer, CL_FALSE, 0, 3 * n * sizeof(float),
+                                         &points[3 * done]);
+            cl_.queue.finish();
+            stats_.seconds_upload += seconds_since(t);
+
+            t = SolidClock::now();
+            kernel_.setArg(0, vertices_);
+            kernel_.setArg(1, nodes_);
+            kernel_.setArg(2, node_count_);
+            kernel_.setArg(3, point_buffer);
+            kernel_.setArg(5, cl_uint(n));
+            kernel_.setArg(6, far_ratio);
+            kernel_.setArg(7, node_tolerance);
+            kernel_.setArg(8, w_buffer);
+            kernel_.setArg(9, error_buffer);
+            for (uint64_t base = 0; base < n; base += kWindingItemsPerLaunch) {
+                kernel_.setArg(4, cl_uint(base));
+                launch(cl_.queue, kernel_, std::min<uint64_t>(kWindingItemsPerLaunch, n - base),
+                       group_);
+            }
+            cl_.queue.finish();
+            stats_.seconds_kernels += seconds_since(t);
+            stats_.work_items += n;
+            ++stats_.batches;
+
+            t = SolidClock::now();
+            cl_.queue.enqueueReadBuffer(w_buffer, CL_FALSE, 0, n * sizeof(float), &w[done]);
+            cl_.queue.enqueueReadBuffer(error_buffer, CL_TRUE, 0, n * sizeof(float), &error[done]);
+            stats_.seconds_download += seconds_since(t);
+            return n;
+        };
+        run_batches(cl_.queue, count, points_per_batch_, stats_,
+                    "evaluating winding numbers on " + cl_.info.name, "point", run_batch);
+    }
+
+  private:
+    Device::Impl& cl_;
+    VoxelizeStats& stats_;
+    cl::Kernel kernel_;
+    cl::Buffer vertices_, nodes_;
+    cl_uint node_count_ = 0;
+    size_t group_ = 1;
+    size_t points_per_batch_ = size_t(1) << 20;  // the most; less after allocation failures
+};
+
+// Voxels of the box, and bricks of `result` meeting it (all of which the result may hold).
+uint64_t box_voxels(const VoxelBox& box) {
+    uint64_t voxels = 1;
+    for (int k = 0; k < 3; ++k) voxels *= uint64_t(box.hi[k] - box.lo[k] + 1);
+    return voxels;
+}
+uint64_t box_bricks(const SparseVoxels& result, const VoxelBox& box) {
+    const int64_t b = result.brick_size();
+    uint64_t bricks = 1;
+    for (int k = 0; k < 3; ++k) bricks *= uint64_t(box.hi[k] / b - box.lo[k] / b + 1);
+    return bricks;
+}
+
+// Tiles of the winding solid: cubes of 2^level voxels aligned to the box's low corner, clipped
+// to the box. Tiles of the first level hold 2^kTopLevel voxels per axis; tiles are evaluated down
+// to kFinestTileLevel (below it, a near-surface tile's centre costs about as much as its voxels).
+constexpr int kTopLevel = 5;
+constexpr int kFinestTileLevel = 3;
+// Tile evaluations accept a subtree only when its expansion error bound is at most this (in
+// units of w); the sum of the accepted bounds is the tile's certified error.
+constexpr float kTileNodeTolerance = 1e-2f;
+// Slack for float rounding in a tile's w (a few hundred terms of relative error 2^-24 or so).
+constexpr double kTileRounding = 1e-3;
+
+struct Tile {
+    int64_t lo[3], hi[3];  // box-relative voxel range, inclusive
+};
+
+}  // namespace
+
+WeldedEdges weld_edges(const Mesh& mesh) {
+    WeldedEdges out;
+    std::map<std::array<double, 3>, uint32_t> ids;
+    std::vector<uint32_t> welded(mesh.positions.size());
+    for (size_t v = 0; v < mesh.positions.size(); ++v) {
+        const auto [it, added] = ids.emplace(mesh.positions[v], uint32_t(ids.size()));
+        if (added) out.positions.push_back(mesh.positions[v]);
+        welded[v] = it->second;
+    }
+    for (const auto& tri : mesh.triangles) {
+        const uint32_t v[3] = {welded[tri[0]], welded[tri[1]], welded[tri[2]]};
+        if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;
+        for (int e = 0; e < 3; ++e) {
+            const uint32_t a = v[e], b = v[(e + 1) % 3];
+            ++out.uses[{std::min(a, b), std::max(a, b)}][a < b ? 0 : 1];
+        }
+    }
+    return out;
+}
+
+// The winding-number solid on the device, with tree evaluations only where they can matter.
+// w = n + w_fans (BoundaryFans), where the integer n changes only across the mesh or a fan.
+// Phases:
+// 1. the tree over the triangles, the fans over the holes, and the voxels of the box that the
+//    mesh or a fan touches (with a pyramid of coarser tiles over them);
+// 2. per level, from the first level's tiles down to kFinestTileLevel: a tile that neither the
+//    mesh nor a fan touches takes n from w (tree, certified error) minus w_fans (double) at its
+//    centre; if the fans' w is certainly below 1/2 over the tile, n decides it (inside iff
+//    n != 0); any other tile splits;
+// 3. the voxels of undecided tiles take n from a neighbour across the segment between their
+//    centres when no triangle of the mesh or a fan meets it (a flood from the decided tiles);
+//    each decides |n + w_fans| > 1/2, with w_fans in double where its bound does not settle it;
+// 4. the voxels still without n take |w| > 1/2 at their centres from the tree;
+// 5. the inside bits into bricks.
+void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
+                    const VoxelizeOptions& options, VoxelizeStats& stats) {
+    auto t = SolidClock::now();
+    const Grid& grid = result.grid();
+    const VoxelBox box = centre_box(mesh, grid);
+    if (box.empty()) return;
+    const int b = result.brick_size();
+    const auto nb = result.brick_dims();
+    // The box is held densely: a state byte per voxel, and bits for the inside, the surface, the
+    // fans and their coarser pyramids (under half a byte per voxel).
+    const uint64_t voxels = box_voxels(box);
+    check_solid_memory(
+        result, box_bricks(result, box), voxels + voxels / 2, options,
+        " and the winding number's dense state for " + std::to_string(voxels) + " voxels");
+    std::vector<uint64_t> bricks;  // every brick meeting the box
+    for (int64_t bz = box.lo[2] / b; bz <= box.hi[2] / b; ++bz)
+        for (int64_t by = box.lo[1] / b; by <= box.hi[1] / b; ++by)
+            for (int64_t bx = box.lo[0] / b; bx <= box.hi[0] / b; ++bx)
+                bricks.push_back(uint64_t(bx) +
+                                 uint64_t(nb[0]) * (uint64_t(by) + uint64_t(nb[1]) * uint64_t(bz)));
+    stats.bricks_active = bricks.size();
+    constexpr int kSteps = 4;  // progress: tiles, flood, voxels, bricks
+
+    // Phase 1.
+    auto tri = grid_triangles(mesh, grid);
+    const WindingTree tree = build_winding_tree(tri);
+    const BoundaryFans fans = boundary_fans(mesh, grid);
+    tri.insert(tri.end(), fans.triangles.begin(), fans.triangles.end());
+    const SurfaceVoxels surface = surface_voxels(tri, box);
+    BoxBits fan_pyramid = surface_voxels(fans.triangles, box).bits;
+    for (int level = 0; level < kFinestTileLevel; ++level) fan_pyramid = fan_pyramid.coarser();
+    std::vector<BoxBits> pyramid{surface.bits.coarser()};
+    while (int(pyramid.size()) < kTopLevel) pyramid.push_back(pyramid.back().coarser());
+    stats.seconds_binning += seconds_since(t);
+    WindingEvaluator evaluator(cl, tree, stats);
+    const int64_t n[3] = {surface.bits.dim(0), surface.bits.dim(1), surface.bits.dim(2)};
+    auto centre_of = [&](const Tile& tile) {
+        Vec3d c;
+        for (int k = 0; k < 3; ++k)
+            c[k] = double(box.lo[k]) + (tile.lo[k] + tile.hi[k]) / 2.0 + 0.5;
+        return c;
+    };
+
+    // The farthest a voxel centre of the tile lies from the tile's centre.
+    auto tile_reach = [](const Tile& tile) {
+        double reach2 = 0;
+        for (int k = 0; k < 3; ++k)
+            reach2 += double(tile.hi[k] - tile.lo[k]) * double(tile.hi[k] - tile.lo[k]) / 4;
+        return std::sqrt(reach2);
+    };
+
+    // Phase 2. Per voxel: kUnknown, or n + kZero (n in [-kZero, kZero]).
+    constexpr uint8_t kUnknown = 0xFF, kZero = 0x7F;
+    BoxBits inside(n[0], n[1], n[2]);
+    std::vector<uint8_t> state(size_t(n[0] * n[1] * n[2]), kUnknown);
+    std::vector<Tile> pending;
+    const BoxBits& top = pyramid[kTopLevel - 1];
+    for (int64_t z = 0; z < top.dim(2); ++z)
+        for (int64_t y = 0; y < top.dim(1); ++y)
+            for (int64_t x = 0; x < top.dim(0); ++x) {
+                const int64_t at[3] = {x, y, z};
+                Tile tile;
+                for (int k = 0; k < 3; ++k) {
+                    tile.lo[k] = at[k] << kTopLevel;
+                    tile.hi[k] = std::min(tile.lo[k] + (int64_t(1) << kTopLevel), n[k]) - 1;
+                }
+                pending.push_back(tile);
+            }
+    std::vector<float> points, w, error;
+    for (int level = kTopLevel; level >= kFinestTileLevel; --level) {
+        std::vector<Tile> evaluated, children;
+        auto split = [&](const Tile& tile) {
+            const int64_t half = int64_t(1) << (level - 1);
+            for (int c = 0; c < 8; ++c) {
+                Tile child;
+                bool empty = false;
+                for (int k = 0; k < 3; ++k) {
+                    const int64_t mid = tile.lo[k] + half;
+                    child.lo[k] = (c >> k & 1) ? mid : tile.lo[k];
+                    child.hi[k] = (c >> k & 1) ? tile.hi[k] : std::min(mid - 1, tile.hi[k]);
+                    empty = empty || child.lo[k] > child.hi[k];
+                }
+                if (!empty) children.push_back(child);
+            }
+        };
+        points.clear();
+        for (const Tile& tile : pending) {
+            if (pyramid[level - 1].get(tile.lo[0] >> level, tile.lo[1] >> level,
+                                       tile.lo[2] >> level)) {
+                split(tile);
+                continue;
+            }
+            evaluated.push_back(tile);
+            for (double c : centre_of(tile)) points.push_back(float(c));
+        }
+        evaluator.evaluate(points, OVS_WINDING_FAR, kTileNodeTolerance, w, error);
+        for (size_t i = 0; i < evaluated.size(); ++i) {
+            const Tile& tile = evaluated[i];
+            const Vec3d centre = centre_of(tile);
+            const double reach = tile_reach(tile);
+            const double cycle =
+                double(w[i]) - (fans.triangles.empty() ? 0.0 : fans.winding(centre));
+            const double whole = std::round(cycle);
+            const bool certain =
+                std::fabs(cycle - whole) + double(error[i]) + kTileRounding < 0.5 &&
+                std::fabs(whole) < kZero;
+            if (!certain || (!fans.triangles.empty() && !(fans.bound(centre, reach) < 0.5))) {
+                split(tile);
+                continue;
+            }
+            const uint8_t decided = uint8_t(int(whole) + kZero);
+            for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+                for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y) {
+                    std::fill_n(state.begin() + int64_t(inside.index(tile.lo[0], y, z)),
+                                tile.hi[0] - tile.lo[0] + 1, decided);
+                    if (whole != 0) {
+                        const int64_t lo[3] = {tile.lo[0], y, z}, hi[3] = {tile.hi[0], y, z};
+                        inside.fill(lo, hi);
+                    }
+                }
+        }
+        pending = std::move(children);
+    }
+    report_progress(options, bricks.size() / kSteps, bricks.size());
+
+    // Phase 3.
+    std::vector<uint64_t> queue;
+    for (const Tile& tile : pending)
+        for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+            for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x)
+                    queue.push_back(inside.index(x, y, z));
+    auto coords = [&](uint64_t i, int64_t* v) {
+        v[0] = int64_t(i % uint64_t(n[0]));
+        v[1] = int64_t(i / uint64_t(n[0]) % uint64_t(n[1]));
+        v[2] = int64_t(i / uint64_t(n[0]) / uint64_t(n[1]));
+    };
+    const uint64_t step[3] = {1, uint64_t(n[0]), uint64_t(n[0]) * uint64_t(n[1])};
+    // Whether no triangle (mesh or fan) meets the segment from the centre of voxel i one step up
+    // `axis`: any that does touches one of the two voxels.
+    auto clear = [&](uint64_t i, int axis) {
+        int64_t v[3];
+        coords(i, v);
+        const Vec3d p{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
+                      double(box.lo[2] + v[2]) + 0.5};
+        for (uint64_t end : {i, i + step[axis]}) {
+            const auto [first, last] = surface.pairs_of(end);
+            for (size_t pair = first; pair < last; ++pair)
+                if (may_cross(tri[surface.voxel_triangle[pair].second], p, axis)) return false;
+        }
+        return true;
+    };
+    // Voxel i (without n) takes n from a neighbour across a clear segment; false if none can.
+    auto settle = [&](uint64_t i) {
+        int64_t v[3];
+        coords(i, v);
+        for (int axis = 0; axis < 3; ++axis)
+            for (int dir = -1; dir <= 1; dir += 2) {
+                if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
+                const uint64_t j = dir > 0 ? i + step[axis] : i - step[axis];
+                if (state[j] == kUnknown) continue;
+                const bool free = !surface.bits.get(i) && !surface.bits.get(j);
+                if (!free && !clear(dir > 0 ? i : j, axis)) continue;
+                state[i] = state[j];
+                return true;
+            }
+        return false;
+    };
+    std::vector<uint64_t> work;
+    for (uint64_t i : queue) {
+        if (state[i] != kUnknown || !settle(i)) continue;
+        work.push_back(i);
+        while (!work.empty()) {
+            const uint64_t k = work.back();
+            work.pop_back();
+            int64_t v[3];
+            coords(k, v);
+            for (int axis = 0; axis < 3; ++axis)
+                for (int dir = -1; dir <= 1; dir += 2) {
+                    if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
+                    const uint64_t j = dir > 0 ? k + step[axis] : k - step[axis];
+                    if (state[j] == kUnknown && settle(j)) work.push_back(j);
+                }
+        }
+    }
+    std::vector<uint64_t> unsettled;
+    std::vector<uint64_t> near_voxels;
+    std::vector<int> near_whole;
+    std::vector<float> near_points;
+    points.clear();
+    for (const Tile& tile : pending) {
+        // Per voxel, w_fans matters only where its bound over the tile does not settle it. In a
+        // tile that no fan touches, w_fans is within `spread` of its value at the tile's centre.
+        const Vec3d tile_centre = centre_of(tile);
+        const double reach = tile_reach(tile);
+        const bool near_fans = !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
+        double fan_centre = 0, spread = INFINITY;
+        if (near_fans &&
+            !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
+                             tile.lo[2] >> kFinestTileLevel)) {
+            fan_centre = fans.winding(tile_centre);
+            spread = reach * fans.gradient_bound(tile_centre, reach);
+        }
+        for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+            for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
+                    const uint64_t i = inside.index(x, y, z);
+                    const Vec3d centre{double(box.lo[0] + x) + 0.5, double(box.lo[1] + y) + 0.5,
+                                       double(box.lo[2] + z) + 0.5};
+                    if (state[i] == kUnknown) {
+                        unsettled.push_back(i);
+                        for (double c : centre) points.push_back(float(c));
+                        continue;
+                    }
+                    const int whole = int(state[i]) - kZero;
+                    bool in = whole != 0;
+                    if (near_fans) {
+                        const double low = std::fabs(whole + fan_centre) - spread;
+                        const double high = std::fabs(whole + fan_centre) + spread;
+                        if (low > 0.5)
+                            in = true;
+                        else if (high < 0.5)
+                            in = false;
+                        else {
+                            // Decided below, from w_fans summed on the device.
+                            near_voxels.push_back(i);
+                            near_whole.push_back(whole);
+                            for (double c : centre) near_points.push_back(float(c));
+                            continue;
+                        }
+                    }
+                    if (in) inside.set(i);
+                }
+    }
+    report_progress(options, 2 * bricks.size() / kSteps, bricks.size());
+
+    if (!near_voxels.empty()) {
+        // w_fans from a tree over the fans (each triangle as many times as its weight), like
+        // the mesh's.
+        std::vector<std::array<double, 9>> weighted;
+        for (size_t f = 0; f < fans.triangles.size(); ++f)
+            weighted.insert(weighted.end(), size_t(fans.weight[f]), fans.triangles[f]);
+        WindingEvaluator fan_evaluator(cl, build_winding_tree(weighted), stats);
+        fan_evaluator.evaluate(near_points, OVS_WINDING_FAR, INFINITY, w, error);
+        for (size_t u = 0; u < near_voxels.size(); ++u)
+            if (std::fabs(near_whole[u] + w[u]) > 0.5f) inside.set(near_voxels[u]);
+    }
+
+    // Phase 4.
+    evaluator.evaluate(points, OVS_WINDING_FAR, INFINITY, w, error);
+    for (size_t u = 0; u < unsettled.size(); ++u)
+        if (std::fabs(w[u]) > 0.5f) inside.set(unsettled[u]);
+    report_progress(options, 3 * bricks.size() / kSteps, bricks.size());
+
+    // Phase 5, a row of up to 64 voxels at a time: each 4-voxel group of a row is a nibble of
+    // one block word.
+    t = SolidClock::now();
+    std::vector<uint64_t> blocks(result.blocks_per_brick());
+    const int64_t nbb = b / 4;
+    for (uint64_t index : bricks) {
+        const int64_t at[3] = {int64_t(index % uint64_t(nb[0])) * b,
+                               int64_t(index / uint64_t(nb[0]) % uint64_t(nb[1])) * b,
+                               int64_t(index / uint64_t(nb[0]) / uint64_t(nb[1])) * b};
+        int64_t lo[3], hi[3];  // the brick-local voxels inside the box
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::max<int64_t>(box.lo[k] - at[k], 0);
+            hi[k] = std::min<int64_t>(box.hi[k] - at[k], b - 1);
+        }
+        std::fill(blocks.begin(), blocks.end(), 0);
+        bool any = false;
+        for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (int64_t x0 = lo[0] & ~int64_t(63); x0 <= hi[0]; x0 += 64) {
+                    const int64_t from = std::max(x0, lo[0]), to = std::min(x0 + 63, hi[0]);
+                    uint64_t row =
+                        inside.bits_at(inside.index(at[0] + from - box.lo[0], at[1] + y - box.lo[1],
+                                                    at[2] + z - box.lo[2]),
+                                       int(to - from + 1))
+                        << (from - x0);
+                    const size_t first_block = size_t(x0 / 4 + nbb * (y / 4 + nbb * (z / 4)));
+                    const int shift = int(4 * ((y & 3) + 4 * (z & 3)));
+                    while (row) {
+                        const int group = __builtin_ctzll(row) / 4;
+                        blocks[first_block + size_t(group)] |= (row >> (4 * group) & 15) << shift;
+                        row &= ~(uint64_t(15) << (4 * group));
+                        any = true;
+                    }
+                }
+        if (any) result.merge_brick(index, blocks.data());
+    }
+    stats.seconds_download += seconds_since(t);
+    report_progress(options, bricks.size(), bricks.size());
+}
+
+// Double-precision winding number at every voxel centre of the box, summing every triangle.
+void winding_reference(const Mesh& mesh, SparseVoxels& result, const VoxelizeOptions& options) {
+    const Grid& grid = result.grid();
+    const VoxelBox box = centre_box(mesh, grid);
+    if (box.empty()) return;
+    check_solid_memory(result, box_bricks(result, box), 0, options, "");
+    const uint64_t voxels = box_voxels(box);
+    if (voxels > kMaxReferenceWindingTerms / std::max<uint64_t>(1, mesh.triangles.size()))
+        throw GridError("the CPU reference winding number would sum more than " +
+                        std::to_string(kMaxReferenceWindingTerms) +
+                        " solid angles: lower the resolution");
+    std::vector<std::array<double, 3>> g(mesh.positions.size());
+    for (size_t v = 0; v < g.size(); ++v)
+        for (int k = 0; k < 3; ++k)
+            g[v][k] = (mesh.positions[v][k] - grid.origin[k]) / grid.voxel_size;
+    for (int64_t z = box.lo[2]; z <= box.hi[2]; ++z)
+        for (int64_t y = box.lo[1]; y <= box.hi[1]; ++y)
+            for (int64_t x = box.lo[0]; x <= box.hi[0]; ++x) {
+                const double p[3] = {double(x) + 0.5, double(y) + 0.5, double(z) + 0.5};
+                double sum = 0;
+                for (const auto& tri : mesh.triangles) {
+                    double a[3], b[3], c[3];
+                    for (int k = 0; k < 3; ++k) {
+                        a[k] = g[tri[0]][k] - p[k];
+                        b[k] = g[tri[1]][k] - p[k];
+                        c[k] = g[tri[2]][k] - p[k];
+                    }
+                    // Van Oosterom & Strackee, as in the kernel.
+                    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) +
+                                       a[1] * (b[2] * c[0] - b[0] * c[2]) +
+                                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+                    const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+                    const double lb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+                    const double lc = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+                    const double den = la * lb * lc +
+                                       (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
+                                       (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la +
+                                       (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]) * lb;
+                    sum += 2 * std::atan2(det, den);
+                }
+                // |w| > 1/2: an inward-facing closed mesh has w = -1 inside.
+                if (std::fabs(sum) > 2 * M_PI) result.set(x, y, z);
+            }
+}
+}  // namespace oclvox::detail
