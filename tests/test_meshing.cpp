@@ -666,7 +666,7 @@ TEST(Meshing, BuildOptionsFollowTheDevicesReportedFloatCapability) {
     EXPECT_EQ(with, "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt");
 
     // The device in use: its program was built with the options its capability calls for.
-    Device::Impl& cl = device().impl();
+    Device::Impl& cl = detail::device_impl(device());
     const cl_device_fp_config config = cl.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>();
     const bool supports = (config & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) != 0;
     (void)surface_nets(device(), sphere_field());  // builds (or loads) the meshing program

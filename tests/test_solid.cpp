@@ -7,6 +7,7 @@
 #include <map>
 #include <random>
 
+#include "opencl_runtime.hpp"
 #include "solid.hpp"
 #include "solid_math.h"
 #include "test_support.hpp"
@@ -25,7 +26,7 @@ VoxelizeOptions solid_options(InsideTest inside, int brick_size = 16) {
 SparseVoxels on_device(const Mesh& m, const Grid& g, const VoxelizeOptions& o,
                        VoxelizeStats* stats = nullptr) {
     VoxelizeStats s;
-    SparseVoxels v = detail::solid_device(device().impl(), m, g, o, s);
+    SparseVoxels v = detail::solid_device(detail::device_impl(device()), m, g, o, s);
     if (stats) *stats = s;
     return v;
 }

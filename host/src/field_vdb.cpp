@@ -4,8 +4,6 @@
 // turns a level set's leaves and tiles into a sparse field the same way round.
 #include "field_vdb.hpp"
 
-#include <openvdb/tools/SignedFloodFill.h>
-
 #include <algorithm>
 #include <cmath>
 

@@ -41,7 +41,7 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         progress.finish();
         return Mesh{};
     }
-    Device::Impl& cl = device.impl();
+    Device::Impl& cl = detail::device_impl(device);
     const uint32_t n = uint32_t(field.values.size());
     if (uint64_t(n) * sizeof(float) > cl.info.max_alloc)
         throw GridError(std::string(who) + ": the field needs " +

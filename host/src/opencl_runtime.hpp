@@ -79,3 +79,15 @@ struct Device::Impl {
 };
 
 }  // namespace oclvox
+
+namespace oclvox::detail {
+
+// The OpenCL objects of a device, for the library's algorithms (the public Device hides them).
+struct DeviceAccess {
+    static Device::Impl& impl(Device& device) { return *device.impl_; }
+};
+inline Device::Impl& device_impl(Device& device) {
+    return DeviceAccess::impl(device);
+}
+
+}  // namespace oclvox::detail

@@ -22,7 +22,7 @@ double seconds_since(Clock::time_point t) {
 std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
                                     const SdfOptions& options, ProgressPhases& progress,
                                     const SdfPhases& phases, VoxelizeStats& stats) {
-    Device::Impl& cl = device.impl();
+    Device::Impl& cl = device_impl(device);
 
     // Phase 1: a full-grid field's flood keeps the dense buffers on the device, so they must fit
     // one allocation each. They are allocated once for the whole field, not per batch, so a device

@@ -28,7 +28,7 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
                            VoxelizeStats& stats,
                            const std::function<void(uint64_t first_slot, uint64_t slots,
                                                     const float* distance2)>& on_batch) {
-    Device::Impl& cl = device.impl();
+    Device::Impl& cl = device_impl(device);
     const LeafSet& leaves = band.leaves;
     if (leaves.count == 0) return;
     const std::string doing = "computing a sparse distance field on " + cl.info.name;

@@ -1,8 +1,6 @@
 // Shared .vdb pieces; see vdb_format.hpp.
 #include "vdb_format.hpp"
 
-#include <openvdb/io/Stream.h>
-
 #include "atomic_file.hpp"
 
 namespace oclvox::detail {

@@ -3,12 +3,11 @@
 // .vdb writers include this (it pulls in OpenVDB's headers).
 #pragma once
 
-#include <openvdb/openvdb.h>
-
 #include <functional>
 #include <string>
 
 #include "oclvox/oclvox.hpp"
+#include "openvdb_headers.hpp"
 
 namespace oclvox::detail {
 

@@ -11,7 +11,6 @@
 // (blocks are 4-aligned), found once per block through a cached accessor, and its set bits are
 // switched on by leaf offset. Whole leaves that end up full are then pruned to active tiles, so
 // a solid interior costs a tile, not 512 bits. No dense copy of the grid is ever made.
-#include <openvdb/tree/ValueAccessor.h>
 
 #include "brick_layout.hpp"
 #include "vdb_format.hpp"

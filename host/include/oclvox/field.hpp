@@ -20,6 +20,9 @@
 
 #include "oclvox/oclvox.hpp"
 
+// The library is built with hidden visibility; what these headers declare is its interface.
+#pragma GCC visibility push(default)
+
 namespace oclvox {
 
 // Scalar samples at voxel CENTRES (origin + (i+0.5, j+0.5, k+0.5) * voxel_size), x fastest:
@@ -163,3 +166,5 @@ Mesh marching_cubes(const SparseField& field, float iso = 0.0f,
 void write_mesh(const std::string& path, const Mesh& mesh, const ProgressCallback& progress = {});
 
 }  // namespace oclvox
+
+#pragma GCC visibility pop

@@ -15,6 +15,9 @@
 #include <unordered_map>
 #include <vector>
 
+// The library is built with hidden visibility; what these headers declare is its interface.
+#pragma GCC visibility push(default)
+
 namespace oclvox {
 
 // Progress and cancellation of a long run: called on the calling thread as the work goes on with
@@ -302,6 +305,10 @@ struct DeviceInfo {
 // All OpenCL devices of all platforms. Throws DeviceError if no platform exists.
 std::vector<DeviceInfo> list_devices();
 
+namespace detail {
+struct DeviceAccess;
+}
+
 // One OpenCL device with its context, queue and compiled programs (cached per context and on
 // disk). Cheap to move, not copyable.
 class Device {
@@ -329,11 +336,11 @@ class Device {
     SparseVoxels voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                           VoxelizeStats* stats = nullptr);
 
-    // The OpenCL objects, for the library's own algorithms (an opaque type to users).
+    // The OpenCL objects, reached only by the library's own algorithms (detail::device_impl).
     struct Impl;
-    Impl& impl() { return *impl_; }
 
   private:
+    friend struct detail::DeviceAccess;
     explicit Device(std::unique_ptr<Impl> impl);
     std::unique_ptr<Impl> impl_;
 };
@@ -370,3 +377,5 @@ void write_text_file(const std::string& path, const std::string& text);
 void abandon_pending_writes();
 
 }  // namespace oclvox
+
+#pragma GCC visibility pop

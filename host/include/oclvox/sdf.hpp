@@ -9,6 +9,9 @@
 #include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
 
+// The library is built with hidden visibility; what these headers declare is its interface.
+#pragma GCC visibility push(default)
+
 namespace oclvox {
 
 struct SdfOptions {
@@ -195,3 +198,5 @@ ScalarField read_field(const std::string& path);
 SparseField read_sparse_field(const std::string& path);
 
 }  // namespace oclvox
+
+#pragma GCC visibility pop
