@@ -13,10 +13,6 @@
 
 namespace oclvox_cli {
 
-double seconds_since(Clock::time_point start) {
-    return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
 namespace {
 
 using Json = nlohmann::ordered_json;

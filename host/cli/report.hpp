@@ -11,12 +11,12 @@
 #include <vector>
 
 #include "oclvox/oclvox.hpp"
+#include "timing.hpp"
 
 namespace oclvox_cli {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start);
+using oclvox::detail::Clock;
+using oclvox::detail::seconds_since;
 
 // Runs work(), adds its wall time to `seconds`, returns its result.
 template <class F>

@@ -4,7 +4,6 @@
 #include <sys/stat.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -13,6 +12,7 @@
 
 #include "atomic_file.hpp"
 #include "file_names.hpp"
+#include "timing.hpp"
 
 namespace oclvox::detail {
 
@@ -120,13 +120,12 @@ void run_sliced(const cl::CommandQueue& queue, uint64_t n, size_t group,
     uint64_t slice = whole_groups(report ? kFirstSlice : kMaxSlice);
     for (uint64_t first = 0; first < n;) {
         const uint64_t count = std::min(slice, n - first);
-        const auto start = std::chrono::steady_clock::now();
+        const auto start = Clock::now();
         enqueue(first, count);
         first += count;
         if (!report) continue;
         queue.finish();
-        const double seconds =
-            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        const double seconds = seconds_since(start);
         report(first, n);
         // Towards kSliceSeconds, by at most 4x per slice so one noisy timing cannot swing it far.
         if (count == slice) {
@@ -147,6 +146,8 @@ namespace oclvox {
 
 namespace {
 
+using detail::Clock;
+using detail::seconds_since;
 using detail::throw_device_error;
 
 // Fault injection for tests/fault_test.sh: OCLVOX_FAULT_BUILD_OPTIONS is appended to the build
@@ -358,7 +359,7 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
     const std::string options = injected ? build_options + " " + injected : build_options;
     cl::Program program;
     if (path.empty() || !load_cached(*this, path, program)) {
-        const auto start = std::chrono::steady_clock::now();
+        const auto start = Clock::now();
         if (on_compile) on_compile({source.name, false, 0.0});
         try {
             program = cl::Program(context, std::string(source.text));
@@ -373,10 +374,7 @@ const cl::Program& Device::Impl::program(const detail::KernelSource& source) {
                                    build_log(program, device));
         }
         if (!path.empty()) store_cached(program, path);
-        if (on_compile)
-            on_compile(
-                {source.name, true,
-                 std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()});
+        if (on_compile) on_compile({source.name, true, seconds_since(start)});
     }
     return programs.emplace(source.sha256, program).first->second;
 }

@@ -21,10 +21,6 @@ namespace {
 // voxels the run is refused up front instead of failing in an allocation.
 constexpr uint64_t kMaxFieldVoxels = uint64_t(1) << 32;
 
-double seconds_since(std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
-
 size_t voxel_index(const Grid& grid, int i, int j, int k) {
     return size_t(i) + size_t(grid.dims[0]) * (size_t(j) + size_t(grid.dims[1]) * size_t(k));
 }
@@ -239,7 +235,7 @@ std::vector<float> distance2_reference(const SdfTriangles& prepared, const Grid&
                                        const SdfPhases& phases, VoxelizeStats& stats) {
     // The band; then, for full-grid fields, the jump flood from it. The band pass finds the
     // seeds as it goes.
-    const auto t = std::chrono::steady_clock::now();
+    const auto t = Clock::now();
     std::vector<float> distance2(size_t(grid.voxel_count()), prepared.band2);
     std::vector<uint32_t> nearest, scratch;
     if (options.full_grid) nearest.assign(distance2.size(), kNoTriangle);
@@ -315,7 +311,7 @@ void add_second_field_stats(VoxelizeStats& stats, const VoxelizeStats& b) {
 
 FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& options, bool sign,
                     bool sparse, ProgressPhases& progress, VoxelizeStats& stats) {
-    const auto t = std::chrono::steady_clock::now();
+    const auto t = Clock::now();
     // Prepared on the whole grid, then cut to the layers (so every sample keeps its bits).
     FieldJob job{mesh, prepare_sdf_triangles(mesh, grid, options.band_voxels), {}};
     keep_layers(job.prepared, options);

@@ -7,17 +7,11 @@
 
 #include "opencl_runtime.hpp"
 #include "sdf_internal.hpp"
+#include "timing.hpp"
 
 namespace oclvox::detail {
 
-namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t) {
-    return std::chrono::duration<double>(Clock::now() - t).count();
-}
-
-}  // namespace
+namespace {}  // namespace
 
 std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
                                     const SdfOptions& options, ProgressPhases& progress,

@@ -13,6 +13,7 @@
 #include "oclvox/sdf.hpp"
 #include "progress.hpp"
 #include "sdf_math.h"
+#include "timing.hpp"
 
 namespace oclvox::detail {
 

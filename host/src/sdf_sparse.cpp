@@ -24,10 +24,6 @@ namespace {
 constexpr int64_t kLeaf = SparseField::kLeaf;
 constexpr size_t kLeafSamples = SparseField::kLeafSamples;
 
-double seconds_since(std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
-
 // The reference of band_leaf_samples, all leaves in one batch: every triangle scatters its band
 // samples into the leaves, through the same culls as the dense band pass.
 std::vector<float> leaf_distance2_reference(const SdfTriangles& prepared, const LeafSet& leaves,
@@ -104,7 +100,7 @@ SparseField compute_sparse(Device* device, const FieldJob& job, const Grid& grid
                            VoxelizeStats& stats) {
     // Phase 1: the leaves the band reaches, and the memory their samples need (the field's
     // samples, and beside them one batch, or the reference's squared distances).
-    auto t = std::chrono::steady_clock::now();
+    auto t = Clock::now();
     const BandLeaves band =
         band_leaves(job.prepared, grid, options, progress.reporter(job.phases.leaves));
     const LeafSet& leaves = band.leaves;
@@ -127,7 +123,7 @@ SparseField compute_sparse(Device* device, const FieldJob& job, const Grid& grid
     LeafWriter writer(leaves, job.prepared);
 
     // Phase 3: the band in the leaves, batch by batch into the field.
-    t = std::chrono::steady_clock::now();
+    t = Clock::now();
     auto append = [&](uint64_t, uint64_t slots, const float* distance2) {
         writer.append(field, slots, distance2);
     };

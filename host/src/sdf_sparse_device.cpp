@@ -7,15 +7,11 @@
 
 #include "device_batches.hpp"
 #include "sdf_internal.hpp"
+#include "timing.hpp"
 
 namespace oclvox::detail {
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t) {
-    return std::chrono::duration<double>(Clock::now() - t).count();
-}
 
 constexpr size_t kLeafBytes = SparseField::kLeafSamples * sizeof(cl_uint);
 // band_leaf_samples' work group: a leaf's 8x8 columns.

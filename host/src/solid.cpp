@@ -101,7 +101,7 @@ SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,
 
 SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                              VoxelizeStats& stats) {
-    const auto start = SolidClock::now();
+    const auto start = Clock::now();
     SparseVoxels result = run_solid(
         mesh, grid, options, stats,
         [&](const std::vector<OvParityTriangle>& triangles, SparseVoxels& out) {

@@ -4,7 +4,6 @@
 #pragma once
 
 #include <array>
-#include <chrono>
 #include <map>
 #include <string>
 #include <vector>
@@ -14,13 +13,9 @@
 #include "overlap_double.hpp"
 #include "solid.hpp"
 #include "solid_math.h"
+#include "timing.hpp"
 
 namespace oclvox::detail {
-
-using SolidClock = std::chrono::steady_clock;
-inline double seconds_since(SolidClock::time_point t) {
-    return std::chrono::duration<double>(SolidClock::now() - t).count();
-}
 
 // Before anything is allocated for them: the sparse result, which may hold every one of `bricks`
 // bricks, plus `working_bytes` of dense working state, against the host memory budget.

@@ -153,7 +153,7 @@ bool parity_triangles(const Mesh& mesh, const Grid& grid, std::vector<OvParityTr
 
 void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triangles,
                    SparseVoxels& result, const VoxelizeOptions& options, VoxelizeStats& stats) {
-    auto t = SolidClock::now();
+    auto t = Clock::now();
     const Layout l = make_layout(result);
     const ColumnBins bins = bin_columns(triangles, l, BrickSelection(options.bricks, result));
     stats.brick_pairs = bins.pair_triangle.size();
@@ -173,7 +173,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     const size_t block_words = 2 * size_t(l.nbz) * l.blocks_per_brick;
 
     const cl::Program& program = cl.program(kKernel_solid);
-    t = SolidClock::now();
+    t = Clock::now();
     const cl::Buffer tri_buffer = upload(cl.context, cl.queue, triangles);
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
@@ -191,7 +191,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     // Batches of brick columns, smaller after a device allocation failure (nothing of a failed
     // batch has been merged).
     auto run_batch = [&](size_t done, size_t max_columns) {
-        t = SolidClock::now();
+        t = Clock::now();
         const cl::Buffer& bit_buffer = bits.get(cl.context, max_columns);
         const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
         Batch batch = make_batch(bins, triangles, l, done, max_columns);
@@ -206,7 +206,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         stats.seconds_upload += seconds_since(t);
 
         // Flips, then parity per voxel column, then the brick layout.
-        t = SolidClock::now();
+        t = Clock::now();
         flip.setArg(0, tri_buffer);
         flip.setArg(1, pair_triangle);
         flip.setArg(2, pair_slot);
@@ -242,7 +242,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         stats.seconds_kernels += seconds_since(t);
         stats.work_items += batch.items + columns + pack_items;
 
-        t = SolidClock::now();
+        t = Clock::now();
         host_words.resize(batch.column_count * block_words);
         cl.queue.enqueueReadBuffer(block_buffer, CL_TRUE, 0, host_words.size() * sizeof(cl_uint),
                                    host_words.data());

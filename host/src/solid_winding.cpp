@@ -548,7 +548,7 @@ class WindingEvaluator {
   public:
     WindingEvaluator(Device::Impl& cl, const WindingTree& tree, VoxelizeStats& stats)
         : cl_(cl), stats_(stats), kernel_(cl.program(kKernel_solid), "winding_points") {
-        auto t = SolidClock::now();
+        auto t = Clock::now();
         vertices_ = upload(cl.context, cl.queue, tree.vertices);
         nodes_ = upload(cl.context, cl.queue, tree.nodes);
         node_count_ = cl_uint(tree.nodes.size());
@@ -568,7 +568,7 @@ class WindingEvaluator {
         // are written again by its retry).
         auto run_batch = [&](size_t done, size_t max_points) {
             const size_t n = std::min(max_points, count - done);
-            auto t = SolidClock::now();
+            auto t = Clock::now();
             const cl::Buffer point_buffer =
                 batch_buffer(cl_.context, CL_MEM_READ_ONLY, 3 * n * sizeof(float));
             cl::Buffer w_buffer = batch_buffer(cl_.context, CL_MEM_WRITE_ONLY, n * sizeof(float));
@@ -579,7 +579,7 @@ class WindingEvaluator {
             cl_.queue.finish();
             stats_.seconds_upload += seconds_since(t);
 
-            t = SolidClock::now();
+            t = Clock::now();
             kernel_.setArg(0, vertices_);
             kernel_.setArg(1, nodes_);
             kernel_.setArg(2, node_count_);
@@ -599,7 +599,7 @@ class WindingEvaluator {
             stats_.work_items += n;
             ++stats_.batches;
 
-            t = SolidClock::now();
+            t = Clock::now();
             cl_.queue.enqueueReadBuffer(w_buffer, CL_FALSE, 0, n * sizeof(float), &w[done]);
             cl_.queue.enqueueReadBuffer(error_buffer, CL_TRUE, 0, n * sizeof(float), &error[done]);
             stats_.seconds_download += seconds_since(t);
@@ -685,7 +685,7 @@ WeldedEdges weld_edges(const Mesh& mesh) {
 // 5. the inside bits into bricks.
 void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                     const VoxelizeOptions& options, VoxelizeStats& stats) {
-    auto t = SolidClock::now();
+    auto t = Clock::now();
     const Grid& grid = result.grid();
     const VoxelBox box = centre_box(mesh, grid);
     if (box.empty()) return;
@@ -939,7 +939,7 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
 
     // Phase 5, a row of up to 64 voxels at a time: each 4-voxel group of a row is a nibble of
     // one block word.
-    t = SolidClock::now();
+    t = Clock::now();
     std::vector<uint64_t> blocks(result.blocks_per_brick());
     const int64_t nbb = b / 4;
     for (uint64_t index : bricks) {

@@ -17,15 +17,14 @@
 #include "prepare.hpp"
 #include "solid.hpp"
 #include "surface_tests.hpp"
+#include "timing.hpp"
 
 namespace oclvox {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t) {
-    return std::chrono::duration<double>(Clock::now() - t).count();
-}
+using detail::Clock;
+using detail::seconds_since;
 
 // Work items of one batch are numbered with 32-bit offsets; launches are cut into slices so no
 // single enqueue is enormous (keeps drivers' watchdogs and PoCL's scheduling happy).

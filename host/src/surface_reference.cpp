@@ -3,17 +3,20 @@
 // bricks, no blocks, no atomics): every triangle tests every grid voxel of its range. Device
 // results must equal it bit for bit.
 #include <algorithm>
-#include <chrono>
 
 #include "brick_selection.hpp"
 #include "oclvox/oclvox.hpp"
 #include "prepare.hpp"
 #include "solid.hpp"
 #include "surface_tests.hpp"
+#include "timing.hpp"
 
 namespace oclvox {
 
 namespace {
+
+using detail::Clock;
+using detail::seconds_since;
 
 // The reference tests every voxel of every triangle's range; refuse work no machine can finish.
 constexpr uint64_t kMaxReferenceVoxelTests = uint64_t(1) << 36;
@@ -76,7 +79,7 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
         if (stats) *stats = solid_stats;
         return out;
     }
-    const auto start = std::chrono::steady_clock::now();
+    const auto start = Clock::now();
     const detail::SurfaceTest test = detail::surface_test_for(options);
     const detail::PreparedTriangles prepared =
         detail::prepare_triangles(mesh, grid, options.boundary);
@@ -89,8 +92,7 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
         *stats = VoxelizeStats{};
         stats->triangles_in = mesh.triangles.size();
         stats->triangles_used = prepared.triangles.size();
-        stats->seconds_kernels =
-            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        stats->seconds_kernels = seconds_since(start);
         stats->voxels_set = out.count();
     }
     return out;
