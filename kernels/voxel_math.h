@@ -425,6 +425,23 @@ OV_FN float4 ov_row4(int qx0) {
     return convert_float4((int4)(qx0) + (int4)(0, 1, 2, 3));
 }
 
+// PEF's and thin's nine projected edge functions of a row: n . q' + offset >= 0 (> 0 where the
+// setup's strict bit says so), as the scalar functions evaluate them.
+OV_FN int4 ov_edge_functions4(const float edge_normal[3][3][2], const float edge_offset[3][3],
+                              int strict, const float4 q[3]) {
+    int4 m = (int4)(-1);
+    for (int k = 0; k < 3; ++k) {
+        int a1 = k == 2 ? 0 : k + 1;
+        int a2 = a1 == 2 ? 0 : a1 + 1;
+        for (int j = 0; j < 3; ++j) {
+            float4 e =
+                edge_normal[k][j][0] * q[a1] + edge_normal[k][j][1] * q[a2] + edge_offset[k][j];
+            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(strict, 3 * k + j)));
+        }
+    }
+    return m;
+}
+
 OV_FN int4 ov_sat_overlaps4(const OvSatTriangle* s, int qx0, float qy, float qz) {
     float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
     float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2];
@@ -450,16 +467,7 @@ OV_FN int4 ov_pef_overlaps4(const OvPefTriangle* s, int qx0, float qy, float qz)
     int4 m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict4(s->strict, 9)));
     m &= ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict4(s->strict, 10)));
     if (!any(m)) return m;
-    for (int k = 0; k < 3; ++k) {
-        int a1 = k == 2 ? 0 : k + 1;
-        int a2 = a1 == 2 ? 0 : a1 + 1;
-        for (int j = 0; j < 3; ++j) {
-            float4 e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
-                       s->edge_offset[k][j];
-            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(s->strict, 3 * k + j)));
-        }
-    }
-    return m;
+    return m & ov_edge_functions4(s->edge_normal, s->edge_offset, s->strict, q);
 }
 
 OV_FN int4 ov_thin_overlaps4(const OvThinTriangle* s, int qx0, float qy, float qz) {
@@ -469,16 +477,7 @@ OV_FN int4 ov_thin_overlaps4(const OvThinTriangle* s, int qx0, float qy, float q
     m &= ~(((dn == -s->plane_half) & ov_strict4(s->strict, 9)) |
            ((dn == s->plane_half) & ov_strict4(s->strict, 10)));
     if (!any(m)) return m;
-    for (int k = 0; k < 3; ++k) {
-        int a1 = k == 2 ? 0 : k + 1;
-        int a2 = a1 == 2 ? 0 : a1 + 1;
-        for (int j = 0; j < 3; ++j) {
-            float4 e = s->edge_normal[k][j][0] * q[a1] + s->edge_normal[k][j][1] * q[a2] +
-                       s->edge_offset[k][j];
-            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(s->strict, 3 * k + j)));
-        }
-    }
-    return m;
+    return m & ov_edge_functions4(s->edge_normal, s->edge_offset, s->strict, q);
 }
 #endif
 
