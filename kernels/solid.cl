@@ -59,22 +59,21 @@ __kernel void parity_pack(__global const uint* bits, uint slots, int brick_size,
     int gx = (int)(in_slot % (uint)nb);
     int gy = (int)(in_slot / (uint)nb % (uint)nb);
     int gz = (int)(in_slot / (uint)(nb * nb));  // block row over the whole column height
-    uint lo = 0, hi = 0;
+    // The block's 4 layers lie in one word of each voxel column (4 divides 32): a nibble per
+    // column, cut at the grid's top, whose bit z goes to bit x + 4y + 16z of the block.
+    int k0 = gz * 4;
+    uint valid = k0 + 4 <= nz ? 15u : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
+    ulong mask = 0;
     for (int y = 0; y < 4; ++y)
         for (int x = 0; x < 4; ++x) {
             size_t column = ((size_t)slot * brick_size + (size_t)(gy * 4 + y)) * brick_size +
                             (size_t)(gx * 4 + x);
-            for (int z = 0; z < 4; ++z) {
-                int k = gz * 4 + z;
-                if (k >= nz || !((bits[column * words + (size_t)(k >> 5)] >> (k & 31)) & 1u))
-                    continue;
-                int bit = x + 4 * (y + 4 * z);
-                if (bit < 32)
-                    lo |= 1u << bit;
-                else
-                    hi |= 1u << (bit - 32);
-            }
+            uint nibble = (bits[column * words + (size_t)(k0 >> 5)] >> (k0 & 31)) & valid;
+            ulong spread = (ulong)(nibble & 1u) | (ulong)(nibble >> 1 & 1u) << 16 |
+                           (ulong)(nibble >> 2 & 1u) << 32 | (ulong)(nibble >> 3 & 1u) << 48;
+            mask |= spread << (x + 4 * y);
         }
+    uint lo = (uint)mask, hi = (uint)(mask >> 32);
     // Block (gx, gy, gz) is block (gx, gy, gz % nb) of brick gz / nb in the column.
     size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
     size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));

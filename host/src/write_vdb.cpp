@@ -8,15 +8,33 @@
 // set nor a fog volume.
 //
 // The tree is built straight from the bricks: each 4^3 block word lands in one 8^3 leaf
-// (blocks are 4-aligned), found once per block through a cached accessor, and its set bits are
-// switched on by leaf offset. Whole leaves that end up full are then pruned to active tiles, so
-// a solid interior costs a tile, not 512 bits. No dense copy of the grid is ever made.
+// (blocks are 4-aligned), found once per block through a cached accessor, and its bits are ORed
+// into the leaf's active and value words four rows of 16 at a time. Whole leaves that end up full
+// are then pruned to active tiles, so a solid interior costs a tile, not 512 bits. No dense copy of
+// the grid is ever made.
 
 #include "brick_layout.hpp"
 #include "vdb_format.hpp"
 #include "writers.hpp"
 
 namespace oclvox::detail {
+
+namespace {
+
+// The 16 bits x + 4y + 16z (y, z in 0..3) of a block mask shifted right by x, as bits y * 8 + z:
+// their place in an OpenVDB leaf word.
+uint64_t yz_square(uint64_t shifted) {
+    uint64_t square = 0;
+    for (int z = 0; z < 4; ++z) {
+        const uint64_t column = shifted >> (16 * z);  // bits 0, 4, 8, 12 are y = 0..3
+        square |= ((column & 1) | (column >> 4 & 1) << 8 | (column >> 8 & 1) << 16 |
+                   (column >> 12 & 1) << 24)
+                  << z;
+    }
+    return square;
+}
+
+}  // namespace
 
 void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress) {
     openvdb::initialize();
@@ -26,7 +44,7 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
     // The tree and the file cost about the same; the file has no progress of its own.
     const size_t tree = progress.add(1), file = progress.add(1);
 
-    // Phase 1: every set voxel becomes an active true voxel, block by block.
+    // Phase 1: every set voxel becomes an active true voxel, block by block, a leaf word at a time.
     openvdb::tree::ValueAccessor<openvdb::BoolTree> access(vdb->tree());
     const BrickLayout layout(voxels);
     const std::vector<uint64_t> bricks = voxels.brick_indices();
@@ -35,18 +53,21 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         progress.report(tree, b, bricks.size());
         const uint64_t* blocks = voxels.brick_blocks(index);
         for (size_t w = 0; w < layout.blocks_per_brick(); ++w) {
-            uint64_t mask = blocks[w];
+            const uint64_t mask = blocks[w];
             if (!mask) continue;
             const auto o = layout.block_origin(index, w);
             const openvdb::Coord origin{int(o[0]), int(o[1]), int(o[2])};
             openvdb::BoolTree::LeafNodeType* leaf = access.touchLeaf(origin);
-            // Leaf offsets run z fastest: (x & 7) << 6 | (y & 7) << 3 | (z & 7).
-            const openvdb::Index base = openvdb::BoolTree::LeafNodeType::coordToOffset(origin);
-            while (mask) {
-                const int bit = __builtin_ctzll(mask);
-                mask &= mask - 1;
-                leaf->setValueOn(
-                    base + openvdb::Index((bit & 3) << 6 | (bit >> 2 & 3) << 3 | (bit >> 4)), true);
+            uint64_t* active = &leaf->getValueMask().template getWord<uint64_t>(0);
+            uint64_t* values = leaf->buffer().data();
+            // A leaf's offsets run z fastest, (x & 7) << 6 | (y & 7) << 3 | (z & 7): word x & 7
+            // holds an 8x8 square of (y, z), bit (y & 7) * 8 + (z & 7). The block is a 4x4 corner
+            // of four such words.
+            const int first_word = int(o[0] & 7), shift = int(o[1] & 7) * 8 + int(o[2] & 7);
+            for (int x = 0; x < 4; ++x) {
+                const uint64_t bits = yz_square(mask >> x) << shift;
+                active[first_word + x] |= bits;
+                values[first_word + x] |= bits;
             }
         }
     }
