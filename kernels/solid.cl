@@ -5,7 +5,7 @@
 // each held as one bit column of `words` 32-bit words per voxel column (bit k of the column is
 // voxel k). parity_flip: one work item per (triangle, voxel column) toggles the bit just above
 // the crossing. parity_prefix: one work item per voxel column turns flips into parity. parity_pack:
-// one work item per 4x4x4 block copies the bits into the bricks' block layout.
+// one work item per 4x4 voxel columns and 32 layers copies the bits into the bricks' block layout.
 #include "solid_math.h"
 #include "work_items.h"
 
@@ -47,38 +47,47 @@ __kernel void parity_prefix(__global uint* bits, uint columns, uint words) {
 
 // blocks: per slot, the bricks of the column bottom to top, each in the SparseVoxels block layout
 // as two 32-bit words per block (low word first). Voxels at or above nz are left clear: the grid
-// ends there even when the parity does not.
+// ends there even when the parity does not. One work item per 4x4 columns and 8 block rows: the
+// rows' 32 layers are one word of each of its 16 voxel columns, read once.
 __kernel void parity_pack(__global const uint* bits, uint slots, int brick_size, int brick_rows,
                           int nz, uint words, __global uint* blocks) {
     uint item = (uint)get_global_id(0);
     int nb = brick_size / 4;
-    uint per_slot = (uint)(nb * nb * nb * brick_rows);
+    int rows = nb * brick_rows;  // block rows over the whole column height
+    uint per_slot = (uint)(nb * nb * ((rows + 7) / 8));
     if (item >= slots * per_slot) return;
     uint slot = item / per_slot;
     uint in_slot = item % per_slot;
     int gx = (int)(in_slot % (uint)nb);
     int gy = (int)(in_slot / (uint)nb % (uint)nb);
-    int gz = (int)(in_slot / (uint)(nb * nb));  // block row over the whole column height
-    // The block's 4 layers lie in one word of each voxel column (4 divides 32): a nibble per
-    // column, cut at the grid's top, whose bit z goes to bit x + 4y + 16z of the block.
-    int k0 = gz * 4;
-    uint valid = k0 + 4 <= nz ? 15u : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
-    ulong mask = 0;
+    int word = (int)(in_slot / (uint)(nb * nb));
+    // Layer 32 * word + 4 * r + z of column (x, y) is bit 4 * r + z of that column's word; above
+    // nz it is cut (and the column has no word there).
+    int k0 = 32 * word;
+    uint valid = k0 + 32 <= nz ? 0xffffffffu : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
+    uint column_bits[16];
     for (int y = 0; y < 4; ++y)
         for (int x = 0; x < 4; ++x) {
             size_t column = ((size_t)slot * brick_size + (size_t)(gy * 4 + y)) * brick_size +
                             (size_t)(gx * 4 + x);
-            uint nibble = (bits[column * words + (size_t)(k0 >> 5)] >> (k0 & 31)) & valid;
+            column_bits[x + 4 * y] = valid ? bits[column * words + (size_t)word] & valid : 0u;
+        }
+    for (int r = 0; r < 8 && 8 * word + r < rows; ++r) {
+        // Bit z of each column's nibble goes to bit x + 4y + 16z of the block.
+        ulong mask = 0;
+        for (int c = 0; c < 16; ++c) {
+            uint nibble = column_bits[c] >> (4 * r) & 15u;
             ulong spread = (ulong)(nibble & 1u) | (ulong)(nibble >> 1 & 1u) << 16 |
                            (ulong)(nibble >> 2 & 1u) << 32 | (ulong)(nibble >> 3 & 1u) << 48;
-            mask |= spread << (x + 4 * y);
+            mask |= spread << c;
         }
-    uint lo = (uint)mask, hi = (uint)(mask >> 32);
-    // Block (gx, gy, gz) is block (gx, gy, gz % nb) of brick gz / nb in the column.
-    size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
-    size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));
-    blocks[2 * (brick * nb * nb * nb + block)] = lo;
-    blocks[2 * (brick * nb * nb * nb + block) + 1] = hi;
+        // Block (gx, gy, gz) is block (gx, gy, gz % nb) of brick gz / nb in the column.
+        int gz = 8 * word + r;
+        size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
+        size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));
+        blocks[2 * (brick * nb * nb * nb + block)] = (uint)mask;
+        blocks[2 * (brick * nb * nb * nb + block) + 1] = (uint)(mask >> 32);
+    }
 }
 
 // Signed solid angle of triangle (a, b, c) seen from the origin (Van Oosterom & Strackee 1983):

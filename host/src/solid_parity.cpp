@@ -229,7 +229,10 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         prefix.setArg(1, cl_uint(columns));
         prefix.setArg(2, cl_uint(l.words));
         launch(cl.queue, prefix, columns, prefix_group);
-        const uint64_t pack_items = uint64_t(batch.column_count) * l.nbz * l.blocks_per_brick;
+        // parity_pack: an item per 4x4 voxel columns and 8 block rows (a 32-bit word of layers).
+        const uint64_t block_rows = uint64_t(l.nbz) * uint64_t(l.brick / 4);
+        const uint64_t pack_items = uint64_t(batch.column_count) * uint64_t(l.brick / 4) *
+                                    uint64_t(l.brick / 4) * ((block_rows + 7) / 8);
         pack.setArg(0, bit_buffer);
         pack.setArg(1, cl_uint(batch.column_count));
         pack.setArg(2, cl_int(l.brick));
