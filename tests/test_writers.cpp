@@ -1164,6 +1164,50 @@ TEST(SparseVoxelBoxes, CountAndSetAgreeWithVoxelByVoxelReadsOnRandomBoxes) {
     }
 }
 
+// mark_box writes a window of any orientation: each axis contiguous in turn (a block's row of 4
+// then goes as one word where it lies inside the box) and none. Checked voxel by voxel against
+// get(), with bytes outside the marks (and a guard before the window) left as they were.
+TEST(SparseVoxelBoxes, MarkBoxWindowsAreTheVoxelsInEveryOrientation) {
+    Grid g;
+    g.dims = {37, 29, 41};
+    std::mt19937 rng(5);
+    SparseVoxels voxels(g, 8);
+    for (int n = 0; n < 6000; ++n)
+        voxels.set(int64_t(rng() % 37), int64_t(rng() % 29), int64_t(rng() % 41));
+    voxels.set_box({8, 4, 12}, {20, 16, 24});  // whole blocks, full rows
+    for (int trial = 0; trial < 120; ++trial) {
+        std::array<int64_t, 3> lo, hi, size;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = int64_t(rng() % uint32_t(g.dims[a] + 6)) - 3;
+            hi[a] = lo[a] + 1 + int64_t(rng() % 24);
+            size[a] = hi[a] - lo[a];
+        }
+        // Axis order of the window: the first is contiguous (stride 1) unless trial % 4 == 3.
+        const int order = trial % 4;
+        std::array<int64_t, 3> strides{};
+        const int first_axis = order == 3 ? 0 : order;
+        const int second = (first_axis + 1) % 3, third = (first_axis + 2) % 3;
+        const int64_t unit = order == 3 ? 2 : 1;  // every other byte: no axis contiguous
+        strides[first_axis] = unit;
+        strides[second] = unit * size[first_axis];
+        strides[third] = unit * size[first_axis] * size[second];
+        // A guard before the window; none after it, so that a write past its end is out of bounds
+        // (the sanitizer build of this test, scripts/sanitize.sh, reports it).
+        const int64_t guard = 8, bytes = unit * size[0] * size[1] * size[2];
+        std::vector<uint8_t> window(size_t(guard + bytes), 7);
+        voxels.mark_box(lo, hi, strides, window.data() + guard);
+        for (int64_t g0 = 0; g0 < guard; ++g0) ASSERT_EQ(window[size_t(g0)], 7) << trial;
+        for (int64_t k = lo[2]; k < hi[2]; ++k)
+            for (int64_t j = lo[1]; j < hi[1]; ++j)
+                for (int64_t i = lo[0]; i < hi[0]; ++i) {
+                    const int64_t at = guard + (i - lo[0]) * strides[0] + (j - lo[1]) * strides[1] +
+                                       (k - lo[2]) * strides[2];
+                    ASSERT_EQ(window[size_t(at)], voxels.get(i, j, k) ? 1 : 7)
+                        << trial << " " << i << " " << j << " " << k;
+                }
+    }
+}
+
 // A face of a grid of 2^20 x 2^20 x 3 voxels meets 2^30 bricks; counting it walks the few stored
 // bricks instead.
 TEST(SparseVoxelBoxes, CountOfAHugeThinBoxWalksTheStoredBricks) {

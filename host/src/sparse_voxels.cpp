@@ -200,29 +200,69 @@ void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<i
                             const std::array<int64_t, 3>& strides, uint8_t* out) const {
     std::array<int64_t, 3> first{}, last{};
     if (!clip_box(grid_, lo, hi, first, last)) return;
+    // Where the window is contiguous along an axis (a stride of 1), a block's 4 voxels along it
+    // are 4 adjacent bytes, written as one 32-bit word where the block lies inside the box along
+    // that axis; elsewhere, and for other windows, one byte per set voxel.
+    const int line = strides[0] == 1 ? 0 : strides[1] == 1 ? 1 : strides[2] == 1 ? 2 : -1;
+    const int across[2] = {(line + 1) % 3, (line + 2) % 3};
+    constexpr int kBitStep[3] = {1, 4, 16};  // block bit x + 4y + 16z
+    // Per nibble of a row: the word with byte t = 1 where bit t is set, and the mask of those bytes
+    // (built through bytes, so whatever the machine's byte order).
+    struct RowWords {
+        std::array<uint32_t, 16> ones{}, bytes{};
+    };
+    static const RowWords rows = [] {
+        RowWords words;
+        for (uint32_t nibble = 0; nibble < 16; ++nibble) {
+            uint8_t ones[4], bytes[4];
+            for (int t = 0; t < 4; ++t) {
+                ones[t] = uint8_t(nibble >> t & 1);
+                bytes[t] = uint8_t(0xFF * (nibble >> t & 1));
+            }
+            std::memcpy(&words.ones[nibble], ones, 4);
+            std::memcpy(&words.bytes[nibble], bytes, 4);
+        }
+        return words;
+    }();
     // Phase 1: the bricks the box touches, found by lookup rather than by scanning all bricks.
-    for_each_brick_in(brick_dims(), brick_size_, first, last,
-                      [&](uint64_t index, const std::array<int64_t, 3>& origin) {
-                          const auto it = bricks_.find(index);
-                          if (it == bricks_.end()) return;
-                          const uint64_t* blocks = it->second.data();
-                          // Phase 2: the brick's blocks inside the box, then one byte per set
-                          // voxel.
-                          for_each_block_in(
-                              origin, brick_size_, blocks_per_brick_axis(), first, last,
-                              [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
-                                  mask &= blocks[word];
-                                  uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
-                                                  (o[1] - lo[1]) * strides[1] +
-                                                  (o[2] - lo[2]) * strides[2];
-                                  while (mask) {
-                                      const int bit = __builtin_ctzll(mask);
-                                      mask &= mask - 1;
-                                      base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
-                                           (bit >> 4) * strides[2]] = 1;
-                                  }
-                              });
-                      });
+    for_each_brick_in(
+        brick_dims(), brick_size_, first, last,
+        [&](uint64_t index, const std::array<int64_t, 3>& origin) {
+            const auto it = bricks_.find(index);
+            if (it == bricks_.end()) return;
+            const uint64_t* blocks = it->second.data();
+            // Phase 2: the brick's blocks inside the box, then their set voxels.
+            for_each_block_in(
+                origin, brick_size_, blocks_per_brick_axis(), first, last,
+                [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
+                    mask &= blocks[word];
+                    if (!mask) return;
+                    uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
+                                    (o[1] - lo[1]) * strides[1] + (o[2] - lo[2]) * strides[2];
+                    if (line >= 0 && o[line] >= first[line] && o[line] + 3 <= last[line]) {
+                        for (int a = 0; a < 4; ++a)
+                            for (int b = 0; b < 4; ++b) {
+                                const int bit = a * kBitStep[across[0]] + b * kBitStep[across[1]];
+                                uint32_t nibble = 0;
+                                for (int t = 0; t < 4; ++t)
+                                    nibble |= uint32_t(mask >> (bit + t * kBitStep[line]) & 1) << t;
+                                if (!nibble) continue;
+                                uint8_t* p = base + a * strides[across[0]] + b * strides[across[1]];
+                                uint32_t bytes;
+                                std::memcpy(&bytes, p, 4);
+                                bytes = (bytes & ~rows.bytes[nibble]) | rows.ones[nibble];
+                                std::memcpy(p, &bytes, 4);
+                            }
+                        return;
+                    }
+                    while (mask) {
+                        const int bit = __builtin_ctzll(mask);
+                        mask &= mask - 1;
+                        base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
+                             (bit >> 4) * strides[2]] = 1;
+                    }
+                });
+        });
 }
 
 uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
