@@ -4,7 +4,6 @@
 #pragma once
 
 #include <array>
-#include <map>
 #include <string>
 #include <vector>
 
@@ -55,12 +54,13 @@ void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxe
 
 // ---- winding number (solid_winding.cpp) ----
 
-// The mesh's edges after welding bit-identical positions: per undirected edge (welded vertex
-// ids, low first), how many triangles run it low -> high and high -> low. Triangles with a
-// repeated welded vertex enclose nothing and are left out.
+// The mesh's edges after welding bit-identical positions (ids in the order positions first
+// appear): per undirected edge (welded vertex ids, low first), in ascending order, how many
+// triangles run it low -> high and high -> low. Triangles with a repeated welded vertex enclose
+// nothing and are left out.
 struct WeldedEdges {
     std::vector<Vec3d> positions;  // per welded id
-    std::map<std::pair<uint32_t, uint32_t>, std::array<uint32_t, 2>> uses;
+    std::vector<std::pair<std::pair<uint32_t, uint32_t>, std::array<uint32_t, 2>>> uses;
 };
 
 WeldedEdges weld_edges(const Mesh& mesh);

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "device_batches.hpp"
 #include "solid_internal.hpp"
@@ -650,21 +651,47 @@ struct Tile {
 }  // namespace
 
 WeldedEdges weld_edges(const Mesh& mesh) {
+    // Phase 1: runs of equal positions (by sorting, ties in vertex order), numbered in the order
+    // their first vertex comes.
     WeldedEdges out;
-    std::map<std::array<double, 3>, uint32_t> ids;
-    std::vector<uint32_t> welded(mesh.positions.size());
-    for (size_t v = 0; v < mesh.positions.size(); ++v) {
-        const auto [it, added] = ids.emplace(mesh.positions[v], uint32_t(ids.size()));
-        if (added) out.positions.push_back(mesh.positions[v]);
-        welded[v] = it->second;
+    const auto& p = mesh.positions;
+    std::vector<uint32_t> order(p.size());
+    for (size_t v = 0; v < order.size(); ++v) order[v] = uint32_t(v);
+    tbb::parallel_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+        return p[a] < p[b] || (!(p[b] < p[a]) && a < b);
+    });
+    std::vector<uint32_t> run_first;  // per run, its first vertex
+    std::vector<uint32_t> run_of(p.size());
+    for (size_t i = 0; i < order.size(); ++i) {
+        if (i == 0 || p[order[i - 1]] < p[order[i]]) run_first.push_back(order[i]);
+        run_of[order[i]] = uint32_t(run_first.size() - 1);
     }
+    std::vector<uint32_t> runs(run_first.size()), id_of_run(run_first.size());
+    for (size_t r = 0; r < runs.size(); ++r) runs[r] = uint32_t(r);
+    std::sort(runs.begin(), runs.end(),
+              [&](uint32_t a, uint32_t b) { return run_first[a] < run_first[b]; });
+    for (size_t id = 0; id < runs.size(); ++id) {
+        id_of_run[runs[id]] = uint32_t(id);
+        out.positions.push_back(p[run_first[runs[id]]]);
+    }
+
+    // Phase 2: every triangle's edges, sorted by edge, then counted per direction.
+    std::vector<std::pair<std::pair<uint32_t, uint32_t>, int>> directed;
+    directed.reserve(mesh.triangles.size() * 3);
     for (const auto& tri : mesh.triangles) {
-        const uint32_t v[3] = {welded[tri[0]], welded[tri[1]], welded[tri[2]]};
+        const uint32_t v[3] = {id_of_run[run_of[tri[0]]], id_of_run[run_of[tri[1]]],
+                               id_of_run[run_of[tri[2]]]};
         if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;
         for (int e = 0; e < 3; ++e) {
             const uint32_t a = v[e], b = v[(e + 1) % 3];
-            ++out.uses[{std::min(a, b), std::max(a, b)}][a < b ? 0 : 1];
+            directed.push_back({{std::min(a, b), std::max(a, b)}, a < b ? 0 : 1});
         }
+    }
+    tbb::parallel_sort(directed.begin(), directed.end());
+    for (size_t i = 0; i < directed.size(); ++i) {
+        if (i == 0 || directed[i].first != directed[i - 1].first)
+            out.uses.push_back({directed[i].first, {0, 0}});
+        ++out.uses.back().second[size_t(directed[i].second)];
     }
     return out;
 }
