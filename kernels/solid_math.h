@@ -363,8 +363,8 @@ typedef struct {
 // (least-squares weighted towards minimax, fitted for this function), folded to the octant and
 // quadrant without branches so work-items vectorize: the library atan2 was half of the winding
 // kernel's time on CPU devices. Each angle's error reaches w divided by 2 pi, far inside the
-// evaluation's tolerance (kTileRounding in solid_winding.cpp). Signs follow atan2: copysign on y (so +-0
-// give +-pi when x is negative), pi when x is -0.
+// evaluation's tolerance (kTileRounding in solid_winding.cpp). Signs follow atan2: copysign on y
+// (so +-0 give +-pi when x is negative), pi when x is -0.
 OVS_FN float ovs_atan2(float y, float x) {
     const float ax = OVS_FABS(x), ay = OVS_FABS(y);
     const float hi = OVS_FMAX(ax, ay), lo = OVS_FMIN(ax, ay);
