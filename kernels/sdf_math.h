@@ -92,12 +92,14 @@ OV_SDF_FN float ov_voxel_distance2(const OvSdfTriangle* t, int i, int j, int k) 
     return ov_triangle_distance2(t, p);
 }
 
-// Whether a point c (anchor-relative, minus vertex[0] for the plane and minus centre for the
-// sphere) may lie within `reach_limit` of the triangle: false only when it is farther than that
-// from the triangle's plane or from its bounding sphere. Culling only saves work, so the margin is
-// generous: it must never reject a point whose exactly evaluated distance is below the limit.
-OV_SDF_FN int ov_may_reach(const OvSdfTriangle* t, const float from_vertex[3],
-                           const float from_centre[3], float reach_limit) {
+// Whether the anchor-relative point c may lie within `reach_limit` of the triangle: false only
+// when it is farther than that from the triangle's plane or from its bounding sphere. Culling only
+// saves work, so the margin is generous: it must never reject a point whose exactly evaluated
+// distance is below the limit.
+OV_SDF_FN int ov_may_reach(const OvSdfTriangle* t, float cx, float cy, float cz,
+                           float reach_limit) {
+    float from_vertex[3] = {cx - t->vertex[0][0], cy - t->vertex[0][1], cz - t->vertex[0][2]};
+    float from_centre[3] = {cx - t->centre[0], cy - t->centre[1], cz - t->centre[2]};
     float size = fabs(from_vertex[0]) + fabs(from_vertex[1]) + fabs(from_vertex[2]);
     float limit = reach_limit + 0.01f + 1e-5f * size;
     if (t->has_face && fabs(ov_dot3(from_vertex, t->normal)) > limit) return 0;
@@ -108,43 +110,22 @@ OV_SDF_FN int ov_may_reach(const OvSdfTriangle* t, const float from_vertex[3],
 // Whether voxel (i,j,k)'s centre may be within `band` of the triangle (the band pass evaluates
 // the exact distance only where this holds; the rest would fail d2 < band2 anyway).
 OV_SDF_FN int ov_voxel_near(const OvSdfTriangle* t, int i, int j, int k, float band) {
-    float p[3], from_vertex[3], from_centre[3];
-    p[0] = (float)(i - t->anchor[0]) + 0.5f;
-    p[1] = (float)(j - t->anchor[1]) + 0.5f;
-    p[2] = (float)(k - t->anchor[2]) + 0.5f;
-    for (int a = 0; a < 3; ++a) {
-        from_vertex[a] = p[a] - t->vertex[0][a];
-        from_centre[a] = p[a] - t->centre[a];
-    }
-    return ov_may_reach(t, from_vertex, from_centre, band);
+    return ov_may_reach(t, (float)(i - t->anchor[0]) + 0.5f, (float)(j - t->anchor[1]) + 0.5f,
+                        (float)(k - t->anchor[2]) + 0.5f, band);
 }
 
 // Whether the 4x4x4 block with minimum voxel (i,j,k) may hold a centre within `band` of the
 // triangle. Centres are at most 1.5 * sqrt(3) < 2.6 from the block centre.
 OV_SDF_FN int ov_block_near(const OvSdfTriangle* t, int i, int j, int k, float band) {
-    float c[3], from_vertex[3], from_centre[3];
-    c[0] = (float)(i - t->anchor[0]) + 2.0f;
-    c[1] = (float)(j - t->anchor[1]) + 2.0f;
-    c[2] = (float)(k - t->anchor[2]) + 2.0f;
-    for (int a = 0; a < 3; ++a) {
-        from_vertex[a] = c[a] - t->vertex[0][a];
-        from_centre[a] = c[a] - t->centre[a];
-    }
-    return ov_may_reach(t, from_vertex, from_centre, band + 2.6f);
+    return ov_may_reach(t, (float)(i - t->anchor[0]) + 2.0f, (float)(j - t->anchor[1]) + 2.0f,
+                        (float)(k - t->anchor[2]) + 2.0f, band + 2.6f);
 }
 
 // Whether the row of 8 voxels (i0..i0+7, j, k) may hold a centre within `band` of the triangle.
 // Its centres are at most 3.5 from the row's middle, which lies on no voxel centre.
 OV_SDF_FN int ov_row_near(const OvSdfTriangle* t, int i0, int j, int k, float band) {
-    float c[3], from_vertex[3], from_centre[3];
-    c[0] = (float)(i0 - t->anchor[0]) + 4.0f;
-    c[1] = (float)(j - t->anchor[1]) + 0.5f;
-    c[2] = (float)(k - t->anchor[2]) + 0.5f;
-    for (int a = 0; a < 3; ++a) {
-        from_vertex[a] = c[a] - t->vertex[0][a];
-        from_centre[a] = c[a] - t->centre[a];
-    }
-    return ov_may_reach(t, from_vertex, from_centre, band + 3.5f);
+    return ov_may_reach(t, (float)(i0 - t->anchor[0]) + 4.0f, (float)(j - t->anchor[1]) + 0.5f,
+                        (float)(k - t->anchor[2]) + 0.5f, band + 3.5f);
 }
 
 #ifdef __OPENCL_VERSION__
