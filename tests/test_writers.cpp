@@ -1133,13 +1133,20 @@ namespace {
 
 // Random voxels in a grid of 8^3 bricks, and random boxes, some reaching beyond the grid:
 // count_box is the voxel-by-voxel count of get(), set_box sets exactly the box's voxels.
-TEST(SparseVoxelBoxes, CountAndSetAgreeWithVoxelByVoxelReadsOnRandomBoxes) {
+// `count` random voxels set on a 37 x 29 x 41 grid of 8^3 bricks.
+SparseVoxels random_voxels(int count, std::mt19937& rng) {
     Grid g;
     g.dims = {37, 29, 41};
-    std::mt19937 rng(3);
     SparseVoxels voxels(g, 8);
-    for (int n = 0; n < 3000; ++n)
+    for (int n = 0; n < count; ++n)
         voxels.set(int64_t(rng() % 37), int64_t(rng() % 29), int64_t(rng() % 41));
+    return voxels;
+}
+
+TEST(SparseVoxelBoxes, CountAndSetAgreeWithVoxelByVoxelReadsOnRandomBoxes) {
+    std::mt19937 rng(3);
+    const SparseVoxels voxels = random_voxels(3000, rng);
+    const Grid& g = voxels.grid();
     for (int trial = 0; trial < 200; ++trial) {
         std::array<int64_t, 3> lo, hi;
         for (int a = 0; a < 3; ++a) {
@@ -1168,12 +1175,9 @@ TEST(SparseVoxelBoxes, CountAndSetAgreeWithVoxelByVoxelReadsOnRandomBoxes) {
 // then goes as one word where it lies inside the box) and none. Checked voxel by voxel against
 // get(), with bytes outside the marks (and a guard before the window) left as they were.
 TEST(SparseVoxelBoxes, MarkBoxWindowsAreTheVoxelsInEveryOrientation) {
-    Grid g;
-    g.dims = {37, 29, 41};
     std::mt19937 rng(5);
-    SparseVoxels voxels(g, 8);
-    for (int n = 0; n < 6000; ++n)
-        voxels.set(int64_t(rng() % 37), int64_t(rng() % 29), int64_t(rng() % 41));
+    SparseVoxels voxels = random_voxels(6000, rng);
+    const Grid& g = voxels.grid();
     voxels.set_box({8, 4, 12}, {20, 16, 24});  // whole blocks, full rows
     for (int trial = 0; trial < 120; ++trial) {
         std::array<int64_t, 3> lo, hi, size;

@@ -11,8 +11,6 @@
 
 namespace oclvox::detail {
 
-namespace {}  // namespace
-
 std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
                                     const SdfOptions& options, ProgressPhases& progress,
                                     const SdfPhases& phases, VoxelizeStats& stats) {
@@ -41,13 +39,7 @@ std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared
         [&](uint64_t, uint64_t slots, const float* leaf_distance2) {
             for (uint64_t s = 0; s < slots; ++s, ++leaf) {
                 leaf = band.leaves.set_from(leaf);
-                const int64_t x = int64_t(leaf % uint64_t(band.leaves.dims[0])) * kLeaf,
-                              y = int64_t(leaf / uint64_t(band.leaves.dims[0]) %
-                                          uint64_t(band.leaves.dims[1])) *
-                                  kLeaf,
-                              z = int64_t(leaf /
-                                          uint64_t(band.leaves.dims[0] * band.leaves.dims[1])) *
-                                  kLeaf;
+                const auto [x, y, z] = band.leaves.origin(leaf);
                 const float* samples = leaf_distance2 + s * SparseField::kLeafSamples;
                 const int64_t width = std::min(kLeaf, grid.dims[0] - x);
                 for (int64_t k = z; k < std::min(z + kLeaf, grid.dims[2]); ++k)

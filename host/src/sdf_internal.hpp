@@ -157,6 +157,12 @@ struct LeafSet {
         return uint64_t(bx >> 3) +
                uint64_t(dims[0]) * (uint64_t(by >> 3) + uint64_t(dims[1]) * uint64_t(bz >> 3));
     }
+    // The lowest voxel of a leaf (leaf_of_block's inverse, to the leaf).
+    std::array<int64_t, 3> origin(uint64_t leaf) const {
+        return {int64_t(leaf % uint64_t(dims[0])) * SparseField::kLeaf,
+                int64_t(leaf / uint64_t(dims[0]) % uint64_t(dims[1])) * SparseField::kLeaf,
+                int64_t(leaf / (uint64_t(dims[0]) * uint64_t(dims[1]))) * SparseField::kLeaf};
+    }
     uint64_t slot(uint64_t leaf) const {
         const size_t word = size_t(leaf >> 5);
         return rank[word] + uint64_t(__builtin_popcount(bits[word] & ((1u << (leaf & 31)) - 1u)));

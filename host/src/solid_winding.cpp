@@ -651,36 +651,35 @@ struct Tile {
 }  // namespace
 
 WeldedEdges weld_edges(const Mesh& mesh) {
-    // Phase 1: runs of equal positions (by sorting, ties in vertex order), numbered in the order
-    // their first vertex comes.
+    // Phase 1: runs of equal positions (found by sorting), numbered in the order their first
+    // vertex comes.
     WeldedEdges out;
     const auto& p = mesh.positions;
     std::vector<uint32_t> order(p.size());
     for (size_t v = 0; v < order.size(); ++v) order[v] = uint32_t(v);
-    tbb::parallel_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-        return p[a] < p[b] || (!(p[b] < p[a]) && a < b);
-    });
-    std::vector<uint32_t> run_first;  // per run, its first vertex
-    std::vector<uint32_t> run_of(p.size());
+    tbb::parallel_sort(order.begin(), order.end(),
+                       [&](uint32_t a, uint32_t b) { return p[a] < p[b]; });
+    constexpr uint32_t kUnnumbered = ~uint32_t(0);
+    std::vector<uint32_t> run_of(p.size()), id_of_run;
     for (size_t i = 0; i < order.size(); ++i) {
-        if (i == 0 || p[order[i - 1]] < p[order[i]]) run_first.push_back(order[i]);
-        run_of[order[i]] = uint32_t(run_first.size() - 1);
+        if (i == 0 || p[order[i - 1]] < p[order[i]]) id_of_run.push_back(kUnnumbered);
+        run_of[order[i]] = uint32_t(id_of_run.size() - 1);
     }
-    std::vector<uint32_t> runs(run_first.size()), id_of_run(run_first.size());
-    for (size_t r = 0; r < runs.size(); ++r) runs[r] = uint32_t(r);
-    std::sort(runs.begin(), runs.end(),
-              [&](uint32_t a, uint32_t b) { return run_first[a] < run_first[b]; });
-    for (size_t id = 0; id < runs.size(); ++id) {
-        id_of_run[runs[id]] = uint32_t(id);
-        out.positions.push_back(p[run_first[runs[id]]]);
+    std::vector<uint32_t> welded(p.size());
+    for (size_t v = 0; v < p.size(); ++v) {
+        uint32_t& id = id_of_run[run_of[v]];
+        if (id == kUnnumbered) {
+            id = uint32_t(out.positions.size());
+            out.positions.push_back(p[v]);
+        }
+        welded[v] = id;
     }
 
     // Phase 2: every triangle's edges, sorted by edge, then counted per direction.
     std::vector<std::pair<std::pair<uint32_t, uint32_t>, int>> directed;
     directed.reserve(mesh.triangles.size() * 3);
     for (const auto& tri : mesh.triangles) {
-        const uint32_t v[3] = {id_of_run[run_of[tri[0]]], id_of_run[run_of[tri[1]]],
-                               id_of_run[run_of[tri[2]]]};
+        const uint32_t v[3] = {welded[tri[0]], welded[tri[1]], welded[tri[2]]};
         if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;
         for (int e = 0; e < 3; ++e) {
             const uint32_t a = v[e], b = v[(e + 1) % 3];

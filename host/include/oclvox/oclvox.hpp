@@ -282,10 +282,12 @@ SelectionTriangles selection_triangles(const Mesh& mesh, const Grid& grid,
 // Timing breakdown and counts of one run (seconds).
 struct VoxelizeStats {
     double seconds_binning = 0, seconds_upload = 0, seconds_kernels = 0, seconds_download = 0;
-    uint64_t triangles_in = 0;        // triangles in the mesh
-    uint64_t triangles_used = 0;      // after dropping those outside the grid (after clipping)
-    uint64_t brick_pairs = 0;         // (triangle, brick) pairs after binning
-    uint64_t work_items = 0;          // (triangle, 4^3 block) work items launched
+    uint64_t triangles_in = 0;    // triangles in the mesh
+    uint64_t triangles_used = 0;  // after dropping those outside the grid (after clipping)
+    uint64_t brick_pairs = 0;     // (triangle, brick) pairs after binning
+    // Work items launched (surface: one per triangle and run of up to 8 4^3 blocks of a brick);
+    // for distance fields, the (triangle, 4^3 block) pairs the band's culls examine.
+    uint64_t work_items = 0;
     uint64_t bricks_total = 0;        // bricks in the grid
     uint64_t bricks_active = 0;       // bricks with at least one triangle
     uint64_t batches = 0;             // device batches
