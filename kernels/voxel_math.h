@@ -24,10 +24,27 @@
 #define OV_FLOOR std::floor
 #define OV_CEIL std::ceil
 using std::fabs;
-using std::fmax;
-using std::fmin;
 using std::nextafter;
 namespace oclvox::detail {
+// fmin and fmax as OpenCL and C define them (a NaN argument yields the other), inline: on
+// baseline x86-64 std::fmin is an out-of-line libm call, and the host's preparation and binning
+// make millions of them. The comparison is written apart from the NaN test so that it compiles to
+// minss/maxss rather than to a branch on unpredictable data. They may differ from libm only in
+// the sign of a zero result, which both standards leave unspecified and no comparison can see.
+inline float fmin(float a, float b) {
+    const float smaller = b < a ? b : a;
+    return a != a ? b : smaller;
+}
+inline float fmax(float a, float b) {
+    const float larger = b > a ? b : a;
+    return a != a ? b : larger;
+}
+inline double fmin(double a, double b) {
+    return std::fmin(a, b);
+}
+inline double fmax(double a, double b) {
+    return std::fmax(a, b);
+}
 #endif
 
 // A triangle as uploaded: anchor voxel corner and anchor-relative vertices (x0 y0 z0 x1 ...).

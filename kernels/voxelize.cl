@@ -1,30 +1,36 @@
 // Conservative (26-separating) surface voxelization, OpenCL C 1.2.
 //
 // Two phases. setup_*: one work item per triangle computes the per-triangle constants of the
-// overlap test once. voxelize_*: one work item per (triangle, run of up to OV_BLOCKS_PER_ITEM
-// 4x4x4 blocks) tests each block's voxels a row of 4 at a time, gathers a 64-bit mask privately
-// and ORs it into the brick's bits with at most two 32-bit atomics. Work items are numbered pair by
-// pair; an item finds its (triangle, brick) pair by binary search in the pairs' first-item offsets,
-// so a huge triangle spreads over many items instead of serialising on one.
+// overlap test, and its voxel range, once. voxelize_*: one work item per (triangle, run of up to
+// OV_BLOCKS_PER_ITEM 4x4x4 blocks) tests each block's voxels a row of 4 at a time, gathers a 64-bit
+// mask privately and ORs it into the brick's bits with at most two 32-bit atomics. Work items are
+// numbered pair by pair; an item finds its (triangle, brick) pair by binary search in the pairs'
+// first-item offsets, so a huge triangle spreads over many items instead of serialising on one.
 #include "voxel_math.h"
 #include "work_items.h"
 
 __kernel void setup_sat(__global const OvTriangle* triangles, uint count, int half_open,
-                        __global OvSatTriangle* out) {
+                        __global OvSatTriangle* out, __global OvRange* ranges) {
     uint i = get_global_id(0);
-    if (i < count) out[i] = ov_setup_sat(triangles[i], half_open);
+    if (i >= count) return;
+    out[i] = ov_setup_sat(triangles[i], half_open);
+    ranges[i] = ov_triangle_range(triangles[i], half_open);
 }
 
 __kernel void setup_pef(__global const OvTriangle* triangles, uint count, int half_open,
-                        __global OvPefTriangle* out) {
+                        __global OvPefTriangle* out, __global OvRange* ranges) {
     uint i = get_global_id(0);
-    if (i < count) out[i] = ov_setup_pef(triangles[i], half_open);
+    if (i >= count) return;
+    out[i] = ov_setup_pef(triangles[i], half_open);
+    ranges[i] = ov_triangle_range(triangles[i], half_open);
 }
 
 __kernel void setup_thin(__global const OvTriangle* triangles, uint count, int half_open,
-                         __global OvThinTriangle* out) {
+                         __global OvThinTriangle* out, __global OvRange* ranges) {
     uint i = get_global_id(0);
-    if (i < count) out[i] = ov_setup_thin(triangles[i], half_open);
+    if (i >= count) return;
+    out[i] = ov_setup_thin(triangles[i], half_open);
+    ranges[i] = ov_triangle_range(triangles[i], half_open);
 }
 
 typedef struct {

@@ -2,6 +2,8 @@
 // over the shards of a split are pieces of the unrestricted run, exactly, and together are all of
 // it, also when each shard holds only the triangles selection_triangles gives it. That is what
 // lets a grid be computed on several processes or machines and merged.
+#include <set>
+
 #include "binning.hpp"
 #include "test_support.hpp"
 
@@ -167,6 +169,80 @@ TEST(BrickDivider, EqualsDivisionForEveryIndexAndBrickSize) {
             if (divide(index) != index / uint32_t(size))
                 FAIL() << index << " / " << size << " gave " << divide(index);
     }
+}
+
+// ---- bin_triangles ----
+
+// Binning's (brick, triangle) pairs, in its order.
+std::vector<std::pair<uint64_t, uint32_t>> binned_pairs(const detail::Binning& binning) {
+    std::vector<std::pair<uint64_t, uint32_t>> pairs;
+    for (size_t b = 0; b < binning.bricks.size(); ++b)
+        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1]; ++p)
+            pairs.emplace_back(binning.bricks[b], binning.pair_triangle[p]);
+    return pairs;
+}
+
+// Binning works on chunks of triangles in parallel; its result is exactly the pairs the serial
+// for_each_triangle_brick visits, sorted by brick and then triangle, whatever the threads: here
+// over several chunks (8192 triangles each), triangles spanning many bricks, and a selection.
+TEST(Binning, IsEveryPairSortedByBrickThenTriangle) {
+    const Mesh m = random_triangles(20000, -2, 66, 9, 7);
+    const Grid g = unit_grid(64, 64, 64);
+    const SparseVoxels layout(g, 8);
+    const detail::PreparedTriangles prepared = detail::prepare_triangles(m, g);
+    std::vector<std::pair<uint64_t, uint32_t>> expected;
+    detail::for_each_triangle_brick(
+        prepared, g, 8, [&](uint32_t t, uint64_t brick) { expected.emplace_back(brick, t); });
+    std::sort(expected.begin(), expected.end());
+    ASSERT_GT(expected.size(), prepared.triangles.size());  // some triangles span bricks
+    EXPECT_EQ(
+        binned_pairs(detail::bin_triangles(prepared, g, 8, detail::BrickSelection({}, layout))),
+        expected);
+
+    std::vector<uint64_t> every_third;
+    for (uint64_t brick = 0; brick < 8 * 8 * 8; brick += 3) every_third.push_back(brick);
+    std::vector<std::pair<uint64_t, uint32_t>> expected_selected;
+    for (const auto& pair : expected)
+        if (pair.first % 3 == 0) expected_selected.push_back(pair);
+    EXPECT_EQ(binned_pairs(detail::bin_triangles(prepared, g, 8,
+                                                 detail::BrickSelection(every_third, layout))),
+              expected_selected);
+}
+
+// Conservative: every point of a triangle inside the grid lies in a brick the triangle (or a
+// piece of it) is binned to. Points sampled on a barycentric lattice, in double.
+TEST(Binning, EveryPointOfATriangleIsInOneOfItsBricks) {
+    const Mesh m = random_triangles(3000, -2, 34, 12, 11);
+    const Grid g = unit_grid(32, 32, 32);
+    const detail::PreparedTriangles prepared = detail::prepare_triangles(m, g);
+    const detail::Binning binning =
+        detail::bin_triangles(prepared, g, 8, detail::BrickSelection({}, SparseVoxels(g, 8)));
+    std::set<std::pair<uint64_t, uint32_t>> binned;  // (brick, mesh triangle)
+    for (const auto& [brick, piece] : binned_pairs(binning))
+        binned.emplace(brick, prepared.source[piece]);
+    constexpr int kSteps = 12;
+    uint64_t checked = 0;
+    for (uint32_t t = 0; t < m.triangles.size(); ++t)
+        for (int i = 0; i <= kSteps; ++i)
+            for (int j = 0; i + j <= kSteps; ++j) {
+                const double u = double(i) / kSteps, v = double(j) / kSteps;
+                int64_t brick[3];
+                bool inside = true;
+                for (int k = 0; k < 3; ++k) {
+                    const double p = (1 - u - v) * m.positions[m.triangles[t][0]][k] +
+                                     u * m.positions[m.triangles[t][1]][k] +
+                                     v * m.positions[m.triangles[t][2]][k];
+                    inside = inside && p >= 0 && p < 32;
+                    brick[k] = int64_t(std::floor(p)) / 8;
+                }
+                if (!inside) continue;
+                ++checked;
+                const uint64_t index = uint64_t(brick[0] + 4 * (brick[1] + 4 * brick[2]));
+                if (!binned.count({index, t}))
+                    FAIL() << "triangle " << t << " has a point in brick " << index
+                           << ", which it is not binned to";
+            }
+    EXPECT_GT(checked, 3000u);
 }
 
 // ---- selection_triangles ----

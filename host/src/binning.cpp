@@ -56,109 +56,148 @@ void for_each_brick_of(const PreparedTriangles& prepared, size_t t, const Grid& 
     if (!brick_range(prepared.ranges[t], grid, divider, b)) return;
     const int64_t nbx = (grid.dims[0] + brick_size - 1) / brick_size;
     const int64_t nby = (grid.dims[1] + brick_size - 1) / brick_size;
-    const bool cull = b.count() > 1;
+    if (b.count() == 1) {  // most triangles: nothing to cull
+        f(uint64_t(b.lo[0] + nbx * (b.lo[1] + nby * b.lo[2])));
+        return;
+    }
     const OvTriangle& tri = prepared.triangles[t];
     Vec3d v[3];
     for (int i = 0; i < 3; ++i)
         for (int k = 0; k < 3; ++k) v[i][k] = double(tri.anchor[k]) + double(tri.u[3 * i + k]);
-    const double margin = cull ? cull_margin(tri) : 0;
+    const double margin = cull_margin(tri);
     for (int64_t bz = b.lo[2]; bz <= b.hi[2]; ++bz)
         for (int64_t by = b.lo[1]; by <= b.hi[1]; ++by)
             for (int64_t bx = b.lo[0]; bx <= b.hi[0]; ++bx) {
-                if (cull) {
-                    const Vec3d lo{double(bx * brick_size) - margin,
-                                   double(by * brick_size) - margin,
-                                   double(bz * brick_size) - margin};
-                    const Vec3d hi{double((bx + 1) * brick_size) + margin,
-                                   double((by + 1) * brick_size) + margin,
-                                   double((bz + 1) * brick_size) + margin};
-                    if (!triangle_box_overlap_double(v[0], v[1], v[2], lo, hi)) continue;
-                }
-                f(uint64_t(bx + nbx * (by + nby * bz)));
+                const Vec3d lo{double(bx * brick_size) - margin, double(by * brick_size) - margin,
+                               double(bz * brick_size) - margin};
+                const Vec3d hi{double((bx + 1) * brick_size) + margin,
+                               double((by + 1) * brick_size) + margin,
+                               double((bz + 1) * brick_size) + margin};
+                if (triangle_box_overlap_double(v[0], v[1], v[2], lo, hi))
+                    f(uint64_t(bx + nbx * (by + nby * bz)));
             }
 }
 
-// The (triangle, brick) pairs of the triangles' brick ranges; throws GridError over max_pairs.
-uint64_t candidate_pairs(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
-                         uint64_t max_pairs) {
-    uint64_t candidates = 0;
+// The (triangle, brick) pairs of the triangles' brick ranges, counted per chunk of kChunk
+// triangles (in parallel: a sum of integers is the same in any order); throws GridError if their
+// total is over max_pairs.
+constexpr size_t kChunk = 8192;
+
+std::vector<uint64_t> candidate_pairs(const PreparedTriangles& prepared, const Grid& grid,
+                                      int brick_size, uint64_t max_pairs) {
+    const size_t chunks = (prepared.ranges.size() + kChunk - 1) / kChunk;
+    std::vector<uint64_t> candidates(chunks, 0);
     const BrickDivider brick(brick_size);
-    for (const OvRange& r : prepared.ranges) {
-        BrickRange b;
-        if (brick_range(r, grid, brick, b)) candidates += b.count();
-    }
-    if (candidates > max_pairs)
-        throw GridError("binning would examine " + std::to_string(candidates) +
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        const size_t end = std::min(prepared.ranges.size(), (c + 1) * kChunk);
+        for (size_t t = c * kChunk; t < end; ++t) {
+            BrickRange b;
+            if (brick_range(prepared.ranges[t], grid, brick, b)) candidates[c] += b.count();
+        }
+    });
+    uint64_t total = 0;
+    for (const uint64_t n : candidates) total += n;
+    if (total > max_pairs)
+        throw GridError("binning would examine " + std::to_string(total) +
                         " (triangle, brick) pairs, more than the limit of " +
                         std::to_string(max_pairs) + ": lower the resolution or use larger bricks");
     return candidates;
 }
+
+// One chunk's pairs in ascending triangle order, as their triangles and the slots of their
+// bricks among the chunk's distinct bricks, which are kept in order of first appearance with their
+// pair counts. Consecutive pairs mostly share a brick (meshes are stored coherently), so the last
+// brick's slot is remembered before the map is asked.
+struct ChunkPairs {
+    std::vector<uint32_t> triangles;
+    std::vector<uint32_t> slots;
+    std::vector<uint64_t> bricks;
+    std::vector<uint64_t> counts;
+
+    void add(uint64_t brick, uint32_t triangle) {
+        if (triangles.empty() || brick != last_brick) {
+            const auto [it, fresh] = slot_of_brick.try_emplace(brick, uint32_t(bricks.size()));
+            if (fresh) {
+                bricks.push_back(brick);
+                counts.push_back(0);
+            }
+            last_brick = brick;
+            last_slot = it->second;
+        }
+        triangles.push_back(triangle);
+        slots.push_back(last_slot);
+        ++counts[last_slot];
+    }
+
+  private:
+    std::unordered_map<uint64_t, uint32_t> slot_of_brick;
+    uint64_t last_brick = 0;
+    uint32_t last_slot = 0;
+};
 
 }  // namespace
 
 Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int brick_size,
                       const BrickSelection& selection, uint64_t max_pairs) {
     // Phase 1: refuse absurd work before allocating any of it.
-    const uint64_t candidates = candidate_pairs(prepared, grid, brick_size, max_pairs);
+    const std::vector<uint64_t> candidates = candidate_pairs(prepared, grid, brick_size, max_pairs);
 
-    // Phase 2: (brick, triangle) pairs of the selected bricks, culling bricks of multi-brick
-    // triangles. Triangles are independent, so fixed chunks of them are binned in parallel and
-    // their pairs joined in chunk order: the pairs stay in ascending triangle order, whatever the
-    // threads.
-    constexpr size_t kChunk = 8192;
-    const size_t chunks = (prepared.ranges.size() + kChunk - 1) / kChunk;
-    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> chunk_pairs(chunks);
+    // Phase 2: each chunk's (brick, triangle) pairs in the selected bricks, culling bricks of
+    // multi-brick triangles, and its distinct bricks; chunks in parallel.
+    const size_t chunks = candidates.size();
+    std::vector<ChunkPairs> chunk(chunks);
     const BrickDivider divider(brick_size);
     tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
-        auto& out = chunk_pairs[c];
+        ChunkPairs& out = chunk[c];
+        if (selection.everything()) {  // else the candidates can be far more than the pairs
+            out.triangles.reserve(candidates[c]);
+            out.slots.reserve(candidates[c]);
+        }
         const size_t end = std::min(prepared.ranges.size(), (c + 1) * kChunk);
         for (size_t t = c * kChunk; t < end; ++t)
             for_each_brick_of(prepared, t, grid, brick_size, divider, [&](uint64_t brick) {
-                if (selection.contains(brick)) out.emplace_back(brick, uint32_t(t));
+                if (selection.everything() || selection.contains(brick))
+                    out.add(brick, uint32_t(t));
             });
     });
-    std::vector<std::pair<uint64_t, uint32_t>> pairs;
-    pairs.reserve(selection.everything() ? candidates : 0);
-    for (auto& chunk : chunk_pairs) {
-        pairs.insert(pairs.end(), chunk.begin(), chunk.end());
-        std::vector<std::pair<uint64_t, uint32_t>>().swap(chunk);
-    }
 
-    // Phase 3: group by brick in ascending brick order, triangles ascending within a brick: the
-    // order sorting the pairs would give, so every run is deterministic. The pairs come in
-    // ascending triangle order, so a stable counting sort over the few distinct bricks gives it
-    // in linear time. Consecutive pairs mostly share a brick (meshes are stored coherently), so
-    // the last brick's slot is remembered before the map is asked.
-    std::unordered_map<uint64_t, uint32_t> slot_of_brick;
-    std::vector<uint32_t> slot_of_pair(pairs.size());
-    uint64_t last_brick = 0;
-    uint32_t last_slot = 0;
-    for (size_t i = 0; i < pairs.size(); ++i) {
-        if (i == 0 || pairs[i].first != last_brick) {
-            last_brick = pairs[i].first;
-            last_slot =
-                slot_of_brick.try_emplace(last_brick, uint32_t(slot_of_brick.size())).first->second;
-        }
-        slot_of_pair[i] = last_slot;
-    }
+    // Phase 3: the active bricks in ascending order, and where each chunk's pairs of each brick
+    // go: bricks in order, and within a brick chunk after chunk, so triangles stay ascending (the
+    // order sorting the pairs would give, whatever the threads). Only the chunks' few distinct
+    // bricks are visited here.
     Binning out;
-    out.bricks.reserve(slot_of_brick.size());
-    for (const auto& brick_slot : slot_of_brick) out.bricks.push_back(brick_slot.first);
+    for (const ChunkPairs& part : chunk)
+        out.bricks.insert(out.bricks.end(), part.bricks.begin(), part.bricks.end());
     std::sort(out.bricks.begin(), out.bricks.end());
-    // Slots were numbered by first appearance; renumber them by brick order, then count.
-    std::vector<uint32_t> rank(slot_of_brick.size());
-    for (size_t b = 0; b < out.bricks.size(); ++b) rank[slot_of_brick[out.bricks[b]]] = uint32_t(b);
+    out.bricks.erase(std::unique(out.bricks.begin(), out.bricks.end()), out.bricks.end());
+    auto rank = [&](uint64_t brick) {
+        return size_t(std::lower_bound(out.bricks.begin(), out.bricks.end(), brick) -
+                      out.bricks.begin());
+    };
     out.brick_first_pair.assign(out.bricks.size() + 1, 0);
-    for (uint32_t& slot : slot_of_pair) {
-        slot = rank[slot];
-        ++out.brick_first_pair[slot + 1];
-    }
+    for (const ChunkPairs& part : chunk)
+        for (size_t i = 0; i < part.bricks.size(); ++i)
+            out.brick_first_pair[rank(part.bricks[i]) + 1] += part.counts[i];
     for (size_t b = 0; b < out.bricks.size(); ++b)
         out.brick_first_pair[b + 1] += out.brick_first_pair[b];
-    out.pair_triangle.resize(pairs.size());
+    // chunk_next[c][i]: where chunk c's next pair of its i-th distinct brick goes.
+    std::vector<std::vector<uint64_t>> chunk_next(chunks);
     std::vector<uint64_t> next(out.brick_first_pair.begin(), out.brick_first_pair.end() - 1);
-    for (size_t i = 0; i < pairs.size(); ++i)
-        out.pair_triangle[next[slot_of_pair[i]]++] = pairs[i].second;
+    for (size_t c = 0; c < chunks; ++c)
+        for (size_t i = 0; i < chunk[c].bricks.size(); ++i) {
+            uint64_t& brick_next = next[rank(chunk[c].bricks[i])];
+            chunk_next[c].push_back(brick_next);
+            brick_next += chunk[c].counts[i];
+        }
+
+    // Phase 4: every chunk writes its triangles to their places, in parallel.
+    out.pair_triangle.resize(out.brick_first_pair.back());
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        const ChunkPairs& part = chunk[c];
+        std::vector<uint64_t>& place = chunk_next[c];
+        for (size_t p = 0; p < part.triangles.size(); ++p)
+            out.pair_triangle[place[part.slots[p]]++] = part.triangles[p];
+    });
     return out;
 }
 
@@ -166,7 +205,7 @@ void for_each_triangle_brick(const PreparedTriangles& prepared, const Grid& grid
                              const std::function<void(uint32_t, uint64_t)>& f, uint64_t max_pairs) {
     candidate_pairs(prepared, grid, brick_size, max_pairs);
     const BrickDivider divider(brick_size);
-    for (size_t t = 0; t < prepared.ranges.size(); ++t)
+    for (size_t t = 0; t < prepared.triangles.size(); ++t)
         for_each_brick_of(prepared, t, grid, brick_size, divider,
                           [&](uint64_t brick) { f(uint32_t(t), brick); });
 }

@@ -7,7 +7,11 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
+#include <memory>
 #include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
 
 #include "oclvox/oclvox.hpp"
 
@@ -54,5 +58,31 @@ inline void check_host_memory(uint64_t bytes, uint64_t budget, const std::string
                         " of host memory, over the host memory budget of " + mib_text(budget) +
                         ": lower the resolution or raise the budget");
 }
+
+// An allocator whose resize leaves new elements of trivial types uninitialised instead of zeroing
+// them. For buffers of many megabytes that are written in full right after (in parallel), the
+// serial zeroing and its page faults cost more than the writes.
+template <class T>
+struct NoZeroAllocator : std::allocator<T> {
+    template <class U>
+    struct rebind {
+        using other = NoZeroAllocator<U>;
+    };
+    NoZeroAllocator() = default;
+    template <class U>
+    NoZeroAllocator(const NoZeroAllocator<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+
+// A vector of trivial elements that `resize` does not zero.
+template <class T>
+using FilledLaterVector = std::vector<T, NoZeroAllocator<T>>;
 
 }  // namespace oclvox::detail

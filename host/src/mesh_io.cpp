@@ -1,5 +1,7 @@
 // Loading triangle meshes into one welded Mesh, whatever the format (each reader is in its own
 // read_*.cpp), and checking meshes before anything voxelizes them.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -88,7 +90,23 @@ Mesh welded(const Mesh& raw) {
 
 void validate_mesh(const Mesh& mesh) {
     if (mesh.triangles.empty()) throw InputError("the mesh has no triangles");
-    for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    // Every entry point validates, so this runs several times per run over the whole mesh: fixed
+    // chunks in parallel, and the first chunk with a bad triangle names it, as a serial scan would.
+    constexpr size_t kChunk = 16384;
+    const size_t chunks = (mesh.triangles.size() + kChunk - 1) / kChunk;
+    std::vector<size_t> first_bad(chunks, mesh.triangles.size());
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        const size_t end = std::min(mesh.triangles.size(), (c + 1) * kChunk);
+        for (size_t t = c * kChunk; t < end; ++t)
+            for (const uint32_t v : mesh.triangles[t])
+                if (v >= mesh.positions.size() || !std::isfinite(mesh.positions[v][0]) ||
+                    !std::isfinite(mesh.positions[v][1]) || !std::isfinite(mesh.positions[v][2])) {
+                    first_bad[c] = t;
+                    return;
+                }
+    });
+    for (const size_t t : first_bad) {
+        if (t == mesh.triangles.size()) continue;
         for (const uint32_t v : mesh.triangles[t]) {
             if (v >= mesh.positions.size())
                 throw InputError("triangle " + std::to_string(t) + " refers to vertex " +
@@ -100,6 +118,7 @@ void validate_mesh(const Mesh& mesh) {
                                  ", used by triangle " + std::to_string(t) +
                                  ", has a coordinate that is not a finite number");
         }
+    }
 }
 
 Mesh submesh(const Mesh& mesh, const std::vector<uint32_t>& triangles) {

@@ -50,9 +50,9 @@ void run_sliced(const cl::CommandQueue& queue, uint64_t n, size_t group,
 
 // A read-only buffer holding `data` (written without blocking). Zero-length buffers are invalid
 // in OpenCL, so an empty vector gets a one-element buffer.
-template <typename T>
+template <typename T, typename Allocator>
 cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
-                  const std::vector<T>& data) {
+                  const std::vector<T, Allocator>& data) {
     const size_t bytes = std::max<size_t>(1, data.size()) * sizeof(T);
     cl::Buffer buffer(context, CL_MEM_READ_ONLY, bytes);
     if (!data.empty())

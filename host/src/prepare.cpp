@@ -51,21 +51,30 @@ OvTriangle round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
     return t;
 }
 
-// Prepares triangle t of the mesh into `out` (none if it misses the grid, several if clipping
-// fans it). Throws InputError for a triangle that does not fit grid coordinates.
-void prepare_one(const Mesh& mesh, const Grid& grid, double inv, size_t t, PreparedTriangles& out) {
-    // Phase 1: grid coordinates, in voxel units, in double.
-    Vec3d g[3];
+[[noreturn]] void throw_outside_grid_coordinates(size_t t) {
+    throw InputError("triangle " + std::to_string(t) +
+                     " does not fit in grid coordinates (the voxel size is too small for its "
+                     "coordinates)");
+}
+
+// Triangle t's vertices in grid coordinates (voxel units), in double. Throws InputError for a
+// triangle that does not fit them.
+inline void grid_coordinates(const Mesh& mesh, const Grid& grid, double inv, size_t t, Vec3d g[3]) {
+    bool finite = true;
     for (int i = 0; i < 3; ++i)
         for (int k = 0; k < 3; ++k) {
             g[i][k] = (mesh.positions[mesh.triangles[t][i]][k] - grid.origin[k]) * inv;
-            if (!std::isfinite(g[i][k]))
-                throw InputError("triangle " + std::to_string(t) +
-                                 " does not fit in grid coordinates (the voxel size is too "
-                                 "small for its coordinates)");
+            finite = finite && std::isfinite(g[i][k]);
         }
+    if (!finite) throw_outside_grid_coordinates(t);
+}
 
-    // Phase 2: drop triangles whose box cannot touch the closed grid box.
+// The triangles that grid triangle g prepares into: none if it misses the closed grid box, itself
+// if it lies within the clip margin, else the fan of its clip to the grown grid box. Calls
+// emit(a, b, c) for each and returns how many.
+template <class Emit>
+size_t prepared_pieces(const Vec3d g[3], const Grid& grid, Emit&& emit) {
+    // Drop triangles whose box cannot touch the closed grid box.
     bool inside_margin = true, misses = false;
     for (int k = 0; k < 3; ++k) {
         const double lo = std::min({g[0][k], g[1][k], g[2][k]});
@@ -74,25 +83,22 @@ void prepare_one(const Mesh& mesh, const Grid& grid, double inv, size_t t, Prepa
         inside_margin =
             inside_margin && lo >= -kClipMargin && hi <= double(grid.dims[k]) + kClipMargin;
     }
-    if (misses) return;
+    if (misses) return 0;
     if (inside_margin) {
-        out.triangles.push_back(round_to_anchor(g[0], g[1], g[2]));
-        out.source.push_back(uint32_t(t));
-        return;
+        emit(g[0], g[1], g[2]);
+        return 1;
     }
 
-    // Phase 3: clip the rest to the grown grid box and fan the convex remainder.
+    // Clip the rest to the grown grid box and fan the convex remainder.
     Polygon poly{g[0], g[1], g[2]};
     for (int k = 0; k < 3 && !poly.empty(); ++k) {
         poly = clip_against(poly, k, -kClipMargin, +1);
         if (!poly.empty()) poly = clip_against(poly, k, double(grid.dims[k]) + kClipMargin, -1);
     }
-    if (poly.empty()) return;
+    if (poly.empty()) return 0;
     if (poly.size() < 3) poly.resize(3, poly.back());  // a clipped point or segment
-    for (size_t i = 1; i + 1 < poly.size(); ++i) {
-        out.triangles.push_back(round_to_anchor(poly[0], poly[i], poly[i + 1]));
-        out.source.push_back(uint32_t(t));
-    }
+    for (size_t i = 1; i + 1 < poly.size(); ++i) emit(poly[0], poly[i], poly[i + 1]);
+    return poly.size() - 2;
 }
 
 }  // namespace
@@ -100,39 +106,57 @@ void prepare_one(const Mesh& mesh, const Grid& grid, double inv, size_t t, Prepa
 PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary boundary) {
     validate_mesh(mesh);
     validate_grid(grid);
-    // Triangles are independent, so fixed chunks of them are prepared in parallel and joined in
-    // chunk order: the result, and the triangle an error names (the first that fails), do not
-    // depend on the threads.
+    // Triangles are independent, so fixed chunks of them are prepared in parallel. A first pass
+    // counts each chunk's pieces, so the second writes them straight to their place: the result,
+    // and the triangle an error names (the first that fails), do not depend on the threads, and
+    // no per-chunk copy is made (at hundreds of thousands of triangles the copies and their page
+    // faults cost more than the preparation).
     constexpr size_t kChunk = 8192;
     const double inv = 1.0 / grid.voxel_size;
     const size_t chunks = (mesh.triangles.size() + kChunk - 1) / kChunk;
-    std::vector<PreparedTriangles> parts(chunks);
-    std::vector<std::exception_ptr> errors(chunks);
-    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
-        try {
-            const size_t end = std::min(mesh.triangles.size(), (c + 1) * kChunk);
-            for (size_t t = c * kChunk; t < end; ++t) prepare_one(mesh, grid, inv, t, parts[c]);
-        } catch (...) {
-            errors[c] = std::current_exception();
+    auto for_each_chunk = [&](auto&& body) {
+        std::vector<std::exception_ptr> errors(chunks);
+        tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+            try {
+                body(c, c * kChunk, std::min(mesh.triangles.size(), (c + 1) * kChunk));
+            } catch (...) {
+                errors[c] = std::current_exception();
+            }
+        });
+        for (const std::exception_ptr& error : errors)
+            if (error) std::rethrow_exception(error);
+    };
+
+    // Pass 1: pieces per chunk.
+    std::vector<size_t> offset(chunks + 1, 0);
+    for_each_chunk([&](size_t c, size_t begin, size_t end) {
+        Vec3d g[3];
+        for (size_t t = begin; t < end; ++t) {
+            grid_coordinates(mesh, grid, inv, t, g);
+            offset[c + 1] +=
+                prepared_pieces(g, grid, [](const Vec3d&, const Vec3d&, const Vec3d&) {});
         }
     });
-    for (const std::exception_ptr& error : errors)
-        if (error) std::rethrow_exception(error);
+    for (size_t c = 0; c < chunks; ++c) offset[c + 1] += offset[c];
 
-    // Joined in chunk order at their offsets, with each triangle's voxel range, in parallel too.
-    std::vector<size_t> offset(chunks + 1, 0);
-    for (size_t c = 0; c < chunks; ++c) offset[c + 1] = offset[c] + parts[c].triangles.size();
+    // Pass 2: each chunk's pieces, rounded once to float, with their voxel ranges.
     PreparedTriangles out;
     out.triangles.resize(offset[chunks]);
     out.source.resize(offset[chunks]);
     out.ranges.resize(offset[chunks]);
     const int half_open = boundary == Boundary::HalfOpen;
-    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
-        const PreparedTriangles& part = parts[c];
-        std::copy(part.triangles.begin(), part.triangles.end(), &out.triangles[offset[c]]);
-        std::copy(part.source.begin(), part.source.end(), &out.source[offset[c]]);
-        for (size_t i = 0; i < part.triangles.size(); ++i)
-            out.ranges[offset[c] + i] = ov_triangle_range(part.triangles[i], half_open);
+    for_each_chunk([&](size_t c, size_t begin, size_t end) {
+        size_t next = offset[c];
+        Vec3d g[3];
+        for (size_t t = begin; t < end; ++t) {
+            grid_coordinates(mesh, grid, inv, t, g);
+            prepared_pieces(g, grid, [&](const Vec3d& a, const Vec3d& b, const Vec3d& c3) {
+                out.triangles[next] = round_to_anchor(a, b, c3);
+                out.ranges[next] = ov_triangle_range(out.triangles[next], half_open);
+                out.source[next] = uint32_t(t);
+                ++next;
+            });
+        }
     });
     return out;
 }

@@ -4,15 +4,17 @@
 #include <cstdint>
 #include <vector>
 
+#include "host_memory.hpp"
 #include "oclvox/oclvox.hpp"
 #include "voxel_math.h"
 
 namespace oclvox::detail {
 
 struct PreparedTriangles {
-    std::vector<OvTriangle> triangles;
-    std::vector<OvRange> ranges;   // ov_triangle_range of each triangle
-    std::vector<uint32_t> source;  // the mesh triangle each came from (clipping can split one)
+    FilledLaterVector<OvTriangle> triangles;
+    FilledLaterVector<OvRange> ranges;  // ov_triangle_range of each triangle
+    FilledLaterVector<uint32_t>
+        source;  // the mesh triangle each came from (clipping can split one)
 };
 
 // Validates mesh and grid, maps vertices to grid coordinates (voxel units) in double, drops

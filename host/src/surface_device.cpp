@@ -1,11 +1,11 @@
 // Device::voxelize: the tiled conservative surface voxelization on an OpenCL device.
 //
 // Phases: prepare and bin triangles on the host; upload them and compute the per-triangle
-// constants on the device once; then process the active bricks in batches that fit the device
-// budget: per batch, upload the (triangle, brick) pairs and their work-item offsets, clear the
-// batch's brick bits, run the voxel kernel over all work items, and merge the bits that come
-// back into the sparse result. A batch the device cannot allocate memory for is retried with half
-// as many bricks, down to one (device_batches.hpp).
+// constants and voxel ranges on the device once; then process the active bricks in batches that fit
+// the device budget: per batch, upload the (triangle, brick) pairs and their work-item offsets,
+// clear the batch's brick bits, run the voxel kernel over all work items, and merge the bits that
+// come back into the sparse result. A batch the device cannot allocate memory for is retried with
+// half as many bricks, down to one (device_batches.hpp).
 #include <algorithm>
 #include <chrono>
 
@@ -142,9 +142,10 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             // Phase 3: triangles to the device; per-triangle constants once.
             t = Clock::now();
             const cl::Buffer triangles = detail::upload(cl.context, cl.queue, prepared.triangles);
-            const cl::Buffer ranges = detail::upload(cl.context, cl.queue, prepared.ranges);
             const cl_uint triangle_count = cl_uint(prepared.triangles.size());
             cl::Buffer setups(cl.context, CL_MEM_READ_WRITE, kernels.setup_bytes * triangle_count);
+            cl::Buffer ranges(cl.context, CL_MEM_READ_WRITE,
+                              sizeof(detail::OvRange) * triangle_count);
             cl.queue.finish();
             stats.seconds_upload += seconds_since(t);
 
@@ -154,6 +155,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             setup.setArg(1, triangle_count);
             setup.setArg(2, cl_int(options.boundary == Boundary::HalfOpen));
             setup.setArg(3, setups);
+            setup.setArg(4, ranges);
             detail::launch(cl.queue, setup, triangle_count,
                            detail::work_group_size(setup, cl.device));
             cl.queue.finish();

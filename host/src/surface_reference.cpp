@@ -23,7 +23,8 @@ constexpr uint64_t kMaxReferenceVoxelTests = uint64_t(1) << 36;
 
 void refuse_absurd_work(const detail::PreparedTriangles& prepared, const Grid& grid) {
     uint64_t tests = 0;
-    for (const detail::OvRange& r : prepared.ranges) {
+    for (size_t t = 0; t < prepared.triangles.size(); ++t) {
+        const detail::OvRange& r = prepared.ranges[t];
         uint64_t n = 1;
         for (int k = 0; k < 3; ++k) {
             const int64_t lo = std::max<int64_t>(r.lo[k], 0);
