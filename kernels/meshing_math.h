@@ -98,6 +98,11 @@ OM_FN OM_UINT om_index(OmField f, int x, int y, int z) {
 // The slot of sample (x, y, z), which must lie in an active brick.
 OM_FN OM_UINT om_slot(OmField f, OmTiling t, OM_GLOBAL const OM_UINT* brick_base, int x, int y,
                       int z) {
+    // One brick (the host's sparse mesher tiles each box so): no divisions, the same slot.
+    if (t.count[0] == 1 && t.count[1] == 1 && t.count[2] == 1)
+        return brick_base[0] + (OM_UINT)x +
+               (OM_UINT)min(t.size, f.n[0]) *
+                   ((OM_UINT)y + (OM_UINT)min(t.size, f.n[1]) * (OM_UINT)z);
     int b[3] = {x / t.size, y / t.size, z / t.size};
     OM_UINT base =
         brick_base[(OM_UINT)b[0] +

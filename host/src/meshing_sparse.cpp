@@ -393,8 +393,14 @@ class SparseMesher {
                     }
                 }
             });
-        for (size_t t = 0; t < triangles.size(); t += 3)
-            mesh.triangles.push_back({triangles[t], triangles[t + 1], triangles[t + 2]});
+        const size_t first = mesh.triangles.size();
+        mesh.triangles.resize(first + triangles.size() / 3);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, triangles.size() / 3, 4096),
+                          [&](const auto& range) {
+                              for (size_t t = range.begin(); t != range.end(); ++t)
+                                  mesh.triangles[first + t] = {
+                                      triangles[3 * t], triangles[3 * t + 1], triangles[3 * t + 2]};
+                          });
     }
 
   private:
