@@ -2,6 +2,7 @@
 // over the shards of a split are pieces of the unrestricted run, exactly, and together are all of
 // it, also when each shard holds only the triangles selection_triangles gives it. That is what
 // lets a grid be computed on several processes or machines and merged.
+#include <cstring>
 #include <set>
 
 #include "binning.hpp"
@@ -168,6 +169,32 @@ TEST(BrickDivider, EqualsDivisionForEveryIndexAndBrickSize) {
         for (uint32_t index = 0; index < uint32_t(kMaxGridAxis); ++index)
             if (divide(index) != index / uint32_t(size))
                 FAIL() << index << " / " << size << " gave " << divide(index);
+    }
+}
+
+// ---- prepare_triangles ----
+
+// A grid holding every vertex lets preparation skip counting the pieces; the triangles it
+// prepares are those of the counting path, which an unused vertex outside the grid forces.
+TEST(Preparation, SkippingTheCountGivesTheCountedTriangles) {
+    const Mesh inside = random_triangles(20000, 4, 28, 3, 5);  // every vertex in [1, 31]
+    Mesh with_far_vertex = inside;
+    with_far_vertex.positions.push_back({500, -500, 7});
+    const Grid g = unit_grid(32, 32, 32);
+    for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
+        const detail::PreparedTriangles fast = detail::prepare_triangles(inside, g, boundary);
+        const detail::PreparedTriangles counted =
+            detail::prepare_triangles(with_far_vertex, g, boundary);
+        ASSERT_EQ(fast.triangles.size(), inside.triangles.size());
+        ASSERT_EQ(counted.triangles.size(), inside.triangles.size());
+        for (size_t t = 0; t < fast.triangles.size(); ++t) {
+            ASSERT_EQ(fast.source[t], t);
+            ASSERT_EQ(counted.source[t], t);
+            ASSERT_EQ(
+                std::memcmp(&fast.triangles[t], &counted.triangles[t], sizeof(detail::OvTriangle)),
+                0);
+            ASSERT_EQ(std::memcmp(&fast.ranges[t], &counted.ranges[t], sizeof(detail::OvRange)), 0);
+        }
     }
 }
 
