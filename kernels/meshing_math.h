@@ -372,16 +372,17 @@ OM_FN void om_sn_emit(OM_GLOBAL const float* values, OmField f, int x, int y, in
 // denominator is negative, so the saddle is inside iff A C > B D. Both cells sharing the face
 // compute the same two products (float multiplication is commutative) and compare them the same
 // way, so they always agree; a tie counts as not connected.
-OM_FN int om_mc_face_bits(const float v[8], float iso) {
+// `inside` is om_inside_mask(v, iso): the sides it gives pass over the faces that are not
+// ambiguous (most of them) before any product is formed.
+OM_FN int om_mc_face_bits(const float v[8], float iso, int inside) {
+    if (inside == 0 || inside == 0xff) return 0;
     int bits = 0;
     for (int f = 0; f < 6; ++f) {
-        float w[4];
         int in[4];
-        for (int i = 0; i < 4; ++i) {
-            w[i] = v[om_face_corner(f, i)] - iso;
-            in[i] = om_inside(v[om_face_corner(f, i)], iso);
-        }
+        for (int i = 0; i < 4; ++i) in[i] = (inside >> om_face_corner(f, i)) & 1;
         if (in[0] != in[2] || in[1] != in[3] || in[0] == in[1]) continue;
+        float w[4];
+        for (int i = 0; i < 4; ++i) w[i] = v[om_face_corner(f, i)] - iso;
         float inside_pair = in[0] ? w[0] * w[2] : w[1] * w[3];
         float outside_pair = in[0] ? w[1] * w[3] : w[0] * w[2];
         bits |= (inside_pair > outside_pair) << f;
@@ -390,7 +391,8 @@ OM_FN int om_mc_face_bits(const float v[8], float iso) {
 }
 
 OM_FN int om_mc_case(const float v[8], float iso) {
-    return om_inside_mask(v, iso) | om_mc_face_bits(v, iso) << 8;
+    int inside = om_inside_mask(v, iso);
+    return inside | om_mc_face_bits(v, iso, inside) << 8;
 }
 
 // Index among the sample's own vertices of the one on edge (s, a): its sign-changing edges with

@@ -454,15 +454,47 @@ class SparseMesher {
         field_.copy_box(block.box_lo, block.box_hi, block.box.data());
     }
 
-    // Phase 3: the slab's counts become offsets, walking its samples in global order (z, then
-    // y, then x over the whole grid): layer by layer, each row of blocks row by row, and each
-    // row of samples across the blocks.
+    // Phase 3: the slab's counts become offsets in global sample order (z, then y, then x over
+    // the whole grid): layer by layer, each row of blocks row by row, and each row of samples
+    // across the blocks. The walk in that order is over segments (a block's row of up to 8
+    // samples at one y and z), whose sums are taken and whose samples are numbered in parallel.
     void scan(Slab& slab) {
         slab.first_vertex = uint32_t(vertices_);
         slab.first_triangle = uint32_t(triangles_);
         slab.vertex_offset.resize(slab.vertex_count.size());
         const int64_t z0 = slab.bz * kBlock;
-        for (int64_t lz = 0; lz < std::min<int64_t>(kBlock, n_[2] - z0); ++lz)
+        const int64_t ez = std::min<int64_t>(kBlock, n_[2] - z0);
+        constexpr size_t kSegments = size_t(kBlock) * kBlock;  // per block, (ly, lz)
+        auto extent = [&](const Block& block, int a) {
+            return std::min<int64_t>(kBlock, n_[a] - block.origin[a]);
+        };
+        // Segment (ly, lz) of block b is [b * kBlockSamples + kBlock * (ly + kBlock * lz), + ex).
+        std::vector<uint64_t> segment_vertices(slab.blocks.size() * kSegments),
+            segment_triangles(segment_vertices.size());
+        auto for_each_segment = [&](auto&& f) {
+            tbb::parallel_for(
+                tbb::blocked_range<size_t>(0, slab.blocks.size(), 16), [&](const auto& range) {
+                    for (size_t b = range.begin(); b != range.end(); ++b) {
+                        const Block& block = slab.blocks[b];
+                        const int64_t ex = extent(block, 0), ey = extent(block, 1);
+                        for (int64_t lz = 0; lz < ez; ++lz)
+                            for (int64_t ly = 0; ly < ey; ++ly)
+                                f(b * kSegments + size_t(ly + kBlock * lz),
+                                  b * kBlockSamples + size_t(kBlock * (ly + kBlock * lz)), ex);
+                    }
+                });
+        };
+        for_each_segment([&](size_t segment, size_t s, int64_t ex) {
+            uint64_t vertices = 0, triangles = 0;
+            for (int64_t lx = 0; lx < ex; ++lx) {
+                vertices += slab.vertex_count[s + lx];
+                triangles += slab.triangle_offset[s + lx];
+            }
+            segment_vertices[segment] = vertices;
+            segment_triangles[segment] = triangles;
+        });
+        // The segments in global order; their sums become their first offsets.
+        for (int64_t lz = 0; lz < ez; ++lz)
             for (size_t row = 0; row < slab.blocks.size();) {
                 size_t row_end = row;
                 const int64_t y0 = slab.blocks[row].origin[1];
@@ -470,18 +502,26 @@ class SparseMesher {
                     ++row_end;
                 for (int64_t ly = 0; ly < std::min<int64_t>(kBlock, n_[1] - y0); ++ly)
                     for (size_t b = row; b < row_end; ++b) {
-                        const int64_t x0 = slab.blocks[b].origin[0];
-                        const size_t s = b * kBlockSamples + size_t(kBlock * (ly + kBlock * lz));
-                        for (int64_t lx = 0; lx < std::min<int64_t>(kBlock, n_[0] - x0); ++lx) {
-                            slab.vertex_offset[s + lx] = uint32_t(vertices_);
-                            vertices_ += slab.vertex_count[s + lx];
-                            const uint32_t triangles = slab.triangle_offset[s + lx];
-                            slab.triangle_offset[s + lx] = uint32_t(triangles_);
-                            triangles_ += triangles;
-                        }
+                        const size_t segment = b * kSegments + size_t(ly + kBlock * lz);
+                        const uint64_t vertices = segment_vertices[segment];
+                        const uint64_t triangles = segment_triangles[segment];
+                        segment_vertices[segment] = vertices_;
+                        segment_triangles[segment] = triangles_;
+                        vertices_ += vertices;
+                        triangles_ += triangles;
                     }
                 row = row_end;
             }
+        for_each_segment([&](size_t segment, size_t s, int64_t ex) {
+            uint64_t vertex = segment_vertices[segment], triangle = segment_triangles[segment];
+            for (int64_t lx = 0; lx < ex; ++lx) {
+                slab.vertex_offset[s + lx] = uint32_t(vertex);
+                vertex += slab.vertex_count[s + lx];
+                const uint32_t triangles = slab.triangle_offset[s + lx];
+                slab.triangle_offset[s + lx] = uint32_t(triangle);
+                triangle += triangles;
+            }
+        });
         detail::check_mesh_indices(vertices_, "vertices");
         detail::check_mesh_indices(triangles_, "triangles");
         detail::check_meshing_memory(slab.vertex_count.size(), vertices_, triangles_, who_);
