@@ -109,12 +109,8 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         auto set_common = [&](cl::Kernel& kernel) {
             kernel.setArg(0, values);
             if (!nets) kernel.setArg(1, table);
-            kernel.setArg(1 + shift, cl_int(dims[0]));
-            kernel.setArg(2 + shift, cl_int(dims[1]));
-            kernel.setArg(3 + shift, cl_int(dims[2]));
-            kernel.setArg(4 + shift, cl_float(iso));
-            kernel.setArg(5 + shift, brick_buffer);
-            kernel.setArg(6 + shift, cl_int(kBrickSize));
+            detail::set_args(kernel, 1 + shift, cl_int(dims[0]), cl_int(dims[1]), cl_int(dims[2]),
+                             cl_float(iso), brick_buffer, cl_int(kBrickSize));
             kernel.setArg(9 + shift, brick_base);
         };
 
@@ -124,8 +120,7 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         cl::Buffer triangle_offset = buffer(cl, CL_MEM_READ_WRITE, slots * sizeof(cl_uint));
         cl::Kernel count(program, nets ? "sn_count" : "mc_count");
         set_common(count);
-        count.setArg(10 + shift, vertex_offset);
-        count.setArg(11 + shift, triangle_offset);
+        detail::set_args(count, 10 + shift, vertex_offset, triangle_offset);
         run(count, 7 + shift, phases.count);
 
         // Phase 4: prefix sums in global sample order on the host.
@@ -157,11 +152,8 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
             buffer(cl, CL_MEM_WRITE_ONLY, 3 * size_t(triangle_count) * sizeof(cl_uint));
         cl::Kernel emit(program, nets ? "sn_emit" : "mc_emit");
         set_common(emit);
-        emit.setArg(10 + shift, vertex_offset);
-        emit.setArg(11 + shift, triangle_offset);
-        emit.setArg(12 + shift, vertex_sample);
-        emit.setArg(13 + shift, vertex_local);
-        emit.setArg(14 + shift, triangles);
+        detail::set_args(emit, 10 + shift, vertex_offset, triangle_offset, vertex_sample,
+                         vertex_local, triangles);
         run(emit, 7 + shift, phases.emit);
 
         // Phase 6: results back, converted like the reference's.

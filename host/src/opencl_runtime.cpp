@@ -111,13 +111,14 @@ void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n,
 
 void run_sliced(const cl::CommandQueue& queue, uint64_t n, size_t group,
                 const std::function<void(uint64_t first, uint64_t count)>& enqueue,
-                const std::function<void(uint64_t done, uint64_t total)>& report) {
-    constexpr uint64_t kMaxSlice = uint64_t(1) << 22, kFirstSlice = uint64_t(1) << 12;
+                const std::function<void(uint64_t done, uint64_t total)>& report,
+                uint64_t max_slice) {
+    constexpr uint64_t kFirstSlice = uint64_t(1) << 12;
     const uint64_t unit = std::max<uint64_t>(1, group);
     auto whole_groups = [&](uint64_t items) {
-        return std::clamp(items / unit * unit, unit, std::max(unit, kMaxSlice / unit * unit));
+        return std::clamp(items / unit * unit, unit, std::max(unit, max_slice / unit * unit));
     };
-    uint64_t slice = whole_groups(report ? kFirstSlice : kMaxSlice);
+    uint64_t slice = whole_groups(report ? kFirstSlice : max_slice);
     for (uint64_t first = 0; first < n;) {
         const uint64_t count = std::min(slice, n - first);
         const auto start = Clock::now();

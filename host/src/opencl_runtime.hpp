@@ -37,16 +37,26 @@ std::string build_options(cl_device_fp_config single_fp_config);
 // Launches `kernel` over at least n items in groups of `group`; kernels skip the padding items.
 void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group);
 
+// Sets kernel arguments first, first + 1, ... to `args`, in order.
+template <typename... Args>
+void set_args(cl::Kernel& kernel, cl_uint first, const Args&... args) {
+    (kernel.setArg(first++, args), ...);
+}
+
 // Runs items [0, n) through `enqueue(first, count)`, which sets a slice's arguments and enqueues
-// it; slices are multiples of `group` (but the last), at most 2^22 items so no single enqueue is
-// enormous. Without `report` nothing waits between slices. With it, each slice is finished and
-// then reported as report(items done, n), and slices are sized towards kSliceSeconds each,
-// starting small: an item costs microseconds on a CPU device and nanoseconds on a GPU, and a
-// cancel can only take effect between slices. The price is one queue round trip per slice.
+// it: the one way every kernel over many items is launched. Slices are multiples of `group` (but
+// the last), at most `max_slice` items (2^22 unless a kernel's items are long) so no single
+// enqueue is enormous. Without `report` nothing waits between slices. With it, each slice is
+// finished and then reported as report(items done, n), and slices are sized towards
+// kSliceSeconds each, starting small: an item costs microseconds on a CPU device and nanoseconds
+// on a GPU, and a cancel can only take effect between slices. The price is one queue round trip
+// per slice.
 constexpr double kSliceSeconds = 0.1;
+constexpr uint64_t kMaxSliceItems = uint64_t(1) << 22;
 void run_sliced(const cl::CommandQueue& queue, uint64_t n, size_t group,
                 const std::function<void(uint64_t first, uint64_t count)>& enqueue,
-                const std::function<void(uint64_t done, uint64_t total)>& report);
+                const std::function<void(uint64_t done, uint64_t total)>& report,
+                uint64_t max_slice = kMaxSliceItems);
 
 // A read-only buffer holding `data` (written without blocking). Zero-length buffers are invalid
 // in OpenCL, so an empty vector gets a one-element buffer.

@@ -86,30 +86,17 @@ std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared
         cl.queue.enqueueFillBuffer(nearest, cl_uint(kNoTriangle), 0,
                                    size_t(voxels) * sizeof(cl_uint));
         cl::Kernel seeds(program, "band_nearest");
-        seeds.setArg(0, triangles);
-        seeds.setArg(1, first);
-        seeds.setArg(2, cl_uint(prepared.triangles.size()));
-        seeds.setArg(4, cl_ulong(items));
-        seeds.setArg(5, prepared.band);
-        seeds.setArg(6, prepared.band2);
-        seeds.setArg(7, cl_int(grid.dims[0]));
-        seeds.setArg(8, cl_int(grid.dims[1]));
-        seeds.setArg(9, distance);
-        seeds.setArg(10, nearest);
+        set_args(seeds, 0, triangles, first, cl_uint(prepared.triangles.size()), cl_ulong(0),
+                 cl_ulong(items), prepared.band, prepared.band2, cl_int(grid.dims[0]),
+                 cl_int(grid.dims[1]), distance, nearest);
         run(seeds, 3, items, phases.seeds);
 
         cl::Kernel jump(program, "jump");
-        jump.setArg(0, triangles);
-        jump.setArg(3, cl_ulong(voxels));
-        jump.setArg(5, cl_int(grid.dims[0]));
-        jump.setArg(6, cl_int(grid.dims[1]));
-        jump.setArg(7, cl_int(grid.dims[2]));
-        jump.setArg(9, distance);
         size_t phase = phases.first_jump;
         for (int step : jump_steps(grid)) {
-            jump.setArg(1, nearest);
-            jump.setArg(4, cl_int(step));
-            jump.setArg(8, scratch);
+            set_args(jump, 0, triangles, nearest, cl_ulong(0), cl_ulong(voxels), cl_int(step),
+                     cl_int(grid.dims[0]), cl_int(grid.dims[1]), cl_int(grid.dims[2]), scratch,
+                     distance);
             run(jump, 2, voxels, phase++);
             std::swap(nearest, scratch);
         }

@@ -47,14 +47,9 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             throw DeviceError(cl.info.name + " cannot run work groups of " +
                               std::to_string(kLeafGroup) +
                               " items, which the sparse distance field needs");
-        kernel.setArg(0, triangles);
-        kernel.setArg(1, first);
-        kernel.setArg(2, lists);
-        kernel.setArg(3, leaf_of_slot);
-        kernel.setArg(7, cl_int(leaves.dims[0]));
-        kernel.setArg(8, cl_int(leaves.dims[1]));
-        kernel.setArg(9, prepared.band);
-        kernel.setArg(10, prepared.band2);
+        set_args(kernel, 0, triangles, first, lists, leaf_of_slot);
+        set_args(kernel, 7, cl_int(leaves.dims[0]), cl_int(leaves.dims[1]), prepared.band,
+                 prepared.band2);
 
         // Phase 2: batches of consecutive slots as the budget allows, each leaf a work group that
         // writes only its own samples, which then come back and are handed on.
@@ -70,8 +65,7 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             const uint64_t count = std::min<uint64_t>(max_slots, leaves.count - first_slot);
             t = Clock::now();
             const cl::Buffer& buffer = samples.get(cl.context, max_slots);
-            kernel.setArg(4, cl_uint(first_slot));
-            kernel.setArg(6, cl_uint(first_slot + count));
+            set_args(kernel, 4, cl_uint(first_slot), cl_uint(0), cl_uint(first_slot + count));
             kernel.setArg(11, buffer);
             std::function<void(uint64_t, uint64_t)> report;
             if (options.progress)

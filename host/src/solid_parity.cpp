@@ -16,7 +16,6 @@ namespace oclvox::detail {
 namespace {
 
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
-constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
 
 struct Layout {
     int brick;              // brick edge in voxels
@@ -207,39 +206,24 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
 
         // Flips, then parity per voxel column, then the brick layout.
         t = Clock::now();
-        flip.setArg(0, tri_buffer);
-        flip.setArg(1, pair_triangle);
-        flip.setArg(2, pair_slot);
-        flip.setArg(3, pair_first);
-        flip.setArg(4, pair_count);
-        flip.setArg(5, slot_column);
-        flip.setArg(7, cl_uint(batch.items));
-        flip.setArg(8, cl_int(l.brick));
-        flip.setArg(9, cl_int(l.nx));
-        flip.setArg(10, cl_int(l.ny));
-        flip.setArg(11, cl_int(l.nz));
-        flip.setArg(12, cl_uint(l.words));
-        flip.setArg(13, bit_buffer);
-        for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
-            flip.setArg(6, cl_uint(base));
-            launch(cl.queue, flip, std::min(kItemsPerLaunch, batch.items - base), flip_group);
-        }
+        set_args(flip, 0, tri_buffer, pair_triangle, pair_slot, pair_first, pair_count, slot_column,
+                 cl_uint(0), cl_uint(batch.items), cl_int(l.brick), cl_int(l.nx), cl_int(l.ny),
+                 cl_int(l.nz), cl_uint(l.words), bit_buffer);
+        run_sliced(cl.queue, batch.items, flip_group,
+                   [&](uint64_t first, uint64_t count) {
+                       flip.setArg(6, cl_uint(first));
+                       launch(cl.queue, flip, count, flip_group);
+                   },
+                   {});
         const uint64_t columns = uint64_t(batch.column_count) * l.brick * l.brick;
-        prefix.setArg(0, bit_buffer);
-        prefix.setArg(1, cl_uint(columns));
-        prefix.setArg(2, cl_uint(l.words));
+        set_args(prefix, 0, bit_buffer, cl_uint(columns), cl_uint(l.words));
         launch(cl.queue, prefix, columns, prefix_group);
         // parity_pack: an item per 4x4 voxel columns and 8 block rows (a 32-bit word of layers).
         const uint64_t block_rows = uint64_t(l.nbz) * uint64_t(l.brick / 4);
         const uint64_t pack_items = uint64_t(batch.column_count) * uint64_t(l.brick / 4) *
                                     uint64_t(l.brick / 4) * ((block_rows + 7) / 8);
-        pack.setArg(0, bit_buffer);
-        pack.setArg(1, cl_uint(batch.column_count));
-        pack.setArg(2, cl_int(l.brick));
-        pack.setArg(3, cl_int(l.nbz));
-        pack.setArg(4, cl_int(l.nz));
-        pack.setArg(5, cl_uint(l.words));
-        pack.setArg(6, block_buffer);
+        set_args(pack, 0, bit_buffer, cl_uint(batch.column_count), cl_int(l.brick), cl_int(l.nbz),
+                 cl_int(l.nz), cl_uint(l.words), block_buffer);
         launch(cl.queue, pack, pack_items, pack_group);
         cl.queue.finish();
         stats.seconds_kernels += seconds_since(t);

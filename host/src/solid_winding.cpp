@@ -581,20 +581,15 @@ class WindingEvaluator {
             stats_.seconds_upload += seconds_since(t);
 
             t = Clock::now();
-            kernel_.setArg(0, vertices_);
-            kernel_.setArg(1, nodes_);
-            kernel_.setArg(2, node_count_);
-            kernel_.setArg(3, point_buffer);
-            kernel_.setArg(5, cl_uint(n));
-            kernel_.setArg(6, far_ratio);
-            kernel_.setArg(7, node_tolerance);
-            kernel_.setArg(8, w_buffer);
-            kernel_.setArg(9, error_buffer);
-            for (uint64_t base = 0; base < n; base += kWindingItemsPerLaunch) {
-                kernel_.setArg(4, cl_uint(base));
-                launch(cl_.queue, kernel_, std::min<uint64_t>(kWindingItemsPerLaunch, n - base),
-                       group_);
-            }
+            set_args(kernel_, 0, vertices_, nodes_, node_count_, point_buffer, cl_uint(0),
+                     cl_uint(n), far_ratio, node_tolerance, w_buffer, error_buffer);
+            run_sliced(
+                cl_.queue, n, group_,
+                [&](uint64_t first, uint64_t slice) {
+                    kernel_.setArg(4, cl_uint(first));
+                    launch(cl_.queue, kernel_, slice, group_);
+                },
+                {}, kWindingItemsPerLaunch);
             cl_.queue.finish();
             stats_.seconds_kernels += seconds_since(t);
             stats_.work_items += n;

@@ -26,10 +26,8 @@ namespace {
 using detail::Clock;
 using detail::seconds_since;
 
-// Work items of one batch are numbered with 32-bit offsets; launches are cut into slices so no
-// single enqueue is enormous (keeps drivers' watchdogs and PoCL's scheduling happy).
+// Work items of one batch are numbered with 32-bit offsets.
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
-constexpr uint64_t kItemsPerLaunch = uint64_t(1) << 22;
 
 struct Batch {
     size_t first_brick = 0, brick_count = 0;
@@ -151,11 +149,8 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
 
             t = Clock::now();
             cl::Kernel setup(program, kernels.setup);
-            setup.setArg(0, triangles);
-            setup.setArg(1, triangle_count);
-            setup.setArg(2, cl_int(options.boundary == Boundary::HalfOpen));
-            setup.setArg(3, setups);
-            setup.setArg(4, ranges);
+            detail::set_args(setup, 0, triangles, triangle_count,
+                             cl_int(options.boundary == Boundary::HalfOpen), setups, ranges);
             detail::launch(cl.queue, setup, triangle_count,
                            detail::work_group_size(setup, cl.device));
             cl.queue.finish();
@@ -190,24 +185,16 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 stats.seconds_upload += seconds_since(t);
 
                 t = Clock::now();
-                voxelize.setArg(0, setups);
-                voxelize.setArg(1, ranges);
-                voxelize.setArg(2, pair_triangle);
-                voxelize.setArg(3, pair_slot);
-                voxelize.setArg(4, pair_first);
-                voxelize.setArg(5, pair_count);
-                voxelize.setArg(6, slot_brick);
-                voxelize.setArg(8, cl_uint(batch.items));
-                voxelize.setArg(9, cl_int(brick_size));
-                voxelize.setArg(10, cl_int(grid.dims[0]));
-                voxelize.setArg(11, cl_int(grid.dims[1]));
-                voxelize.setArg(12, cl_int(grid.dims[2]));
-                voxelize.setArg(13, bit_buffer);
-                for (uint64_t base = 0; base < batch.items; base += kItemsPerLaunch) {
-                    voxelize.setArg(7, cl_uint(base));
-                    const uint64_t n = std::min(kItemsPerLaunch, batch.items - base);
-                    detail::launch(cl.queue, voxelize, n, voxelize_group);
-                }
+                detail::set_args(voxelize, 0, setups, ranges, pair_triangle, pair_slot, pair_first,
+                                 pair_count, slot_brick, cl_uint(0), cl_uint(batch.items),
+                                 cl_int(brick_size), cl_int(grid.dims[0]), cl_int(grid.dims[1]),
+                                 cl_int(grid.dims[2]), bit_buffer);
+                detail::run_sliced(cl.queue, batch.items, voxelize_group,
+                                   [&](uint64_t first, uint64_t count) {
+                                       voxelize.setArg(7, cl_uint(first));
+                                       detail::launch(cl.queue, voxelize, count, voxelize_group);
+                                   },
+                                   {});
                 cl.queue.finish();
                 stats.seconds_kernels += seconds_since(t);
                 stats.work_items += batch.items;
