@@ -179,8 +179,18 @@ class BoxBits {
     // Sets cells [lo, hi] (inclusive) of every axis.
     void fill(const int64_t* lo, const int64_t* hi) {
         for (int64_t z = lo[2]; z <= hi[2]; ++z)
-            for (int64_t y = lo[1]; y <= hi[1]; ++y)
-                for (int64_t x = lo[0]; x <= hi[0]; ++x) set(x, y, z);
+            for (int64_t y = lo[1]; y <= hi[1]; ++y) {
+                // The row's cells, a word at a time.
+                const uint64_t first = index(lo[0], y, z),
+                               end = first + uint64_t(hi[0] - lo[0]) + 1;
+                for (uint64_t i = first; i < end;) {
+                    const uint64_t word_end = std::min(end, (i | 63) + 1);
+                    const uint64_t ones =
+                        word_end - i == 64 ? ~uint64_t(0) : ((uint64_t(1) << (word_end - i)) - 1);
+                    words_[i >> 6] |= ones << (i & 63);
+                    i = word_end;
+                }
+            }
     }
     // The cells of this box grouped into 2x2x2 parents: a parent is set if any child is. Visits
     // the set cells only: these boxes hold surfaces, a few percent of their cells.
@@ -800,7 +810,10 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
             for (double c : centre_of(tile)) points.push_back(float(c));
         }
         evaluator.evaluate(points, OVS_WINDING_FAR, kTileNodeTolerance, w, error);
-        for (size_t i = 0; i < evaluated.size(); ++i) {
+        // Each evaluated tile's n, where it is certain over the whole tile, else kUnknown (the
+        // tile is split). The fans' sums are the cost, and tiles are independent: in parallel.
+        std::vector<uint8_t> tile_state(evaluated.size());
+        tbb::parallel_for(size_t(0), evaluated.size(), [&](size_t i) {
             const Tile& tile = evaluated[i];
             const Vec3d centre = centre_of(tile);
             const double reach = tile_reach(tile);
@@ -810,16 +823,23 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
             const bool certain =
                 std::fabs(cycle - whole) + double(error[i]) + kTileRounding < 0.5 &&
                 std::fabs(whole) < kZero;
-            if (!certain || (!fans.triangles.empty() && !(fans.bound(centre, reach) < 0.5))) {
+            tile_state[i] =
+                !certain || (!fans.triangles.empty() && !(fans.bound(centre, reach) < 0.5))
+                    ? kUnknown
+                    : uint8_t(int(whole) + kZero);
+        });
+        for (size_t i = 0; i < evaluated.size(); ++i) {
+            const Tile& tile = evaluated[i];
+            if (tile_state[i] == kUnknown) {
                 split(tile);
                 continue;
             }
-            const uint8_t decided = uint8_t(int(whole) + kZero);
+            const uint8_t decided = tile_state[i];
             for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
                 for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y) {
                     std::fill_n(state.begin() + int64_t(inside.index(tile.lo[0], y, z)),
                                 tile.hi[0] - tile.lo[0] + 1, decided);
-                    if (whole != 0) {
+                    if (decided != kZero) {
                         const int64_t lo[3] = {tile.lo[0], y, z}, hi[3] = {tile.hi[0], y, z};
                         inside.fill(lo, hi);
                     }
@@ -829,114 +849,140 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     }
     report_progress(options, bricks.size() / kSteps, bricks.size());
 
-    // Phase 3.
-    std::vector<uint64_t> queue;
-    for (const Tile& tile : pending)
-        for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
-            for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
-                for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x)
-                    queue.push_back(inside.index(x, y, z));
-    auto coords = [&](uint64_t i, int64_t* v) {
-        v[0] = int64_t(i % uint64_t(n[0]));
-        v[1] = int64_t(i / uint64_t(n[0]) % uint64_t(n[1]));
-        v[2] = int64_t(i / uint64_t(n[0]) / uint64_t(n[1]));
+    // Phase 3. Voxels travel with their coordinates, so none is divided back out of an index.
+    struct Voxel {
+        uint64_t index;
+        int64_t v[3];
     };
     const uint64_t step[3] = {1, uint64_t(n[0]), uint64_t(n[0]) * uint64_t(n[1])};
-    // Whether no triangle (mesh or fan) meets the segment from the centre of voxel i one step up
+    // Whether no triangle (mesh or fan) meets the segment from the centre of voxel a one step up
     // `axis`: any that does touches one of the two voxels.
-    auto clear = [&](uint64_t i, int axis) {
-        int64_t v[3];
-        coords(i, v);
-        const Vec3d p{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
-                      double(box.lo[2] + v[2]) + 0.5};
-        for (uint64_t end : {i, i + step[axis]}) {
+    auto clear = [&](const Voxel& a, int axis) {
+        const Vec3d p{double(box.lo[0] + a.v[0]) + 0.5, double(box.lo[1] + a.v[1]) + 0.5,
+                      double(box.lo[2] + a.v[2]) + 0.5};
+        for (uint64_t end : {a.index, a.index + step[axis]}) {
             const auto [first, last] = surface.pairs_of(end);
             for (size_t pair = first; pair < last; ++pair)
                 if (may_cross(tri[surface.voxel_triangle[pair].second], p, axis)) return false;
         }
         return true;
     };
-    // Voxel i (without n) takes n from a neighbour across a clear segment; false if none can.
-    auto settle = [&](uint64_t i) {
-        int64_t v[3];
-        coords(i, v);
+    // The neighbour of voxel a one step along `axis` in direction dir (-1 or +1); false beyond
+    // the box.
+    auto neighbour = [&](const Voxel& a, int axis, int dir, Voxel& b) {
+        if (a.v[axis] + dir < 0 || a.v[axis] + dir >= n[axis]) return false;
+        b = a;
+        b.v[axis] += dir;
+        b.index = dir > 0 ? a.index + step[axis] : a.index - step[axis];
+        return true;
+    };
+    // Voxel a (without n) takes n from a neighbour across a clear segment; false if none can.
+    auto settle = [&](const Voxel& a) {
         for (int axis = 0; axis < 3; ++axis)
             for (int dir = -1; dir <= 1; dir += 2) {
-                if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
-                const uint64_t j = dir > 0 ? i + step[axis] : i - step[axis];
-                if (state[j] == kUnknown) continue;
-                const bool free = !surface.bits.get(i) && !surface.bits.get(j);
-                if (!free && !clear(dir > 0 ? i : j, axis)) continue;
-                state[i] = state[j];
+                Voxel b;
+                if (!neighbour(a, axis, dir, b) || state[b.index] == kUnknown) continue;
+                const bool free = !surface.bits.get(a.index) && !surface.bits.get(b.index);
+                if (!free && !clear(dir > 0 ? a : b, axis)) continue;
+                state[a.index] = state[b.index];
                 return true;
             }
         return false;
     };
-    std::vector<uint64_t> work;
-    for (uint64_t i : queue) {
-        if (state[i] != kUnknown || !settle(i)) continue;
-        work.push_back(i);
-        while (!work.empty()) {
-            const uint64_t k = work.back();
-            work.pop_back();
-            int64_t v[3];
-            coords(k, v);
-            for (int axis = 0; axis < 3; ++axis)
-                for (int dir = -1; dir <= 1; dir += 2) {
-                    if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
-                    const uint64_t j = dir > 0 ? k + step[axis] : k - step[axis];
-                    if (state[j] == kUnknown && settle(j)) work.push_back(j);
-                }
-        }
-    }
-    std::vector<uint64_t> unsettled;
-    std::vector<uint64_t> near_voxels;
-    std::vector<int> near_whole;
-    std::vector<float> near_points;
-    points.clear();
-    for (const Tile& tile : pending) {
-        // Per voxel, w_fans matters only where its bound over the tile does not settle it. In a
-        // tile that no fan touches, w_fans is within `spread` of its value at the tile's centre.
-        const Vec3d tile_centre = centre_of(tile);
-        const double reach = tile_reach(tile);
-        const bool near_fans = !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
-        double fan_centre = 0, spread = INFINITY;
-        if (near_fans &&
-            !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
-                             tile.lo[2] >> kFinestTileLevel)) {
-            fan_centre = fans.winding(tile_centre);
-            spread = reach * fans.gradient_bound(tile_centre, reach);
-        }
+    // Seeds in the order of the pending tiles' voxels; each flood settles what it can reach.
+    std::vector<Voxel> work;
+    for (const Tile& tile : pending)
         for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
             for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                 for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
-                    const uint64_t i = inside.index(x, y, z);
-                    const Vec3d centre{double(box.lo[0] + x) + 0.5, double(box.lo[1] + y) + 0.5,
-                                       double(box.lo[2] + z) + 0.5};
-                    if (state[i] == kUnknown) {
-                        unsettled.push_back(i);
-                        for (double c : centre) points.push_back(float(c));
-                        continue;
+                    const Voxel seed{inside.index(x, y, z), {x, y, z}};
+                    if (state[seed.index] != kUnknown || !settle(seed)) continue;
+                    work.push_back(seed);
+                    while (!work.empty()) {
+                        const Voxel k = work.back();
+                        work.pop_back();
+                        for (int axis = 0; axis < 3; ++axis)
+                            for (int dir = -1; dir <= 1; dir += 2) {
+                                Voxel j;
+                                if (neighbour(k, axis, dir, j) && state[j.index] == kUnknown &&
+                                    settle(j))
+                                    work.push_back(j);
+                            }
                     }
-                    const int whole = int(state[i]) - kZero;
-                    bool in = whole != 0;
-                    if (near_fans) {
-                        const double low = std::fabs(whole + fan_centre) - spread;
-                        const double high = std::fabs(whole + fan_centre) + spread;
-                        if (low > 0.5)
-                            in = true;
-                        else if (high < 0.5)
-                            in = false;
-                        else {
-                            // Decided below, from w_fans summed on the device.
-                            near_voxels.push_back(i);
-                            near_whole.push_back(whole);
-                            for (double c : centre) near_points.push_back(float(c));
+                }
+    // Each pending tile's voxels: settled ones inside or not (near a fan, from the fans' winding
+    // at the tile's centre and its spread, or later on the device), unsettled ones to evaluate.
+    // Tiles are independent (the fans' sums are the cost), so fixed chunks of them run in
+    // parallel and their lists are joined in chunk order: the same lists for any threads.
+    struct Classified {
+        std::vector<uint64_t> in, unsettled, near_voxels;
+        std::vector<int> near_whole;
+        std::vector<float> points, near_points;
+    };
+    constexpr size_t kTilesPerChunk = 64;
+    std::vector<Classified> parts((pending.size() + kTilesPerChunk - 1) / kTilesPerChunk);
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t c) {
+        Classified& out = parts[c];
+        for (size_t p = c * kTilesPerChunk; p < std::min(pending.size(), (c + 1) * kTilesPerChunk);
+             ++p) {
+            const Tile& tile = pending[p];
+            // Per voxel, w_fans matters only where its bound over the tile does not settle it. In
+            // a tile that no fan touches, w_fans is within `spread` of its value at the tile's
+            // centre.
+            const Vec3d tile_centre = centre_of(tile);
+            const double reach = tile_reach(tile);
+            const bool near_fans =
+                !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
+            double fan_centre = 0, spread = INFINITY;
+            if (near_fans &&
+                !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
+                                 tile.lo[2] >> kFinestTileLevel)) {
+                fan_centre = fans.winding(tile_centre);
+                spread = reach * fans.gradient_bound(tile_centre, reach);
+            }
+            for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+                for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                    for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
+                        const uint64_t i = inside.index(x, y, z);
+                        const Vec3d centre{double(box.lo[0] + x) + 0.5, double(box.lo[1] + y) + 0.5,
+                                           double(box.lo[2] + z) + 0.5};
+                        if (state[i] == kUnknown) {
+                            out.unsettled.push_back(i);
+                            for (double v : centre) out.points.push_back(float(v));
                             continue;
                         }
+                        const int whole = int(state[i]) - kZero;
+                        bool in = whole != 0;
+                        if (near_fans) {
+                            const double low = std::fabs(whole + fan_centre) - spread;
+                            const double high = std::fabs(whole + fan_centre) + spread;
+                            if (low > 0.5)
+                                in = true;
+                            else if (high < 0.5)
+                                in = false;
+                            else {
+                                // Decided below, from w_fans summed on the device.
+                                out.near_voxels.push_back(i);
+                                out.near_whole.push_back(whole);
+                                for (double v : centre) out.near_points.push_back(float(v));
+                                continue;
+                            }
+                        }
+                        if (in) out.in.push_back(i);
                     }
-                    if (in) inside.set(i);
-                }
+        }
+    });
+    std::vector<uint64_t> unsettled, near_voxels;
+    std::vector<int> near_whole;
+    std::vector<float> near_points;
+    points.clear();
+    for (const Classified& part : parts) {
+        for (const uint64_t i : part.in) inside.set(i);
+        unsettled.insert(unsettled.end(), part.unsettled.begin(), part.unsettled.end());
+        points.insert(points.end(), part.points.begin(), part.points.end());
+        near_voxels.insert(near_voxels.end(), part.near_voxels.begin(), part.near_voxels.end());
+        near_whole.insert(near_whole.end(), part.near_whole.begin(), part.near_whole.end());
+        near_points.insert(near_points.end(), part.near_points.begin(), part.near_points.end());
     }
     report_progress(options, 2 * bricks.size() / kSteps, bricks.size());
 
