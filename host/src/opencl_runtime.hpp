@@ -70,6 +70,23 @@ cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
     return buffer;
 }
 
+// Calls f(pointer) with the first `count` elements of `buffer` mapped for reading, then unmaps
+// it, also when f throws. A CPU device maps the buffer itself (no copy into fresh host pages,
+// which fault in at several microseconds a page); a GPU driver makes the same transfer a read
+// would.
+template <typename T, typename F>
+void read_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t count, F&& f) {
+    if (count == 0) return;  // a mapping of no bytes is invalid
+    void* mapped = queue.enqueueMapBuffer(buffer, CL_TRUE, CL_MAP_READ, 0, count * sizeof(T));
+    try {
+        f(static_cast<const T*>(mapped));
+    } catch (...) {
+        queue.enqueueUnmapMemObject(buffer, mapped);
+        throw;
+    }
+    queue.enqueueUnmapMemObject(buffer, mapped);
+}
+
 }  // namespace oclvox::detail
 
 namespace oclvox {

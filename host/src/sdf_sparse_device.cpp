@@ -60,7 +60,6 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
         size_t slots = size_t(
             std::clamp<uint64_t>(budget / kLeafBytes, 1, std::min(leaves.count, kMaxBatchLeaves)));
         SlotBuffer samples(CL_MEM_WRITE_ONLY, kLeafBytes);
-        std::vector<float> host;
         auto run_batch = [&](uint64_t first_slot, size_t max_slots) {
             const uint64_t count = std::min<uint64_t>(max_slots, leaves.count - first_slot);
             t = Clock::now();
@@ -84,10 +83,11 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             stats.seconds_kernels += seconds_since(t);
 
             t = Clock::now();
-            host.resize(size_t(count) * SparseField::kLeafSamples);
-            cl.queue.enqueueReadBuffer(buffer, CL_TRUE, 0, size_t(count) * kLeafBytes, host.data());
-            stats.seconds_download += seconds_since(t);
-            on_batch(first_slot, count, host.data());
+            read_mapped<float>(cl.queue, buffer, size_t(count) * SparseField::kLeafSamples,
+                               [&](const float* samples) {
+                                   stats.seconds_download += seconds_since(t);
+                                   on_batch(first_slot, count, samples);
+                               });
             ++stats.batches;
             progress.report(phase, first_slot + count, leaves.count);
             return size_t(count);

@@ -184,7 +184,6 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     const size_t flip_group = work_group_size(flip, cl.device);
     const size_t prefix_group = work_group_size(prefix, cl.device);
     const size_t pack_group = work_group_size(pack, cl.device);
-    std::vector<cl_uint> host_words;
     std::vector<uint64_t> host_blocks(block_words / 2);
 
     // Batches of brick columns, smaller after a device allocation failure (nothing of a failed
@@ -230,15 +229,16 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         stats.work_items += batch.items + columns + pack_items;
 
         t = Clock::now();
-        host_words.resize(batch.column_count * block_words);
-        cl.queue.enqueueReadBuffer(block_buffer, CL_TRUE, 0, host_words.size() * sizeof(cl_uint),
-                                   host_words.data());
-        for (size_t slot = 0; slot < batch.column_count; ++slot) {
-            const cl_uint* w = host_words.data() + slot * block_words;
-            for (size_t b = 0; b < host_blocks.size(); ++b)
-                host_blocks[b] = uint64_t(w[2 * b]) | uint64_t(w[2 * b + 1]) << 32;
-            merge_column(result, l, bins.columns[batch.first_column + slot], host_blocks.data());
-        }
+        read_mapped<cl_uint>(
+            cl.queue, block_buffer, batch.column_count * block_words, [&](const cl_uint* words) {
+                for (size_t slot = 0; slot < batch.column_count; ++slot) {
+                    const cl_uint* w = words + slot * block_words;
+                    for (size_t b = 0; b < host_blocks.size(); ++b)
+                        host_blocks[b] = uint64_t(w[2 * b]) | uint64_t(w[2 * b + 1]) << 32;
+                    merge_column(result, l, bins.columns[batch.first_column + slot],
+                                 host_blocks.data());
+                }
+            });
         stats.seconds_download += seconds_since(t);
         ++stats.batches;
         const size_t finished = done + batch.column_count;

@@ -159,7 +159,6 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             cl::Kernel voxelize(program, kernels.voxelize);
             const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
-            std::vector<cl_uint> host_bits;
             std::vector<uint64_t> blocks(result.blocks_per_brick());
             size_t slots = std::min(max_slots, binning.bricks.size());
             detail::SlotBuffer bits(CL_MEM_READ_WRITE, words_per_brick * sizeof(cl_uint));
@@ -201,15 +200,17 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
 
                 // Two 32-bit words per block, low word first.
                 t = Clock::now();
-                host_bits.resize(bit_words);
-                cl.queue.enqueueReadBuffer(bit_buffer, CL_TRUE, 0, bit_words * sizeof(cl_uint),
-                                           host_bits.data());
-                for (size_t slot = 0; slot < batch.brick_count; ++slot) {
-                    const cl_uint* words = host_bits.data() + slot * words_per_brick;
-                    for (size_t b = 0; b < blocks.size(); ++b)
-                        blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1]) << 32;
-                    result.merge_brick(binning.bricks[batch.first_brick + slot], blocks.data());
-                }
+                detail::read_mapped<cl_uint>(
+                    cl.queue, bit_buffer, bit_words, [&](const cl_uint* bits_back) {
+                        for (size_t slot = 0; slot < batch.brick_count; ++slot) {
+                            const cl_uint* words = bits_back + slot * words_per_brick;
+                            for (size_t b = 0; b < blocks.size(); ++b)
+                                blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1])
+                                                                         << 32;
+                            result.merge_brick(binning.bricks[batch.first_brick + slot],
+                                               blocks.data());
+                        }
+                    });
                 stats.seconds_download += seconds_since(t);
                 ++stats.batches;
 
