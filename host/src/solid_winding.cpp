@@ -889,24 +889,27 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
             }
         return false;
     };
-    // Seeds in the order of the pending tiles' voxels; each flood settles what it can reach.
-    std::vector<Voxel> work;
+    // Seeds in the order of the pending tiles' voxels; each flood settles what it can reach. The
+    // flood's stack can hold millions of voxels: it keeps their coordinates only.
+    std::vector<std::array<int32_t, 3>> work;
     for (const Tile& tile : pending)
         for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
             for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                 for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
                     const Voxel seed{inside.index(x, y, z), {x, y, z}};
                     if (state[seed.index] != kUnknown || !settle(seed)) continue;
-                    work.push_back(seed);
+                    work.push_back({int32_t(x), int32_t(y), int32_t(z)});
                     while (!work.empty()) {
-                        const Voxel k = work.back();
+                        const auto [kx, ky, kz] = work.back();
                         work.pop_back();
+                        const Voxel k{inside.index(kx, ky, kz), {kx, ky, kz}};
                         for (int axis = 0; axis < 3; ++axis)
                             for (int dir = -1; dir <= 1; dir += 2) {
                                 Voxel j;
                                 if (neighbour(k, axis, dir, j) && state[j.index] == kUnknown &&
                                     settle(j))
-                                    work.push_back(j);
+                                    work.push_back(
+                                        {int32_t(j.v[0]), int32_t(j.v[1]), int32_t(j.v[2])});
                             }
                     }
                 }
@@ -919,70 +922,76 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         std::vector<int> near_whole;
         std::vector<float> points, near_points;
     };
-    constexpr size_t kTilesPerChunk = 64;
-    std::vector<Classified> parts((pending.size() + kTilesPerChunk - 1) / kTilesPerChunk);
-    tbb::parallel_for(size_t(0), parts.size(), [&](size_t c) {
-        Classified& out = parts[c];
-        for (size_t p = c * kTilesPerChunk; p < std::min(pending.size(), (c + 1) * kTilesPerChunk);
-             ++p) {
-            const Tile& tile = pending[p];
-            // Per voxel, w_fans matters only where its bound over the tile does not settle it. In
-            // a tile that no fan touches, w_fans is within `spread` of its value at the tile's
-            // centre.
-            const Vec3d tile_centre = centre_of(tile);
-            const double reach = tile_reach(tile);
-            const bool near_fans =
-                !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
-            double fan_centre = 0, spread = INFINITY;
-            if (near_fans &&
-                !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
-                                 tile.lo[2] >> kFinestTileLevel)) {
-                fan_centre = fans.winding(tile_centre);
-                spread = reach * fans.gradient_bound(tile_centre, reach);
-            }
-            for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
-                for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
-                    for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
-                        const uint64_t i = inside.index(x, y, z);
-                        const Vec3d centre{double(box.lo[0] + x) + 0.5, double(box.lo[1] + y) + 0.5,
-                                           double(box.lo[2] + z) + 0.5};
-                        if (state[i] == kUnknown) {
-                            out.unsettled.push_back(i);
-                            for (double v : centre) out.points.push_back(float(v));
-                            continue;
-                        }
-                        const int whole = int(state[i]) - kZero;
-                        bool in = whole != 0;
-                        if (near_fans) {
-                            const double low = std::fabs(whole + fan_centre) - spread;
-                            const double high = std::fabs(whole + fan_centre) + spread;
-                            if (low > 0.5)
-                                in = true;
-                            else if (high < 0.5)
-                                in = false;
-                            else {
-                                // Decided below, from w_fans summed on the device.
-                                out.near_voxels.push_back(i);
-                                out.near_whole.push_back(whole);
-                                for (double v : centre) out.near_points.push_back(float(v));
-                                continue;
-                            }
-                        }
-                        if (in) out.in.push_back(i);
-                    }
-        }
-    });
+    // Rounds of kChunksPerRound chunks bound the lists held at once.
+    constexpr size_t kTilesPerChunk = 64, kChunksPerRound = 256;
+    const size_t chunks = (pending.size() + kTilesPerChunk - 1) / kTilesPerChunk;
     std::vector<uint64_t> unsettled, near_voxels;
     std::vector<int> near_whole;
     std::vector<float> near_points;
     points.clear();
-    for (const Classified& part : parts) {
-        for (const uint64_t i : part.in) inside.set(i);
-        unsettled.insert(unsettled.end(), part.unsettled.begin(), part.unsettled.end());
-        points.insert(points.end(), part.points.begin(), part.points.end());
-        near_voxels.insert(near_voxels.end(), part.near_voxels.begin(), part.near_voxels.end());
-        near_whole.insert(near_whole.end(), part.near_whole.begin(), part.near_whole.end());
-        near_points.insert(near_points.end(), part.near_points.begin(), part.near_points.end());
+    std::vector<Classified> parts;
+    for (size_t round = 0; round < chunks; round += kChunksPerRound) {
+        parts.assign(std::min(kChunksPerRound, chunks - round), Classified());
+        tbb::parallel_for(size_t(0), parts.size(), [&](size_t c) {
+            Classified& out = parts[c];
+            const size_t first = (round + c) * kTilesPerChunk;
+            for (size_t p = first; p < std::min(pending.size(), first + kTilesPerChunk); ++p) {
+                const Tile& tile = pending[p];
+                // Per voxel, w_fans matters only where its bound over the tile does not settle it.
+                // In a tile that no fan touches, w_fans is within `spread` of its value at the
+                // tile's centre.
+                const Vec3d tile_centre = centre_of(tile);
+                const double reach = tile_reach(tile);
+                const bool near_fans =
+                    !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
+                double fan_centre = 0, spread = INFINITY;
+                if (near_fans &&
+                    !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
+                                     tile.lo[2] >> kFinestTileLevel)) {
+                    fan_centre = fans.winding(tile_centre);
+                    spread = reach * fans.gradient_bound(tile_centre, reach);
+                }
+                for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+                    for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                        for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
+                            const uint64_t i = inside.index(x, y, z);
+                            const Vec3d centre{double(box.lo[0] + x) + 0.5,
+                                               double(box.lo[1] + y) + 0.5,
+                                               double(box.lo[2] + z) + 0.5};
+                            if (state[i] == kUnknown) {
+                                out.unsettled.push_back(i);
+                                for (double v : centre) out.points.push_back(float(v));
+                                continue;
+                            }
+                            const int whole = int(state[i]) - kZero;
+                            bool in = whole != 0;
+                            if (near_fans) {
+                                const double low = std::fabs(whole + fan_centre) - spread;
+                                const double high = std::fabs(whole + fan_centre) + spread;
+                                if (low > 0.5)
+                                    in = true;
+                                else if (high < 0.5)
+                                    in = false;
+                                else {
+                                    // Decided below, from w_fans summed on the device.
+                                    out.near_voxels.push_back(i);
+                                    out.near_whole.push_back(whole);
+                                    for (double v : centre) out.near_points.push_back(float(v));
+                                    continue;
+                                }
+                            }
+                            if (in) out.in.push_back(i);
+                        }
+            }
+        });
+        for (const Classified& part : parts) {
+            for (const uint64_t i : part.in) inside.set(i);
+            unsettled.insert(unsettled.end(), part.unsettled.begin(), part.unsettled.end());
+            points.insert(points.end(), part.points.begin(), part.points.end());
+            near_voxels.insert(near_voxels.end(), part.near_voxels.begin(), part.near_voxels.end());
+            near_whole.insert(near_whole.end(), part.near_whole.begin(), part.near_whole.end());
+            near_points.insert(near_points.end(), part.near_points.begin(), part.near_points.end());
+        }
     }
     report_progress(options, 2 * bricks.size() / kSteps, bricks.size());
 
