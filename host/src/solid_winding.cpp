@@ -850,41 +850,33 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     report_progress(options, bricks.size() / kSteps, bricks.size());
 
     // Phase 3. Voxels travel with their coordinates, so none is divided back out of an index.
-    struct Voxel {
-        uint64_t index;
-        int64_t v[3];
-    };
     const uint64_t step[3] = {1, uint64_t(n[0]), uint64_t(n[0]) * uint64_t(n[1])};
-    // Whether no triangle (mesh or fan) meets the segment from the centre of voxel a one step up
-    // `axis`: any that does touches one of the two voxels.
-    auto clear = [&](const Voxel& a, int axis) {
-        const Vec3d p{double(box.lo[0] + a.v[0]) + 0.5, double(box.lo[1] + a.v[1]) + 0.5,
-                      double(box.lo[2] + a.v[2]) + 0.5};
-        for (uint64_t end : {a.index, a.index + step[axis]}) {
+    // Whether no triangle (mesh or fan) meets the segment from the centre of voxel i (at v) one
+    // step up `axis`: any that does touches one of the two voxels.
+    auto clear = [&](uint64_t i, const int64_t* v, int axis) {
+        const Vec3d p{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
+                      double(box.lo[2] + v[2]) + 0.5};
+        for (uint64_t end : {i, i + step[axis]}) {
             const auto [first, last] = surface.pairs_of(end);
             for (size_t pair = first; pair < last; ++pair)
                 if (may_cross(tri[surface.voxel_triangle[pair].second], p, axis)) return false;
         }
         return true;
     };
-    // The neighbour of voxel a one step along `axis` in direction dir (-1 or +1); false beyond
-    // the box.
-    auto neighbour = [&](const Voxel& a, int axis, int dir, Voxel& b) {
-        if (a.v[axis] + dir < 0 || a.v[axis] + dir >= n[axis]) return false;
-        b = a;
-        b.v[axis] += dir;
-        b.index = dir > 0 ? a.index + step[axis] : a.index - step[axis];
-        return true;
-    };
-    // Voxel a (without n) takes n from a neighbour across a clear segment; false if none can.
-    auto settle = [&](const Voxel& a) {
+    // Voxel i at v (without n) takes n from a neighbour across a clear segment; false if none
+    // can.
+    auto settle = [&](uint64_t i, const int64_t* v) {
         for (int axis = 0; axis < 3; ++axis)
             for (int dir = -1; dir <= 1; dir += 2) {
-                Voxel b;
-                if (!neighbour(a, axis, dir, b) || state[b.index] == kUnknown) continue;
-                const bool free = !surface.bits.get(a.index) && !surface.bits.get(b.index);
-                if (!free && !clear(dir > 0 ? a : b, axis)) continue;
-                state[a.index] = state[b.index];
+                if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
+                const uint64_t j = dir > 0 ? i + step[axis] : i - step[axis];
+                if (state[j] == kUnknown) continue;
+                if (surface.bits.get(i) || surface.bits.get(j)) {  // else the segment is free
+                    int64_t lower[3] = {v[0], v[1], v[2]};
+                    if (dir < 0) lower[axis] -= 1;
+                    if (!clear(dir > 0 ? i : j, lower, axis)) continue;
+                }
+                state[i] = state[j];
                 return true;
             }
         return false;
@@ -896,20 +888,25 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
             for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                 for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
-                    const Voxel seed{inside.index(x, y, z), {x, y, z}};
-                    if (state[seed.index] != kUnknown || !settle(seed)) continue;
+                    const int64_t seed[3] = {x, y, z};
+                    const uint64_t s = inside.index(x, y, z);
+                    if (state[s] != kUnknown || !settle(s, seed)) continue;
                     work.push_back({int32_t(x), int32_t(y), int32_t(z)});
                     while (!work.empty()) {
-                        const auto [kx, ky, kz] = work.back();
+                        const std::array<int32_t, 3> top = work.back();
                         work.pop_back();
-                        const Voxel k{inside.index(kx, ky, kz), {kx, ky, kz}};
+                        const int64_t k[3] = {top[0], top[1], top[2]};
+                        const uint64_t ki = inside.index(k[0], k[1], k[2]);
                         for (int axis = 0; axis < 3; ++axis)
                             for (int dir = -1; dir <= 1; dir += 2) {
-                                Voxel j;
-                                if (neighbour(k, axis, dir, j) && state[j.index] == kUnknown &&
-                                    settle(j))
+                                if (k[axis] + dir < 0 || k[axis] + dir >= n[axis]) continue;
+                                const uint64_t j = dir > 0 ? ki + step[axis] : ki - step[axis];
+                                if (state[j] != kUnknown) continue;
+                                int64_t jv[3] = {k[0], k[1], k[2]};
+                                jv[axis] += dir;
+                                if (settle(j, jv))
                                     work.push_back(
-                                        {int32_t(j.v[0]), int32_t(j.v[1]), int32_t(j.v[2])});
+                                        {int32_t(jv[0]), int32_t(jv[1]), int32_t(jv[2])});
                             }
                     }
                 }
