@@ -256,6 +256,22 @@ struct SurfaceVoxels {
 void mark_surface(const std::array<double, 9>& t, uint32_t id, const VoxelBox& box,
                   const BoxBits& cells, const int64_t* lo, const int64_t* hi,
                   std::vector<std::pair<uint64_t, uint32_t>>& out) {
+    // A small range is tested voxel by voxel: halving it would test about as many larger boxes
+    // again on the way down.
+    constexpr int64_t kDirectVoxels = 64;
+    if ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1) <= kDirectVoxels) {
+        const Vec3d a{t[0], t[1], t[2]}, b{t[3], t[4], t[5]}, c{t[6], t[7], t[8]};
+        for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (int64_t x = lo[0]; x <= hi[0]; ++x) {
+                    const Vec3d voxel_lo{double(box.lo[0] + x), double(box.lo[1] + y),
+                                         double(box.lo[2] + z)};
+                    const Vec3d voxel_hi{voxel_lo[0] + 1, voxel_lo[1] + 1, voxel_lo[2] + 1};
+                    if (triangle_box_overlap_double(a, b, c, voxel_lo, voxel_hi))
+                        out.push_back({cells.index(x, y, z), id});
+                }
+        return;
+    }
     Vec3d box_lo, box_hi;
     for (int k = 0; k < 3; ++k) {
         box_lo[k] = double(box.lo[k] + lo[k]);
@@ -741,9 +757,13 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     auto tri = grid_triangles(mesh, grid);
     const WindingTree tree = build_winding_tree(tri);
     const BoundaryFans fans = boundary_fans(mesh, grid);
+    const size_t first_fan = tri.size();
     tri.insert(tri.end(), fans.triangles.begin(), fans.triangles.end());
     const SurfaceVoxels surface = surface_voxels(tri, box);
-    BoxBits fan_pyramid = surface_voxels(fans.triangles, box).bits;
+    // The fans' voxels: those of the fan triangles' pairs (each triangle is marked on its own).
+    BoxBits fan_pyramid(surface.bits.dim(0), surface.bits.dim(1), surface.bits.dim(2));
+    for (const auto& [voxel, triangle] : surface.voxel_triangle)
+        if (triangle >= first_fan) fan_pyramid.set(voxel);
     for (int level = 0; level < kFinestTileLevel; ++level) fan_pyramid = fan_pyramid.coarser();
     std::vector<BoxBits> pyramid{surface.bits.coarser()};
     while (int(pyramid.size()) < kTopLevel) pyramid.push_back(pyramid.back().coarser());
