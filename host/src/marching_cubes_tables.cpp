@@ -17,6 +17,7 @@
 //     face, which would put one edge in four triangles. A loop that cannot be triangulated that
 //     way becomes a fan around an extra centre vertex (as in Marching Cubes 33), so every mesh
 //     edge still belongs to exactly two triangles.
+#include <algorithm>
 #include <array>
 #include <string>
 #include <vector>
@@ -150,10 +151,31 @@ bool triangulate(const std::vector<int>& loop, std::vector<std::array<int, 3>>& 
     return false;
 }
 
+// The faces of case `mask` with four crossings: the only ones whose decider bit matters.
+int ambiguous_faces(int mask) {
+    int faces = 0;
+    for (int f = 0; f < 6; ++f) {
+        int inside[4];
+        for (int i = 0; i < 4; ++i) inside[i] = (mask >> om_face_corner(f, i)) & 1;
+        if (inside[0] == inside[2] && inside[1] == inside[3] && inside[0] != inside[1])
+            faces |= 1 << f;
+    }
+    return faces;
+}
+
 std::vector<uint8_t> build_table() {
     std::vector<uint8_t> table(size_t(OM_MC_ENTRIES) * OM_MC_ENTRY_BYTES, 0);
     for (int index = 0; index < OM_MC_ENTRIES; ++index) {
         const int mask = index & 255, face_bits = index >> 8;
+        // Decider bits of faces that are not ambiguous change nothing: such a case is the one
+        // without them, built already (its index is lower). Most masks have no ambiguous face.
+        const int relevant = face_bits & ambiguous_faces(mask);
+        if (relevant != face_bits) {
+            const size_t same = size_t(mask | relevant << 8) * OM_MC_ENTRY_BYTES;
+            std::copy_n(table.begin() + long(same), OM_MC_ENTRY_BYTES,
+                        table.begin() + long(size_t(index) * OM_MC_ENTRY_BYTES));
+            continue;
+        }
         const std::array<int, 12> next = directed_segments(mask, face_bits);
 
         // Phase 3: follow the loops, each from its lowest crossing, lowest first.
