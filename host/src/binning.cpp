@@ -149,10 +149,11 @@ Binning bin_triangles(const PreparedTriangles& prepared, const Grid& grid, int b
     const BrickDivider divider(brick_size);
     tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
         ChunkPairs& out = chunk[c];
-        if (selection.everything()) {  // else the candidates can be far more than the pairs
-            out.triangles.reserve(candidates[c]);
-            out.slots.reserve(candidates[c]);
-        }
+        // Room for the usual pairs; the candidates of large triangles can be far more than the
+        // pairs their cull keeps, and a selection keeps fewer still.
+        const size_t room = size_t(std::min<uint64_t>(candidates[c], 2 * kChunk));
+        out.triangles.reserve(room);
+        out.slots.reserve(room);
         const size_t end = std::min(prepared.ranges.size(), (c + 1) * kChunk);
         for (size_t t = c * kChunk; t < end; ++t)
             for_each_brick_of(prepared, t, grid, brick_size, divider, [&](uint64_t brick) {
