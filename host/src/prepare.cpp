@@ -168,8 +168,8 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
         Vec3d g[3];
         for (size_t t = begin; t < end; ++t) {
             grid_coordinates(mesh, grid, inv, t, g);
-            prepared_pieces(g, grid, [&](const Vec3d& a, const Vec3d& b, const Vec3d& c3) {
-                out.triangles[next] = round_to_anchor(a, b, c3);
+            prepared_pieces(g, grid, [&](const Vec3d& p0, const Vec3d& p1, const Vec3d& p2) {
+                out.triangles[next] = round_to_anchor(p0, p1, p2);
                 out.ranges[next] = ov_triangle_range(out.triangles[next], half_open);
                 out.source[next] = uint32_t(t);
                 ++next;
