@@ -1,4 +1,6 @@
 // Sparse brick storage of a bit grid. See SparseVoxels in oclvox.hpp for the layout.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cstring>
 
@@ -224,45 +226,52 @@ void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<i
         }
         return words;
     }();
-    // Phase 1: the bricks the box touches, found by lookup rather than by scanning all bricks.
-    for_each_brick_in(
-        brick_dims(), brick_size_, first, last,
-        [&](uint64_t index, const std::array<int64_t, 3>& origin) {
-            const auto it = bricks_.find(index);
-            if (it == bricks_.end()) return;
-            const uint64_t* blocks = it->second.data();
-            // Phase 2: the brick's blocks inside the box, then their set voxels.
-            for_each_block_in(
-                origin, brick_size_, blocks_per_brick_axis(), first, last,
-                [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
-                    mask &= blocks[word];
-                    if (!mask) return;
-                    uint8_t* base = out + (o[0] - lo[0]) * strides[0] +
-                                    (o[1] - lo[1]) * strides[1] + (o[2] - lo[2]) * strides[2];
-                    if (line >= 0 && o[line] >= first[line] && o[line] + 3 <= last[line]) {
-                        for (int a = 0; a < 4; ++a)
-                            for (int b = 0; b < 4; ++b) {
-                                const int bit = a * kBitStep[across[0]] + b * kBitStep[across[1]];
-                                uint32_t nibble = 0;
-                                for (int t = 0; t < 4; ++t)
-                                    nibble |= uint32_t(mask >> (bit + t * kBitStep[line]) & 1) << t;
+    // Phase 1: the stored bricks the box touches, found by lookup rather than by scanning all
+    // bricks.
+    std::vector<std::pair<const uint64_t*, std::array<int64_t, 3>>> touched;
+    for_each_brick_in(brick_dims(), brick_size_, first, last,
+                      [&](uint64_t index, const std::array<int64_t, 3>& origin) {
+                          const auto it = bricks_.find(index);
+                          if (it != bricks_.end()) touched.emplace_back(it->second.data(), origin);
+                      });
+    // Phase 2: each brick's blocks inside the box, then their set voxels. Bricks hold disjoint
+    // voxels, so they write disjoint bytes of the window: in parallel.
+    tbb::parallel_for(size_t(0), touched.size(), [&](size_t t) {
+        const uint64_t* blocks = touched[t].first;
+        for_each_block_in(
+            touched[t].second, brick_size_, blocks_per_brick_axis(), first, last,
+            [&](size_t word, uint64_t mask, const std::array<int64_t, 3>& o) {
+                mask &= blocks[word];
+                if (!mask) return;
+                uint8_t* base = out + (o[0] - lo[0]) * strides[0] + (o[1] - lo[1]) * strides[1] +
+                                (o[2] - lo[2]) * strides[2];
+                if (line >= 0 && o[line] >= first[line] && o[line] + 3 <= last[line]) {
+                    for (int a = 0; a < 4; ++a)
+                        for (int b = 0; b < 4; ++b) {
+                            const int bit = a * kBitStep[across[0]] + b * kBitStep[across[1]];
+                            uint32_t nibble = 15;  // a full block (most of a solid) has all rows
+                            if (mask != ~uint64_t(0)) {
+                                nibble = 0;
+                                for (int s = 0; s < 4; ++s)
+                                    nibble |= uint32_t(mask >> (bit + s * kBitStep[line]) & 1) << s;
                                 if (!nibble) continue;
-                                uint8_t* p = base + a * strides[across[0]] + b * strides[across[1]];
-                                uint32_t bytes;
-                                std::memcpy(&bytes, p, 4);
-                                bytes = (bytes & ~rows.bytes[nibble]) | rows.ones[nibble];
-                                std::memcpy(p, &bytes, 4);
                             }
-                        return;
-                    }
-                    while (mask) {
-                        const int bit = __builtin_ctzll(mask);
-                        mask &= mask - 1;
-                        base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
-                             (bit >> 4) * strides[2]] = 1;
-                    }
-                });
-        });
+                            uint8_t* p = base + a * strides[across[0]] + b * strides[across[1]];
+                            uint32_t bytes;
+                            std::memcpy(&bytes, p, 4);
+                            bytes = (bytes & ~rows.bytes[nibble]) | rows.ones[nibble];
+                            std::memcpy(p, &bytes, 4);
+                        }
+                    return;
+                }
+                while (mask) {
+                    const int bit = __builtin_ctzll(mask);
+                    mask &= mask - 1;
+                    base[(bit & 3) * strides[0] + (bit >> 2 & 3) * strides[1] +
+                         (bit >> 4) * strides[2]] = 1;
+                }
+            });
+    });
 }
 
 uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
