@@ -19,6 +19,8 @@
 //
 // Placement: binvox maps voxel (i,j,k) to the point translate + scale * (i,j,k) / D (plus half a
 // voxel for centres), so translate = grid origin and scale = D * voxel_size reproduce our grid.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cstring>
 #include <iomanip>
@@ -36,19 +38,16 @@ namespace {
 // and readers expand it to one byte (or bit) per voxel.
 constexpr int64_t kMaxBinvoxDim = 4096;
 
-// Collects voxels into maximal runs and writes them as (value, count) pairs, count <= 255, in
-// large pieces.
-class RunWriter {
+// The maximal runs of voxel values of a stretch of the file, in order: what one plane of a slab
+// encodes to, independently of (and in parallel with) the other planes.
+class Runs {
   public:
-    explicit RunWriter(std::ostream& out) : out_(out) { buffer_.reserve(kFlushBytes); }
-
     void add(uint8_t value, uint64_t count) {
         if (count == 0) return;
-        if (value != value_) {
-            emit();
-            value_ = value;
-        }
-        pending_ += count;
+        if (!runs_.empty() && runs_.back().first == value)
+            runs_.back().second += count;
+        else
+            runs_.emplace_back(value, count);
     }
     // Adds the voxels bytes[0, n) (each 0 or 1), run by run, and zeroes them: the caller's
     // buffer is all zero again afterwards at a cost proportional to the set voxels, not to the
@@ -62,10 +61,7 @@ class RunWriter {
             start += length;
         }
     }
-    void finish() {
-        emit();
-        flush();
-    }
+    const std::vector<std::pair<uint8_t, uint64_t>>& runs() const { return runs_; }
 
   private:
     // Length of the run of `value` at the start of bytes[0, n). Empty space, most of a surface
@@ -88,6 +84,33 @@ class RunWriter {
         while (i < n && bytes[i] == value) ++i;
         return i;
     }
+
+    std::vector<std::pair<uint8_t, uint64_t>> runs_;
+};
+
+// Joins runs into maximal ones and writes them as (value, count) pairs, count <= 255, in large
+// pieces.
+class RunWriter {
+  public:
+    explicit RunWriter(std::ostream& out) : out_(out) { buffer_.reserve(kFlushBytes); }
+
+    void add(uint8_t value, uint64_t count) {
+        if (count == 0) return;
+        if (value != value_) {
+            emit();
+            value_ = value;
+        }
+        pending_ += count;
+    }
+    void add(const Runs& runs) {
+        for (const auto& [value, count] : runs.runs()) add(value, count);
+    }
+    void finish() {
+        emit();
+        flush();
+    }
+
+  private:
     // Writes the pending run as pairs: full (value, 255) pairs first, filled a buffer at a time
     // (the padding of a large cube is tens of millions of them), then the remainder.
     void emit() {
@@ -158,6 +181,7 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, ProgressP
         std::vector<std::vector<std::pair<int64_t, int64_t>>> stored(
             static_cast<size_t>(nbricks[2]));
         RunWriter runs(out);
+        std::vector<Runs> plane_runs;
         for (int64_t x0 = 0; x0 < nx; x0 += thickness) {
             const int64_t depth = std::min(thickness, nx - x0);
             voxels.mark_box({x0, 0, 0}, {x0 + depth, ny, nz}, {plane, 1, ny}, slab.data());
@@ -177,19 +201,24 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, ProgressP
                         ranges.push_back({by * b, end});
                 }
             }
-            for (int64_t x = 0; x < depth; ++x) {
+            // The slab's planes are encoded in parallel, each into its own runs, which are then
+            // written in plane order: the runs are the same as one pass's.
+            plane_runs.assign(size_t(depth), Runs());
+            tbb::parallel_for(int64_t(0), depth, [&](int64_t x) {
+                Runs& plane_run = plane_runs[size_t(x)];
                 uint8_t* rows = slab.data() + x * plane;
                 for (int64_t z = 0; z < nz; ++z) {
                     int64_t y = 0;  // the row is encoded up to here
                     for (const auto& [begin, end] : stored[size_t(z / b)]) {
-                        runs.add(0, uint64_t(begin - y));
-                        runs.take_bytes(rows + z * ny + begin, size_t(end - begin));
+                        plane_run.add(0, uint64_t(begin - y));
+                        plane_run.take_bytes(rows + z * ny + begin, size_t(end - begin));
                         y = end;
                     }
-                    runs.add(0, uint64_t(dim - y));
+                    plane_run.add(0, uint64_t(dim - y));
                 }
-                runs.add(0, uint64_t(dim - nz) * uint64_t(dim));
-            }
+                plane_run.add(0, uint64_t(dim - nz) * uint64_t(dim));
+            });
+            for (const Runs& plane_run : plane_runs) runs.add(plane_run);
             progress.report(planes, uint64_t(x0 + depth), uint64_t(nx));
         }
         runs.add(0, uint64_t(dim - nx) * uint64_t(dim) * uint64_t(dim));
