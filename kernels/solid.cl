@@ -2,10 +2,14 @@
 // winding number.
 //
 // Parity works on a batch of brick columns (a brick_size^2 footprint and the whole grid height),
-// each held as one bit column of `words` 32-bit words per voxel column (bit k of the column is
-// voxel k). parity_flip: one work item per (triangle, voxel column) toggles the bit just above
-// the crossing. parity_prefix: one work item per voxel column turns flips into parity. parity_pack:
-// one work item per 4x4 voxel columns and 32 layers copies the bits into the bricks' block layout.
+// each held as `words` layers of 32 voxels: word w of voxel column (x, y) of slot s is
+// bits[((s * words + w) * brick_size + y) * brick_size + x], and its bit b is voxel 32 w + b of the
+// column. Neighbouring columns' words are neighbours, so the prefix and pack kernels read
+// consecutive words in consecutive work items. parity_flip: one work item per (triangle, voxel row
+// of its footprint in the brick column) toggles, in each voxel column of the row it covers, the bit
+// just above the crossing. parity_prefix: one work item per voxel column turns flips into parity.
+// parity_pack: one work item per 4x4 voxel columns and 32 layers copies the bits into the bricks'
+// block layout.
 #include "solid_math.h"
 #include "work_items.h"
 
@@ -22,25 +26,26 @@ __kernel void parity_flip(__global const OvParityTriangle* triangles,
     int bx = slot_column[2 * slot], by = slot_column[2 * slot + 1];
     OvColumnRange r;
     ovs_column_range(&t, bx, by, brick_size, nx, ny, &r);
-    uint index = item - pair_first_item[p];
-    uint width = (uint)(r.hi[0] - r.lo[0] + 1);
-    int i = r.lo[0] + (int)(index % width);
-    int j = r.lo[1] + (int)(index / width);
-    int k = ovs_parity_flip(&t, i, j, nz);
-    if (k < 0 || k >= nz) return;
-    size_t column = ((size_t)slot * brick_size + (size_t)(j - by * brick_size)) * brick_size +
-                    (size_t)(i - bx * brick_size);
-    atomic_xor(&bits[column * words + (size_t)(k >> 5)], 1u << (k & 31));
+    int j = r.lo[1] + (int)(item - pair_first_item[p]);
+    size_t layer = (size_t)brick_size * brick_size;
+    size_t row = (size_t)slot * words * layer + (size_t)(j - by * brick_size) * brick_size;
+    for (int i = r.lo[0]; i <= r.hi[0]; ++i) {
+        int k = ovs_parity_flip(&t, i, j, nz);
+        if (k < 0 || k >= nz) continue;
+        size_t column = row + (size_t)(i - bx * brick_size);
+        atomic_xor(&bits[column + (size_t)(k >> 5) * layer], 1u << (k & 31));
+    }
 }
 
-__kernel void parity_prefix(__global uint* bits, uint columns, uint words) {
+__kernel void parity_prefix(__global uint* bits, uint columns, int brick_size, uint words) {
     uint column = (uint)get_global_id(0);
     if (column >= columns) return;
-    __global uint* w = bits + (size_t)column * words;
+    size_t layer = (size_t)brick_size * brick_size;
+    __global uint* w = bits + column / layer * words * layer + column % layer;
     uint carry = 0;
     for (uint i = 0; i < words; ++i) {
-        uint v = ovs_prefix_xor(w[i], carry);
-        w[i] = v;
+        uint v = ovs_prefix_xor(w[i * layer], carry);
+        w[i * layer] = v;
         carry = v >> 31;
     }
 }
@@ -65,28 +70,41 @@ __kernel void parity_pack(__global const uint* bits, uint slots, int brick_size,
     // nz it is cut (and the column has no word there).
     int k0 = 32 * word;
     uint valid = k0 + 32 <= nz ? 0xffffffffu : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
+    __global const uint* layers =
+        bits + (((size_t)slot * words + (size_t)word) * brick_size + (size_t)gy * 4) * brick_size +
+        (size_t)gx * 4;
     uint column_bits[16];
     for (int y = 0; y < 4; ++y)
-        for (int x = 0; x < 4; ++x) {
-            size_t column = ((size_t)slot * brick_size + (size_t)(gy * 4 + y)) * brick_size +
-                            (size_t)(gx * 4 + x);
-            column_bits[x + 4 * y] = valid ? bits[column * words + (size_t)word] & valid : 0u;
+        for (int x = 0; x < 4; ++x)
+            column_bits[x + 4 * y] = valid ? layers[(size_t)y * brick_size + x] & valid : 0u;
+    // Transpose the 16 x 32 bit matrix (column c, layer k) in place, as two 16 x 16 halves side by
+    // side in each word: afterwards bits 0-15 of column_bits[k] are layer k's 16 columns and bits
+    // 16-31 are layer 16 + k's. Each step swaps the off-diagonal j x j blocks of every 2j x 2j
+    // block (Hacker's Delight, "transposing a bit matrix"), the masks repeated in both halves.
+    const uint masks[4] = {0x00ff00ffu, 0x0f0f0f0fu, 0x33333333u, 0x55555555u};
+#pragma unroll
+    for (int s = 0; s < 4; ++s) {
+        int j = 8 >> s;
+#pragma unroll
+        for (int i = 0; i < 8; ++i) {
+            int a = (i & ~(j - 1)) << 1 | (i & (j - 1));  // the i-th row with bit j clear
+            uint t = (column_bits[a] >> j ^ column_bits[a + j]) & masks[s];
+            column_bits[a + j] ^= t;
+            column_bits[a] ^= t << j;
         }
+    }
     for (int r = 0; r < 8 && 8 * word + r < rows; ++r) {
-        // Bit z of each column's nibble goes to bit x + 4y + 16z of the block.
-        ulong mask = 0;
-        for (int c = 0; c < 16; ++c) {
-            uint nibble = column_bits[c] >> (4 * r) & 15u;
-            ulong spread = (ulong)(nibble & 1u) | (ulong)(nibble >> 1 & 1u) << 16 |
-                           (ulong)(nibble >> 2 & 1u) << 32 | (ulong)(nibble >> 3 & 1u) << 48;
-            mask |= spread << c;
-        }
+        // Layers 4r .. 4r + 3 are bits z = 0 .. 3 of the block's rows: bit x + 4y + 16z.
+        int shift = r < 4 ? 0 : 16;
+        int k = 4 * r - shift;
+        uint low = (column_bits[k] >> shift & 0xffffu) | (column_bits[k + 1] >> shift) << 16;
+        uint high = (column_bits[k + 2] >> shift & 0xffffu) | (column_bits[k + 3] >> shift) << 16;
         // Block (gx, gy, gz) is block (gx, gy, gz % nb) of brick gz / nb in the column.
         int gz = 8 * word + r;
         size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
         size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));
-        blocks[2 * (brick * nb * nb * nb + block)] = (uint)mask;
-        blocks[2 * (brick * nb * nb * nb + block) + 1] = (uint)(mask >> 32);
+        blocks[2 * (brick * nb * nb * nb + block)] = low;
+        blocks[2 * (brick * nb * nb * nb + block) + 1] = high;
     }
 }
 

@@ -511,6 +511,20 @@ TEST(Solid, ResultDoesNotDependOnBrickSize) {
     EXPECT_TRUE(on_device(spot, gs, solid_options(InsideTest::Winding, 4)).same_voxels(w16));
 }
 
+// Brick columns are binned by a counting sort when a grid has few of them for its triangles, and
+// by a comparison sort when it has many (a small mesh in a wide grid of small bricks): both bin
+// the same triangles into the same columns.
+TEST(Solid, ResultDoesNotDependOnBrickSizeOnAWideSparseGrid) {
+    const Mesh m = icosphere({1000.3, 1500.6, 4.1}, 3.5, 2);
+    Grid g;
+    g.voxel_size = 1.0;
+    g.dims = {2048, 2048, 8};
+    const SparseVoxels v64 = on_device(m, g, solid_options(InsideTest::Parity, 64));
+    EXPECT_TRUE(on_device(m, g, solid_options(InsideTest::Parity, 4)).same_voxels(v64));
+    EXPECT_TRUE(on_host(m, g, solid_options(InsideTest::Parity, 4)).same_voxels(v64));
+    EXPECT_GT(v64.count(), 100u);
+}
+
 // Float on the device, double on the host: the winding results may differ only at centres
 // within rounding of the surface.
 TEST(Solid, WindingDeviceMatchesDoubleReference) {

@@ -64,19 +64,39 @@ void for_each_column_of(const OvParityTriangle& tri, const Layout& l, F&& f) {
 
 ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l,
                        const BrickSelection& selection) {
+    // (column, triangle) pairs in triangle order, then sorted by column, then triangle: by a
+    // stable counting sort when the grid has few brick columns for its pairs (the usual case),
+    // else by a comparison sort.
     std::vector<std::pair<uint64_t, uint32_t>> pairs;
     for (size_t t = 0; t < triangles.size(); ++t)
         for_each_column_of(triangles[t], l, [&](uint64_t column) {
             if (selection.contains_column(column)) pairs.push_back({column, uint32_t(t)});
         });
-    std::sort(pairs.begin(), pairs.end());
+    const uint64_t columns = uint64_t(l.nbx) * uint64_t(l.nby);
     ColumnBins bins;
-    for (size_t p = 0; p < pairs.size(); ++p) {
-        if (p == 0 || pairs[p].first != pairs[p - 1].first) {
-            bins.columns.push_back(pairs[p].first);
-            bins.first_pair.push_back(p);
+    bins.pair_triangle.resize(pairs.size());
+    if (columns <= 4 * pairs.size() + 4096) {
+        std::vector<uint64_t> start(columns, 0);  // pairs per column, then its first pair
+        for (const auto& pair : pairs) ++start[pair.first];
+        uint64_t total = 0;
+        for (uint64_t c = 0; c < columns; ++c) {
+            const uint64_t count = start[c];
+            start[c] = total;
+            if (count == 0) continue;
+            bins.columns.push_back(c);
+            bins.first_pair.push_back(total);
+            total += count;
         }
-        bins.pair_triangle.push_back(pairs[p].second);
+        for (const auto& [column, t] : pairs) bins.pair_triangle[start[column]++] = t;
+    } else {
+        std::sort(pairs.begin(), pairs.end());
+        for (size_t p = 0; p < pairs.size(); ++p) {
+            if (p == 0 || pairs[p].first != pairs[p - 1].first) {
+                bins.columns.push_back(pairs[p].first);
+                bins.first_pair.push_back(p);
+            }
+            bins.pair_triangle[p] = pairs[p].second;
+        }
     }
     bins.first_pair.push_back(pairs.size());
     return bins;
@@ -101,9 +121,11 @@ Batch make_batch(const ColumnBins& bins, const std::vector<OvParityTriangle>& tr
         uint64_t column_items = 0;
         counts.clear();
         for (uint64_t p = bins.first_pair[c]; p < bins.first_pair[c + 1]; ++p) {
+            // A work item per voxel row of the triangle's footprint in the brick column.
             OvColumnRange r;
-            counts.push_back(cl_uint(ovs_column_range(&triangles[bins.pair_triangle[p]], bx, by,
-                                                      l.brick, l.nx, l.ny, &r)));
+            const bool covers = ovs_column_range(&triangles[bins.pair_triangle[p]], bx, by, l.brick,
+                                                 l.nx, l.ny, &r) > 0;
+            counts.push_back(covers ? cl_uint(r.hi[1] - r.lo[1] + 1) : 0u);
             column_items += counts.back();
         }
         if (batch.items + column_items > kMaxItemsPerBatch) {
@@ -215,7 +237,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
                    },
                    {});
         const uint64_t columns = uint64_t(batch.column_count) * l.brick * l.brick;
-        set_args(prefix, 0, bit_buffer, cl_uint(columns), cl_uint(l.words));
+        set_args(prefix, 0, bit_buffer, cl_uint(columns), cl_int(l.brick), cl_uint(l.words));
         launch(cl.queue, prefix, columns, prefix_group);
         // parity_pack: an item per 4x4 voxel columns and 8 block rows (a 32-bit word of layers).
         const uint64_t block_rows = uint64_t(l.nbz) * uint64_t(l.brick / 4);

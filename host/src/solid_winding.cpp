@@ -696,22 +696,35 @@ WeldedEdges weld_edges(const Mesh& mesh) {
         welded[v] = id;
     }
 
-    // Phase 2: every triangle's edges, sorted by edge, then counted per direction.
-    std::vector<std::pair<std::pair<uint32_t, uint32_t>, int>> directed;
-    directed.reserve(mesh.triangles.size() * 3);
-    for (const auto& tri : mesh.triangles) {
-        const uint32_t v[3] = {welded[tri[0]], welded[tri[1]], welded[tri[2]]};
-        if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;
-        for (int e = 0; e < 3; ++e) {
-            const uint32_t a = v[e], b = v[(e + 1) % 3];
-            directed.push_back({{std::min(a, b), std::max(a, b)}, a < b ? 0 : 1});
+    // Phase 2: every triangle's edges, bucketed by their lower end (a counting sort: linear, where
+    // sorting all edges was most of the closed-mesh check), then each bucket (a few edges) sorted
+    // by the upper end and counted per direction. Edges come out ordered by (lower, upper) end.
+    auto for_each_edge = [&](auto&& f) {
+        for (const auto& tri : mesh.triangles) {
+            const uint32_t v[3] = {welded[tri[0]], welded[tri[1]], welded[tri[2]]};
+            if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;
+            for (int e = 0; e < 3; ++e) f(v[e], v[(e + 1) % 3]);
         }
-    }
-    tbb::parallel_sort(directed.begin(), directed.end());
-    for (size_t i = 0; i < directed.size(); ++i) {
-        if (i == 0 || directed[i].first != directed[i - 1].first)
-            out.uses.push_back({directed[i].first, {0, 0}});
-        ++out.uses.back().second[size_t(directed[i].second)];
+    };
+    std::vector<size_t> first(out.positions.size() + 1, 0);
+    for_each_edge([&](uint32_t a, uint32_t b) { ++first[std::min(a, b) + size_t(1)]; });
+    for (size_t v = 1; v < first.size(); ++v) first[v] += first[v - 1];
+    // Per edge: its upper end and direction (1 when it runs from the upper end to the lower).
+    std::vector<uint64_t> upper(first.back());
+    std::vector<size_t> next(first.begin(), first.end() - 1);
+    for_each_edge([&](uint32_t a, uint32_t b) {
+        upper[next[std::min(a, b)]++] = uint64_t(std::max(a, b)) << 1 | uint64_t(a < b ? 0 : 1);
+    });
+    for (size_t v = 0; v + 1 < first.size(); ++v) {
+        const auto begin = upper.begin() + ptrdiff_t(first[v]),
+                   end = upper.begin() + ptrdiff_t(first[v + 1]);
+        std::sort(begin, end);
+        for (auto e = begin; e != end; ++e) {
+            const uint32_t b = uint32_t(*e >> 1);
+            if (e == begin || b != uint32_t(*(e - 1) >> 1))
+                out.uses.push_back({{uint32_t(v), b}, {0, 0}});
+            ++out.uses.back().second[size_t(*e & 1)];
+        }
     }
     return out;
 }
