@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Side-by-side surface voxelization timings: oclvox against the tools users would otherwise pick,
-# same meshes and resolutions, in one run. Each figure is the voxelization call alone (no loading,
-# no writing), in seconds, the minimum of REPEAT runs.
+# Side-by-side voxelization timings: oclvox against the tools users would otherwise pick, same
+# meshes and resolutions, in one run. Each figure is the voxelization call alone (no loading, no
+# writing), in seconds, the minimum of REPEAT runs.
 #
 #   bash bench/peers.sh [RES...]              (default: 256 1024)
+#   MODE=solid bash bench/peers.sh [RES...]   parity solids of closed meshes: oclvox --mode solid
+#                                             (parity), naive_tribox --mode solid (parity along x)
 #
 # Peers are optional; the script says which it found:
 #   NAIVE_TRIBOX    path of naive_tribox (plain OpenMP 13-axis SAT over each triangle's bbox;
@@ -12,8 +14,10 @@
 #   CUDA_VOXELIZER  path of cuda_voxelizer, else `cuda_voxelizer` on PATH; run with -cpu unless
 #                   CUDA_VOXELIZER_GPU=1
 # Other settings: OCLVOX (default build/oclvox), OCLVOX_DEVICE (device selector), MESHES (mesh
-# files, default bunny, buildings and motorBike from ../shared/data/meshes), REPEAT (default 3),
-# THREADS (naive_tribox threads, default: all cores).
+# files, default bunny, buildings and motorBike from ../shared/data/meshes; for MODE=solid the
+# closed bunny00 and spot), REPEAT (default 3), THREADS (naive_tribox threads, default: all cores).
+# naive_tribox reads OBJ only: other meshes (OFF) are converted for it first. cuda_voxelizer's
+# -solid crashes or is wrong on most meshes, so it is left out of MODE=solid.
 #
 # Grids: oclvox and naive_tribox fit RES voxels to the longest side of the mesh's bounding box;
 # cuda_voxelizer pads the box to a cube first. So the grids agree in voxel size, not in origin.
@@ -23,7 +27,13 @@ cd "$(dirname "$0")/.."
 resolutions=("$@")
 [ ${#resolutions[@]} -gt 0 ] || resolutions=(256 1024)
 mesh_dir=${OCLVOX_MESH_DIR:-../shared/data/meshes}
-read -r -a meshes <<< "${MESHES:-$mesh_dir/stanford-bunny.obj $mesh_dir/buildings.obj $mesh_dir/motorBike.obj}"
+mode=${MODE:-surface}
+case "$mode" in
+surface) default_meshes="$mesh_dir/stanford-bunny.obj $mesh_dir/buildings.obj $mesh_dir/motorBike.obj" ;;
+solid) default_meshes="$mesh_dir/bunny00.off $mesh_dir/spot.obj" ;;
+*) echo "peers.sh: MODE must be surface or solid, not $mode" >&2; exit 2 ;;
+esac
+read -r -a meshes <<< "${MESHES:-$default_meshes}"
 repeat=${REPEAT:-3}
 threads=${THREADS:-$(nproc)}
 oclvox=${OCLVOX:-build/oclvox}
@@ -41,8 +51,10 @@ naive=$(find_tool "${NAIVE_TRIBOX:-}" naive_tribox)
 cuda=$(find_tool "${CUDA_VOXELIZER:-}" cuda_voxelizer)
 cuda_flag=-cpu
 [ "${CUDA_VOXELIZER_GPU:-0}" = 1 ] && cuda_flag=
+[ "$mode" = surface ] || cuda=
 
 [ -x "$oclvox" ] || { echo "peers.sh: $oclvox not found; build first (scripts/build.sh)" >&2; exit 1; }
+echo "mode:           $mode"
 echo "oclvox:         $oclvox (${OCLVOX_DEVICE:-default device})"
 echo "naive_tribox:   ${naive:-not found (set NAIVE_TRIBOX)}${naive:+ ($threads threads)}"
 echo "cuda_voxelizer: ${cuda:-not found (set CUDA_VOXELIZER)}${cuda:+ (${cuda_flag:-GPU})}"
@@ -57,13 +69,25 @@ min_of() { sort -g | head -n1; }
 
 oclvox_seconds() {  # mesh res: the "voxelize" phase of --stats
     for _ in $(seq "$repeat"); do
-        "$oclvox" voxelize "${device[@]}" "$1" -r "$2" -o "$work/out.binvox" --stats 2>&1 |
+        "$oclvox" voxelize "${device[@]}" "$1" -r "$2" --mode "$mode" -o "$work/out.binvox" --stats 2>&1 |
             awk '$1 == "voxelize" { print $2 }'
     done | min_of
 }
 
 naive_seconds() {
-    "$naive" "$1" "$2" --threads "$threads" --repeat "$repeat" | sed -n 's/.* t_vox=\([^ ]*\).*/\1/p'
+    local mesh=$1
+    case "$mesh" in
+    *.obj) ;;
+    *.off)  # OFF to OBJ: vertices, then faces with 1-based indices
+        mesh="$work/$(basename "$1" .off).obj"
+        awk 'NR == 1 { next } !counts && NF >= 3 { nv = $1; counts = 1; next }
+             counts && v < nv && NF >= 3 { print "v", $1, $2, $3; v++; next }
+             counts && v == nv && NF >= 4 { s = "f"; for (i = 2; i <= $1 + 1; i++) s = s " " $i + 1; print s }' \
+            "$1" > "$mesh" ;;
+    *) echo "peers.sh: naive_tribox reads OBJ or (converted) OFF, not $1" >&2; return ;;
+    esac
+    "$naive" "$mesh" "$2" --threads "$threads" --repeat "$repeat" --mode "$mode" |
+        sed -n 's/.* t_vox=\([^ ]*\).*/\1/p'
 }
 
 cuda_seconds() {  # cuda_voxelizer writes beside its input: work on a copy

@@ -1,10 +1,13 @@
 // Solid voxelization: parity and winding number against hand counts, analytic volumes and
 // double-precision geometry, device against host reference, and the robustness properties that
 // motivate each inside test.
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <optional>
 #include <random>
 
 #include "opencl_runtime.hpp"
@@ -582,6 +585,19 @@ TEST(Solid, HierarchicalWindingStaysWithinItsErrorBound) {
             }
     EXPECT_GT(inside, 0u);
     RecordProperty("voxels_within_0.02_of_half", std::to_string(near_half));
+}
+
+// The winding solid's host phases (the fans' sums per tile, the flood in rounds, the per-voxel
+// decisions) split across threads: the voxels they decide must not depend on how many.
+TEST(Solid, WindingDoesNotDependOnThreadCount) {
+    const Mesh m = load("stanford-bunny.obj");
+    const Grid g = fitted(m, 96);
+    const auto o = solid_options(InsideTest::Winding);
+    std::optional<SparseVoxels> one, four;
+    tbb::task_arena(1).execute([&] { one.emplace(on_device(m, g, o)); });
+    tbb::task_arena(4).execute([&] { four.emplace(on_device(m, g, o)); });
+    EXPECT_TRUE(one->same_voxels(*four));
+    EXPECT_GT(one->count(), 0u);
 }
 
 // An open scan (223 boundary edges) at a size where certified tiles, the flood across clear

@@ -8,6 +8,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <map>
 
@@ -752,10 +753,10 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     const int b = result.brick_size();
     const auto nb = result.brick_dims();
     // The box is held densely: a state byte per voxel, and bits for the inside, the surface, the
-    // fans and their coarser pyramids (under half a byte per voxel).
+    // fans, their coarser pyramids and the flood's marks (under five eighths of a byte per voxel).
     const uint64_t voxels = box_voxels(box);
     check_solid_memory(
-        result, box_bricks(result, box), voxels + voxels / 2, options,
+        result, box_bricks(result, box), voxels + voxels / 2 + voxels / 8, options,
         " and the winding number's dense state for " + std::to_string(voxels) + " voxels");
     std::vector<uint64_t> bricks;  // every brick meeting the box
     for (int64_t bz = box.lo[2] / b; bz <= box.hi[2] / b; ++bz)
@@ -896,9 +897,9 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         }
         return true;
     };
-    // Voxel i at v (without n) takes n from a neighbour across a clear segment; false if none
-    // can.
-    auto settle = [&](uint64_t i, const int64_t* v) {
+    // The state voxel i at v (without n) takes from a neighbour across a clear segment, or
+    // kUnknown if none gives one.
+    auto settled_state = [&](uint64_t i, const int64_t* v) {
         for (int axis = 0; axis < 3; ++axis)
             for (int dir = -1; dir <= 1; dir += 2) {
                 if (v[axis] + dir < 0 || v[axis] + dir >= n[axis]) continue;
@@ -909,40 +910,174 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                     if (dir < 0) lower[axis] -= 1;
                     if (!clear(dir > 0 ? i : j, lower, axis)) continue;
                 }
-                state[i] = state[j];
-                return true;
+                return state[j];
             }
-        return false;
+        return kUnknown;
     };
-    // Seeds in the order of the pending tiles' voxels; each flood settles what it can reach. The
-    // flood's stack can hold millions of voxels: it keeps their coordinates only.
-    std::vector<std::array<int32_t, 3>> work;
-    for (const Tile& tile : pending)
+    // The flood goes in rounds. A round finds the voxels without n that may settle (first every
+    // voxel of the pending tiles, then the neighbours of the voxels the round before settled),
+    // works out each one's state reading only the states of earlier rounds, and then stores
+    // them. So the states do not depend on the order of the voxels or on the threads; and as n
+    // changes only across the mesh or a fan, which no clear segment crosses, they are the ones a
+    // serial flood reaches. Rounds are few (about the depth of the pending tiles), and within one
+    // the clear-segment tests, the cost, run in parallel. `queued` marks the voxels a round has
+    // taken, so that each is worked out once.
+    //
+    // Pending tiles are the 2^kPendingLevel-voxel children of the finest split tiles. One without
+    // surface voxels (a free tile, about half of them) is one region, as every segment inside it
+    // is free: it settles as a whole, from the first of its voxels (in index order) that can, and
+    // is taken and stored as one (marked at its low corner).
+    constexpr int kPendingLevel = kFinestTileLevel - 1;
+    const int64_t tile_size = int64_t(1) << kPendingLevel;
+    BoxBits free_tiles((n[0] + tile_size - 1) >> kPendingLevel,
+                       (n[1] + tile_size - 1) >> kPendingLevel,
+                       (n[2] + tile_size - 1) >> kPendingLevel);
+    {
+        std::vector<uint8_t> is_free(pending.size());
+        tbb::parallel_for(size_t(0), pending.size(), [&](size_t p) {
+            const Tile& tile = pending[p];
+            bool any = false;
+            for (int64_t z = tile.lo[2]; z <= tile.hi[2] && !any; ++z)
+                for (int64_t y = tile.lo[1]; y <= tile.hi[1] && !any; ++y)
+                    any = surface.bits.bits_at(surface.bits.index(tile.lo[0], y, z),
+                                               int(tile.hi[0] - tile.lo[0] + 1)) != 0;
+            is_free[p] = !any;
+        });
+        for (size_t p = 0; p < pending.size(); ++p)
+            if (is_free[p])
+                free_tiles.set(pending[p].lo[0] >> kPendingLevel, pending[p].lo[1] >> kPendingLevel,
+                               pending[p].lo[2] >> kPendingLevel);
+    }
+    auto tile_at = [&](const int32_t* v) {
+        Tile tile;
+        for (int k = 0; k < 3; ++k) {
+            tile.lo[k] = int64_t(v[k]) >> kPendingLevel << kPendingLevel;
+            tile.hi[k] = std::min(tile.lo[k] + tile_size, n[k]) - 1;
+        }
+        return tile;
+    };
+    auto for_each_voxel = [](const Tile& tile, auto&& f) {
         for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
             for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                 for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
-                    const int64_t seed[3] = {x, y, z};
-                    const uint64_t s = inside.index(x, y, z);
-                    if (state[s] != kUnknown || !settle(s, seed)) continue;
-                    work.push_back({int32_t(x), int32_t(y), int32_t(z)});
-                    while (!work.empty()) {
-                        const std::array<int32_t, 3> top = work.back();
-                        work.pop_back();
-                        const int64_t k[3] = {top[0], top[1], top[2]};
-                        const uint64_t ki = inside.index(k[0], k[1], k[2]);
-                        for (int axis = 0; axis < 3; ++axis)
-                            for (int dir = -1; dir <= 1; dir += 2) {
-                                if (k[axis] + dir < 0 || k[axis] + dir >= n[axis]) continue;
-                                const uint64_t j = dir > 0 ? ki + step[axis] : ki - step[axis];
-                                if (state[j] != kUnknown) continue;
-                                int64_t jv[3] = {k[0], k[1], k[2]};
-                                jv[axis] += dir;
-                                if (settle(j, jv))
-                                    work.push_back(
-                                        {int32_t(jv[0]), int32_t(jv[1]), int32_t(jv[2])});
-                            }
-                    }
+                    const int64_t v[3] = {x, y, z};
+                    if (!f(v)) return;
                 }
+    };
+    struct Settled {
+        std::array<int32_t, 3> voxel;  // a free tile's low corner when `tile`
+        uint8_t state;
+        bool tile;
+    };
+    using SettledLists = tbb::enumerable_thread_specific<std::vector<Settled>>;
+    std::vector<std::atomic<uint64_t>> queued((state.size() + 63) / 64);
+    tbb::parallel_for(size_t(0), queued.size(),
+                      [&](size_t w) { queued[w].store(0, std::memory_order_relaxed); });
+    auto take = [&](uint64_t i) {
+        const uint64_t bit = uint64_t(1) << (i & 63);
+        return !(queued[i >> 6].fetch_or(bit, std::memory_order_relaxed) & bit);
+    };
+    // Voxel i at v, or the free tile holding it: false if it cannot settle yet.
+    auto try_settle = [&](std::vector<Settled>& out, uint64_t i, const int64_t* v) {
+        const std::array<int32_t, 3> at{int32_t(v[0]), int32_t(v[1]), int32_t(v[2])};
+        if (!free_tiles.get(v[0] >> kPendingLevel, v[1] >> kPendingLevel, v[2] >> kPendingLevel)) {
+            const uint8_t s = settled_state(i, v);
+            if (s != kUnknown) out.push_back({at, s, false});
+            return s != kUnknown;
+        }
+        const Tile tile = tile_at(at.data());
+        uint8_t s = kUnknown;
+        for_each_voxel(tile, [&](const int64_t* u) {
+            s = settled_state(inside.index(u[0], u[1], u[2]), u);
+            return s == kUnknown;
+        });
+        if (s != kUnknown)
+            out.push_back(
+                {{int32_t(tile.lo[0]), int32_t(tile.lo[1]), int32_t(tile.lo[2])}, s, true});
+        return s != kUnknown;
+    };
+    // Stores a round's states; returns the voxels and tiles they settled, the next round's
+    // frontier.
+    auto store = [&](SettledLists& lists) {
+        std::vector<Settled> frontier;
+        for (auto& list : lists) {
+            frontier.insert(frontier.end(), list.begin(), list.end());
+            list.clear();
+        }
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 1024), [&](const auto& r) {
+            for (size_t f = r.begin(); f != r.end(); ++f) {
+                const auto& v = frontier[f].voxel;
+                if (!frontier[f].tile) {
+                    state[inside.index(v[0], v[1], v[2])] = frontier[f].state;
+                    continue;
+                }
+                const Tile tile = tile_at(v.data());
+                for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
+                    for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
+                        std::fill_n(state.begin() + int64_t(inside.index(tile.lo[0], y, z)),
+                                    tile.hi[0] - tile.lo[0] + 1, frontier[f].state);
+            }
+        });
+        return frontier;
+    };
+    SettledLists lists;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pending.size(), 16), [&](const auto& r) {
+        auto& out = lists.local();
+        for (size_t p = r.begin(); p != r.end(); ++p) {
+            const Tile& tile = pending[p];
+            if (free_tiles.get(tile.lo[0] >> kPendingLevel, tile.lo[1] >> kPendingLevel,
+                               tile.lo[2] >> kPendingLevel)) {
+                try_settle(out, inside.index(tile.lo[0], tile.lo[1], tile.lo[2]), tile.lo);
+                continue;
+            }
+            for_each_voxel(tile, [&](const int64_t* v) {
+                const uint64_t i = inside.index(v[0], v[1], v[2]);
+                if (state[i] == kUnknown) try_settle(out, i, v);
+                return true;
+            });
+        }
+    });
+    for (std::vector<Settled> frontier = store(lists); !frontier.empty(); frontier = store(lists)) {
+        // What a round takes but cannot settle may settle in a later one.
+        tbb::enumerable_thread_specific<std::vector<uint64_t>> unsettled_lists;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 64), [&](const auto& r) {
+            auto& out = lists.local();
+            auto& unsettled = unsettled_lists.local();
+            auto visit_neighbours = [&](const int64_t* k) {
+                const uint64_t ki = inside.index(k[0], k[1], k[2]);
+                for (int axis = 0; axis < 3; ++axis)
+                    for (int dir = -1; dir <= 1; dir += 2) {
+                        if (k[axis] + dir < 0 || k[axis] + dir >= n[axis]) continue;
+                        const uint64_t j = dir > 0 ? ki + step[axis] : ki - step[axis];
+                        if (state[j] != kUnknown) continue;
+                        int64_t jv[3] = {k[0], k[1], k[2]};
+                        jv[axis] += dir;
+                        // A free tile is taken at its low corner.
+                        const uint64_t key =
+                            free_tiles.get(jv[0] >> kPendingLevel, jv[1] >> kPendingLevel,
+                                           jv[2] >> kPendingLevel)
+                                ? inside.index(jv[0] >> kPendingLevel << kPendingLevel,
+                                               jv[1] >> kPendingLevel << kPendingLevel,
+                                               jv[2] >> kPendingLevel << kPendingLevel)
+                                : j;
+                        if (take(key) && !try_settle(out, j, jv)) unsettled.push_back(key);
+                    }
+                return true;
+            };
+            for (size_t f = r.begin(); f != r.end(); ++f) {
+                const auto& k = frontier[f].voxel;
+                if (frontier[f].tile) {
+                    for_each_voxel(tile_at(k.data()), visit_neighbours);
+                } else {
+                    const int64_t v[3] = {k[0], k[1], k[2]};
+                    visit_neighbours(v);
+                }
+            }
+        });
+        for (const auto& list : unsettled_lists)
+            for (const uint64_t key : list)
+                queued[key >> 6].fetch_and(~(uint64_t(1) << (key & 63)), std::memory_order_relaxed);
+    }
     // Each pending tile's voxels: settled ones inside or not (near a fan, from the fans' winding
     // at the tile's centre and its spread, or later on the device), unsettled ones to evaluate.
     // Tiles are independent (the fans' sums are the cost), so fixed chunks of them run in
