@@ -149,6 +149,22 @@ fi
 grep -q 'CPU reference' <<<"$OUT" && pass "summary names the CPU reference" ||
     fail "summary names the CPU reference" "$OUT"
 
+# Both downloads give the same file; the compact one reports fewer bytes brought back.
+run voxelize "$MESH" -r 48 --mode filled --brick-size 16 --device-memory 1 --download whole \
+    -o "$WORK/whole.binvox" --stats-json "$WORK/whole.json" -q
+run voxelize "$MESH" -r 48 --mode filled --brick-size 16 --device-memory 1 --download blocks \
+    -o "$WORK/blocks.binvox" --stats-json "$WORK/blocks.json" -q
+whole_bytes=$(json_field "$WORK/whole.json" bytes_downloaded)
+blocks_bytes=$(json_field "$WORK/blocks.json" bytes_downloaded)
+if [ "$RC" -eq 0 ] && cmp -s "$WORK/whole.binvox" "$WORK/blocks.binvox" &&
+    [ "$blocks_bytes" -gt 0 ] 2>/dev/null && [ "$blocks_bytes" -lt "$whole_bytes" ]; then
+    pass "--download blocks writes the --download whole file ($blocks_bytes of $whole_bytes bytes)"
+else
+    fail "--download blocks" "rc=$RC bytes=$blocks_bytes whole=$whole_bytes err=$ERR"
+fi
+expect_failure "--download with --workers" "$WORK/workers.binvox" 'download.*workers' \
+    voxelize "$MESH" --download blocks --workers 2 -o "$WORK/workers.binvox"
+
 run voxelize "$MESH" -r 32 --test pef -o "$WORK/sat.npy" --stats
 sat_ones=$(npy_ones "$WORK/sat.npy")
 if [ "$RC" -eq 0 ] && [ "$sat_ones" -gt 0 ] 2>/dev/null && grep -q 'kernels' <<<"$OUT" &&

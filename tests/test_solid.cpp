@@ -514,6 +514,24 @@ TEST(Solid, ResultDoesNotDependOnBrickSize) {
     EXPECT_TRUE(on_device(spot, gs, solid_options(InsideTest::Winding, 4)).same_voxels(w16));
 }
 
+// The parity batches come back whole or as their non-empty blocks with the same voxels, in one
+// batch or many, and the compact download is the size of the result's non-empty blocks.
+TEST(Solid, ParityResultDoesNotDependOnTheDownload) {
+    const Mesh m = load("bunny00.off");
+    const Grid g = fitted(m, 64);
+    const SparseVoxels ref = on_host(m, g, solid_options(InsideTest::Parity));
+    for (uint64_t budget : {uint64_t(256) << 20, uint64_t(16) << 10}) {
+        VoxelizeOptions o = solid_options(InsideTest::Parity, 16);
+        o.device_budget_bytes = budget;
+        VoxelizeStats whole, compact;
+        o.download = Download::Whole;
+        EXPECT_TRUE(on_device(m, g, o, &whole).same_voxels(ref));
+        o.download = Download::NonEmptyBlocks;
+        EXPECT_TRUE(on_device(m, g, o, &compact).same_voxels(ref));
+        expect_compact_download(ref, whole, compact);
+    }
+}
+
 // Brick columns are binned by a counting sort when a grid has few of them for its triangles, and
 // by a comparison sort when it has many (a small mesh in a wide grid of small bricks): both bin
 // the same triangles into the same columns.

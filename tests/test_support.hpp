@@ -225,6 +225,23 @@ inline void expect_exact_up_to(const SparseVoxels& v, const Mesh& m, double eps)
     EXPECT_EQ(unjustified, 0u);
 }
 
+// A compact download (Download::NonEmptyBlocks) brings back 12 bytes (index and two words) per
+// non-empty 4^3 block of the result, counted here from its voxels, plus a 4-byte count per 64
+// blocks of each batch (at most 1/128 of the whole download, and one partial group per batch).
+inline void expect_compact_download(const SparseVoxels& result, const VoxelizeStats& whole,
+                                    const VoxelizeStats& compact) {
+    std::vector<uint64_t> blocks;
+    result.for_each([&](int64_t i, int64_t j, int64_t k) {
+        blocks.push_back(uint64_t(i / 4) | uint64_t(j / 4) << 21 | uint64_t(k / 4) << 42);
+    });
+    std::sort(blocks.begin(), blocks.end());
+    const uint64_t non_empty = std::unique(blocks.begin(), blocks.end()) - blocks.begin();
+    EXPECT_GE(whole.bytes_downloaded, 8 * non_empty);
+    EXPECT_GE(compact.bytes_downloaded, 12 * non_empty);
+    EXPECT_LE(compact.bytes_downloaded,
+              12 * non_empty + whole.bytes_downloaded / 128 + 4 * compact.batches);
+}
+
 // Voxels set in exactly one of a and b must all be touching cases: within eps of some triangle,
 // and not met by any triangle once shrunk by eps.
 inline uint64_t expect_differ_only_where_touching(const SparseVoxels& a, const SparseVoxels& b,

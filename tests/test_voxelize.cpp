@@ -68,6 +68,26 @@ TEST_P(DeviceMatchesReference, ForEveryBrickSizeAndBudget) {
     EXPECT_EQ(stats.batches, stats.bricks_active);
 }
 
+// Whole batches and only their non-empty blocks bring back the same voxels, in one batch or in a
+// batch per brick, and the compact download is the size of the result's non-empty blocks.
+TEST_P(DeviceMatchesReference, ForBothDownloadsAndEveryBudget) {
+    const Grid g = unit_grid(96, 80, 90);
+    const Mesh m = random_triangles(300, 0, 90, 20, 17);
+    const SparseVoxels ref = voxelize_reference(m, g, options(GetParam()));
+    for (uint64_t budget : {uint64_t(256) << 20, uint64_t(16 * 16 * 16 / 8), uint64_t(4096)}) {
+        VoxelizeOptions o = options(GetParam(), 16);
+        o.device_budget_bytes = budget;
+        VoxelizeStats whole, compact;
+        o.download = Download::Whole;
+        expect_same(device().voxelize(m, g, o, &whole), ref);
+        o.download = Download::NonEmptyBlocks;
+        expect_same(device().voxelize(m, g, o, &compact), ref);
+        EXPECT_EQ(compact.batches, whole.batches);
+        expect_compact_download(ref, whole, compact);
+        EXPECT_LT(compact.bytes_downloaded, whole.bytes_downloaded) << budget;
+    }
+}
+
 // Shuffling the triangle order changes the binning and the order of atomic ORs, never the bits.
 TEST_P(DeviceMatchesReference, ForShuffledTriangles) {
     const Grid g = unit_grid(32, 32, 32);

@@ -16,6 +16,7 @@ namespace {
 
 struct VoxelizeArgs {
     std::string input, output, preview;
+    std::string download = "auto";
     FileArgs files;
     oclvox::GridFit fit;
     VoxelizationArgs voxelization;
@@ -54,6 +55,15 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
     add_device_options(command, args.device, "Voxelization");
     args.device_option = command.get_option("--device");
     add_tiling_options(command, args.tiling);
+    command
+        .add_option("--download", args.download,
+                    "how the device's voxels come back: auto (only the non-empty 4^3 blocks from "
+                    "a device with memory of its own, whole batches read in place on CPUs), whole "
+                    "or blocks; the voxels are the same")
+        ->type_name("HOW")
+        ->check(CLI::IsMember({"auto", "whole", "blocks"}))
+        ->capture_default_str()
+        ->group("Tiling");
     add_reporting_options(command, args.reporting);
     add_cluster_options(command, args.cluster, true);
 }
@@ -63,6 +73,10 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
     if (args.input == "-" || args.output == "-" || !args.preview.empty())
         throw UsageError(
             "stdin, stdout and --preview are not available with --workers/--scheduler");
+    if (args.download != "auto")
+        throw UsageError(
+            "--download is not available with --workers/--scheduler (the workers "
+            "choose for their own devices)");
     check_output(args.output, {args.input}, kVoxelExtensions, args.files);
     std::vector<std::string> command{"voxelize", args.input, "-o", args.output};
     if (args.cluster.shard_bricks > 0)
@@ -105,6 +119,7 @@ int run(const VoxelizeArgs& args) {
     options.brick_size = args.tiling.brick_size;
     options.device_budget_bytes = args.tiling.device_mib << 20;
     options.host_budget_bytes = args.tiling.host_mib << 20;
+    options.download = oclvox::download_from_string(args.download);
     oclvox::VoxelizeStats stats;
     const oclvox::SparseVoxels voxels = timed(record.seconds.compute, [&] {
         ProgressBar bar("voxelizing", "bricks", args.reporting);

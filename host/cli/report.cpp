@@ -143,7 +143,8 @@ std::string stats_text(const RunRecord& r) {
             text += format("    binning     %9.4f\n", r.stats->seconds_binning);
             text += format("    upload      %9.4f\n", r.stats->seconds_upload);
             text += format("    kernels     %9.4f\n", r.stats->seconds_kernels);
-            text += format("    download    %9.4f\n", r.stats->seconds_download);
+            text += format("    download    %9.4f  (%.1f MiB)\n", r.stats->seconds_download,
+                           double(r.stats->bytes_downloaded) / (1 << 20));
         }
     } else {
         text += format("  field         %9.4f\n", t.compute);
@@ -253,6 +254,7 @@ Json record_json(const RunRecord& r) {
         j["bricks_active"] = s.bricks_active;
         j["batches"] = s.batches;
         j["allocation_retries"] = s.allocation_retries;
+        j["bytes_downloaded"] = s.bytes_downloaded;
         j["brick_pairs"] = s.brick_pairs;
         j["work_items"] = s.work_items;
         j["voxels_set"] = s.voxels_set;

@@ -70,4 +70,23 @@ Boundary boundary_from_string(const std::string& name) {
     throw GridError("unknown boundary rule '" + name + "' (expected closed or half-open)");
 }
 
+const char* to_string(Download download) {
+    switch (download) {
+        case Download::Auto:
+            return "auto";
+        case Download::Whole:
+            return "whole";
+        case Download::NonEmptyBlocks:
+            return "blocks";
+    }
+    return "?";
+}
+
+Download download_from_string(const std::string& name) {
+    const std::string n = detail::lowercase(name);
+    for (Download d : {Download::Auto, Download::Whole, Download::NonEmptyBlocks})
+        if (n == to_string(d)) return d;
+    throw GridError("unknown download '" + name + "' (expected auto, whole or blocks)");
+}
+
 }  // namespace oclvox

@@ -13,5 +13,6 @@ extern const KernelSource kKernel_voxelize;
 extern const KernelSource kKernel_solid;
 extern const KernelSource kKernel_sdf;
 extern const KernelSource kKernel_meshing;
+extern const KernelSource kKernel_blocks;
 
 }  // namespace oclvox::detail

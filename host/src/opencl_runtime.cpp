@@ -203,6 +203,8 @@ std::vector<Found> all_devices() {
                 info.type = type_name(devices[d].getInfo<CL_DEVICE_TYPE>());
                 info.global_memory = devices[d].getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>();
                 info.max_alloc = devices[d].getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
+                info.host_unified_memory =
+                    devices[d].getInfo<CL_DEVICE_HOST_UNIFIED_MEMORY>() == CL_TRUE;
                 info.id = std::to_string(p) + ":" + std::to_string(d);
                 found.push_back({platforms[p], devices[d], info});
             } catch (const cl::Error& e) {

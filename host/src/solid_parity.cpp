@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "block_download.hpp"
 #include "brick_selection.hpp"
 #include "device_batches.hpp"
 #include "solid_internal.hpp"
@@ -206,7 +207,6 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     const size_t flip_group = work_group_size(flip, cl.device);
     const size_t prefix_group = work_group_size(prefix, cl.device);
     const size_t pack_group = work_group_size(pack, cl.device);
-    std::vector<uint64_t> host_blocks(block_words / 2);
 
     // Batches of brick columns, smaller after a device allocation failure (nothing of a failed
     // batch has been merged).
@@ -250,18 +250,14 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         stats.seconds_kernels += seconds_since(t);
         stats.work_items += batch.items + columns + pack_items;
 
-        t = Clock::now();
-        read_mapped<cl_uint>(
-            cl.queue, block_buffer, batch.column_count * block_words, [&](const cl_uint* words) {
-                for (size_t slot = 0; slot < batch.column_count; ++slot) {
-                    const cl_uint* w = words + slot * block_words;
-                    for (size_t b = 0; b < host_blocks.size(); ++b)
-                        host_blocks[b] = uint64_t(w[2 * b]) | uint64_t(w[2 * b + 1]) << 32;
-                    merge_column(result, l, bins.columns[batch.first_column + slot],
-                                 host_blocks.data());
-                }
+        // Each slot's bricks, bottom to top, are units of the download.
+        download_bricks(
+            cl, block_buffer, batch.column_count * size_t(l.nbz), l.blocks_per_brick,
+            options.download, stats, [&](size_t unit, const uint64_t* blocks) {
+                const uint64_t column = bins.columns[batch.first_column + unit / size_t(l.nbz)];
+                const uint64_t row = unit % size_t(l.nbz);
+                result.merge_brick(column + uint64_t(l.nbx) * uint64_t(l.nby) * row, blocks);
             });
-        stats.seconds_download += seconds_since(t);
         ++stats.batches;
         const size_t finished = done + batch.column_count;
         report_progress(options, finished * uint64_t(l.nbz), bins.columns.size() * uint64_t(l.nbz));

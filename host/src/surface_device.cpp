@@ -4,12 +4,14 @@
 // constants and voxel ranges on the device once; then process the active bricks in batches that fit
 // the device budget: per batch, upload the (triangle, brick) pairs and their work-item offsets,
 // clear the batch's brick bits, run the voxel kernel over all work items, and merge the bits that
-// come back into the sparse result. A batch the device cannot allocate memory for is retried with
-// half as many bricks, down to one (device_batches.hpp).
+// come back (whole, or only the non-empty blocks: block_download.hpp) into the sparse result. A
+// batch the device cannot allocate memory for is retried with half as many bricks, down to one
+// (device_batches.hpp).
 #include <algorithm>
 #include <chrono>
 
 #include "binning.hpp"
+#include "block_download.hpp"
 #include "brick_selection.hpp"
 #include "device_batches.hpp"
 #include "host_memory.hpp"
@@ -159,7 +161,6 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             cl::Kernel voxelize(program, kernels.voxelize);
             const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
-            std::vector<uint64_t> blocks(result.blocks_per_brick());
             size_t slots = std::min(max_slots, binning.bricks.size());
             detail::SlotBuffer bits(CL_MEM_READ_WRITE, words_per_brick * sizeof(cl_uint));
 
@@ -198,20 +199,11 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 stats.seconds_kernels += seconds_since(t);
                 stats.work_items += batch.items;
 
-                // Two 32-bit words per block, low word first.
-                t = Clock::now();
-                detail::read_mapped<cl_uint>(
-                    cl.queue, bit_buffer, bit_words, [&](const cl_uint* bits_back) {
-                        for (size_t slot = 0; slot < batch.brick_count; ++slot) {
-                            const cl_uint* words = bits_back + slot * words_per_brick;
-                            for (size_t b = 0; b < blocks.size(); ++b)
-                                blocks[b] = uint64_t(words[2 * b]) | uint64_t(words[2 * b + 1])
-                                                                         << 32;
-                            result.merge_brick(binning.bricks[batch.first_brick + slot],
-                                               blocks.data());
-                        }
+                detail::download_bricks(
+                    cl, bit_buffer, batch.brick_count, result.blocks_per_brick(), options.download,
+                    stats, [&](size_t slot, const uint64_t* blocks) {
+                        result.merge_brick(binning.bricks[batch.first_brick + slot], blocks);
                     });
-                stats.seconds_download += seconds_since(t);
                 ++stats.batches;
 
                 const size_t finished = done + batch.brick_count;

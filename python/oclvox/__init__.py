@@ -101,8 +101,8 @@ def save_mesh(path, vertices, faces=None, *, progress=None):
 
 def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat", inside="auto",
              boundary="closed", voxel_size=None, origin=None, dims=None, pad=0, cubic=False,
-             brick_size=64, device_memory=None, host_memory=None, device=None, reference=False,
-             progress=None, bricks=None):
+             brick_size=64, device_memory=None, host_memory=None, download="auto", device=None,
+             reference=False, progress=None, bricks=None):
     """Voxelizes a mesh; returns a VoxelGrid.
 
     mode: "surface" (conservative: every voxel whose closed box touches a triangle), "thin"
@@ -113,6 +113,9 @@ def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat"
     (x, y, z) and `dims` (nx, ny, nz) fix the grid instead of fitting it; `pad` adds empty voxels
     on every side; `cubic` makes a resolution^3 grid with the mesh centred (binvox convention).
     brick_size: voxels per brick edge (multiple of 4); device_memory / host_memory: MiB budgets.
+    download: how the device's voxels come back: "auto" (only the non-empty 4^3 blocks from a
+    device with memory of its own, whole batches read in place on CPUs), "whole" or "blocks";
+    the voxels are the same.
     progress: called as progress(bricks_done, bricks_total) after each batch; returning False
     cancels the run, which raises oclvox.Cancelled (an exception it raises is passed on).
     bricks: compute only these bricks of the whole grid (linear indices bx + nbx * (by + nby * bz)
@@ -122,7 +125,7 @@ def voxelize(vertices, faces=None, resolution=256, *, mode="surface", test="sat"
     grid's and keeps the selected bricks. See candidate_bricks and oclvox.distributed.
     """
     options = dict(mode=mode, test=test, inside=inside, boundary=boundary, brick_size=brick_size,
-                   device_memory=device_memory, host_memory=host_memory)
+                   device_memory=device_memory, host_memory=host_memory, download=download)
     mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
     return _oclvox.voxelize(mesh, _fit(resolution, voxel_size, origin, dims, pad, cubic), **options,
                             device=_selector(device), reference=reference, progress=progress,

@@ -69,10 +69,11 @@ py::tuple dims_tuple(const oclvox::Grid& grid) {
 py::dict stats_dict(const oclvox::VoxelizeStats& s) {
     py::dict d("seconds_binning"_a = s.seconds_binning, "seconds_upload"_a = s.seconds_upload,
                "seconds_kernels"_a = s.seconds_kernels, "seconds_download"_a = s.seconds_download,
-               "triangles_in"_a = s.triangles_in, "triangles_used"_a = s.triangles_used,
-               "brick_pairs"_a = s.brick_pairs, "work_items"_a = s.work_items,
-               "bricks_total"_a = s.bricks_total, "bricks_active"_a = s.bricks_active,
-               "batches"_a = s.batches, "voxels_set"_a = s.voxels_set);
+               "bytes_downloaded"_a = s.bytes_downloaded, "triangles_in"_a = s.triangles_in,
+               "triangles_used"_a = s.triangles_used, "brick_pairs"_a = s.brick_pairs,
+               "work_items"_a = s.work_items, "bricks_total"_a = s.bricks_total,
+               "bricks_active"_a = s.bricks_active, "batches"_a = s.batches,
+               "voxels_set"_a = s.voxels_set);
     if (!s.inside_test.empty()) {
         d["inside_test"] = s.inside_test;
         d["inside_test_reason"] = s.inside_test_reason;
@@ -173,7 +174,8 @@ oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::str
                                          const std::string& inside, const std::string& boundary,
                                          int brick_size, std::optional<uint64_t> device_mib,
                                          std::optional<uint64_t> host_mib,
-                                         const py::object& bricks = py::none()) {
+                                         const py::object& bricks = py::none(),
+                                         const std::string& download = "auto") {
     oclvox::VoxelizeOptions options;
     options.mode = oclvox::voxelize_mode_from_string(mode);
     options.test = oclvox::overlap_test_from_string(test);
@@ -183,6 +185,7 @@ oclvox::VoxelizeOptions voxelize_options(const std::string& mode, const std::str
     if (device_mib) options.device_budget_bytes = *device_mib << 20;
     if (host_mib) options.host_budget_bytes = *host_mib << 20;
     options.bricks = brick_list(bricks);
+    options.download = oclvox::download_from_string(download);
     return options;
 }
 
@@ -662,15 +665,15 @@ PYBIND11_MODULE(_oclvox, m) {
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const std::string& mode,
            const std::string& test, const std::string& inside, const std::string& boundary,
            int brick_size, std::optional<uint64_t> device_memory,
-           std::optional<uint64_t> host_memory, py::object device, bool reference,
-           py::object progress, py::object bricks) {
+           std::optional<uint64_t> host_memory, const std::string& download, py::object device,
+           bool reference, py::object progress, py::object bricks) {
             return voxelize(mesh, fit,
                             voxelize_options(mode, test, inside, boundary, brick_size,
-                                             device_memory, host_memory, bricks),
+                                             device_memory, host_memory, bricks, download),
                             device, reference, std::move(progress));
         },
         "mesh"_a, "fit"_a, "mode"_a, "test"_a, "inside"_a, "boundary"_a, "brick_size"_a,
-        "device_memory"_a, "host_memory"_a, "device"_a, "reference"_a, "progress"_a,
+        "device_memory"_a, "host_memory"_a, "download"_a, "device"_a, "reference"_a, "progress"_a,
         "bricks"_a = py::none());
     m.def(
         "candidate_bricks",

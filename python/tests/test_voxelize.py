@@ -113,6 +113,27 @@ def test_device_equals_reference_and_modes_nest(spot):
     assert oclvox.voxelize(vertices, faces, 48, mode="solid").stats["inside_test"] == "parity"
 
 
+def test_downloads_bring_back_the_same_voxels(spot):
+    # The compact download brings back 12 bytes per non-empty 4^3 block (counted here from the
+    # voxels) and a 4-byte count per 64 blocks.
+    vertices, faces = spot
+    for mode in ("surface", "solid"):
+        whole = oclvox.voxelize(vertices, faces, 64, mode=mode, inside="parity", download="whole")
+        blocks = oclvox.voxelize(vertices, faces, 64, mode=mode, inside="parity",
+                                 download="blocks")
+        dense = whole.to_numpy()
+        assert np.array_equal(blocks.to_numpy(), dense), mode
+        n = tuple(-(-d // 4) * 4 for d in dense.shape)
+        padded = np.zeros(n, dtype=bool)
+        padded[:dense.shape[0], :dense.shape[1], :dense.shape[2]] = dense
+        non_empty = padded.reshape(n[0] // 4, 4, n[1] // 4, 4, n[2] // 4, 4).any(axis=(1, 3, 5))
+        compact = blocks.stats["bytes_downloaded"]
+        assert 12 * non_empty.sum() <= compact <= 12 * non_empty.sum() + \
+            whole.stats["bytes_downloaded"] // 128 + 4 * blocks.stats["batches"], mode
+    with pytest.raises(ValueError, match="download"):
+        oclvox.voxelize(vertices, faces, 16, download="some")
+
+
 def test_mesh_given_every_way(spot, tmp_path):
     vertices, faces = spot
     expected = oclvox.voxelize(vertices, faces, 40).to_numpy()

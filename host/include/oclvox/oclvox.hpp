@@ -231,6 +231,16 @@ enum class Boundary {
 const char* to_string(Boundary boundary);
 Boundary boundary_from_string(const std::string& name);
 
+// How a device's voxels come back to the host, batch by batch. Either way the result is the same,
+// bit for bit; what differs is the bytes moved.
+enum class Download {
+    Auto,            // NonEmptyBlocks from a device with memory of its own, else Whole (CPUs)
+    Whole,           // every 4^3 block of the batch's bricks, read in place where the device can
+    NonEmptyBlocks,  // only the blocks with a voxel set, compacted on the device (12 bytes each)
+};
+const char* to_string(Download download);
+Download download_from_string(const std::string& name);  // "auto", "whole" or "blocks"
+
 struct VoxelizeOptions {
     VoxelizeMode mode = VoxelizeMode::Surface;
     InsideTest inside = InsideTest::Auto;
@@ -239,6 +249,7 @@ struct VoxelizeOptions {
     int brick_size = 64;                  // voxels per brick edge, a multiple of 4 in [4, 1024]
     uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
     uint64_t host_budget_bytes = 0;             // 0: half of physical memory
+    Download download = Download::Auto;
     ProgressCallback progress;
     // Compute only these bricks of the whole grid (linear indices bx + nbx*(by + nby*bz) of
     // brick_size bricks, as SparseVoxels::brick_indices gives them; any order). The result holds
@@ -282,9 +293,10 @@ SelectionTriangles selection_triangles(const Mesh& mesh, const Grid& grid,
 // Timing breakdown and counts of one run (seconds).
 struct VoxelizeStats {
     double seconds_binning = 0, seconds_upload = 0, seconds_kernels = 0, seconds_download = 0;
-    uint64_t triangles_in = 0;    // triangles in the mesh
-    uint64_t triangles_used = 0;  // after dropping those outside the grid (after clipping)
-    uint64_t brick_pairs = 0;     // (triangle, brick) pairs after binning
+    uint64_t bytes_downloaded = 0;  // voxel results read back from the device (Download)
+    uint64_t triangles_in = 0;      // triangles in the mesh
+    uint64_t triangles_used = 0;    // after dropping those outside the grid (after clipping)
+    uint64_t brick_pairs = 0;       // (triangle, brick) pairs after binning
     // Work items launched (surface: one per triangle and run of up to 8 4^3 blocks of a brick);
     // for distance fields, the (triangle, 4^3 block) pairs the band's culls examine.
     uint64_t work_items = 0;
@@ -301,7 +313,8 @@ struct DeviceInfo {
     std::string platform, name, vendor, version, driver_version;
     std::string type;  // "CPU", "GPU", "ACCELERATOR", ...
     uint64_t global_memory = 0, max_alloc = 0;
-    std::string id;  // "P:D" indices as accepted by Device::open
+    bool host_unified_memory = false;  // the device's memory is the host's (CPU devices)
+    std::string id;                    // "P:D" indices as accepted by Device::open
 };
 
 // All OpenCL devices of all platforms. Throws DeviceError if no platform exists.

@@ -1,0 +1,111 @@
+// Downloads of brick bits: whole batches read in place, or only the non-empty 4^3 blocks,
+// compacted on the device (kernels/blocks.cl). Most blocks of a surface's bricks are empty: at
+// 1024^3 and 64^3 bricks, a surface brick holds a few hundred non-empty blocks of 4096.
+#include "block_download.hpp"
+
+#include <algorithm>
+#include <vector>
+
+#include "device_batches.hpp"
+#include "timing.hpp"
+
+namespace oclvox::detail {
+
+namespace {
+
+constexpr size_t kGroupBlocks = 64;  // OV_GROUP_BLOCKS of blocks.cl
+
+// Calls merge(unit, blocks) for each unit with a set block; block(i) gives block i of the batch.
+template <typename Block>
+void merge_units(size_t units, size_t blocks_per_unit, std::vector<uint64_t>& blocks,
+                 const std::function<void(size_t, const uint64_t*)>& merge, Block&& block) {
+    for (size_t unit = 0; unit < units; ++unit) {
+        bool any = false;
+        for (size_t b = 0; b < blocks_per_unit; ++b) {
+            blocks[b] = block(unit * blocks_per_unit + b);
+            any = any || blocks[b] != 0;
+        }
+        if (any) merge(unit, blocks.data());
+    }
+}
+
+}  // namespace
+
+void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, size_t blocks_per_unit,
+                     Download mode, VoxelizeStats& stats,
+                     const std::function<void(size_t unit, const uint64_t* blocks)>& merge) {
+    const auto start = Clock::now();
+    const uint64_t block_count = uint64_t(units) * blocks_per_unit;
+    std::vector<uint64_t> blocks(blocks_per_unit);
+    // Block indices are 32-bit on the device.
+    const bool compact = block_count < (uint64_t(1) << 32) &&
+                         (mode == Download::NonEmptyBlocks ||
+                          (mode == Download::Auto && !cl.info.host_unified_memory));
+    if (!compact) {
+        read_mapped<cl_uint>(cl.queue, bits, 2 * block_count, [&](const cl_uint* words) {
+            merge_units(units, blocks_per_unit, blocks, merge, [&](uint64_t i) {
+                return uint64_t(words[2 * i]) | uint64_t(words[2 * i + 1]) << 32;
+            });
+        });
+        stats.bytes_downloaded += 2 * block_count * sizeof(cl_uint);
+        stats.seconds_download += seconds_since(start);
+        return;
+    }
+
+    // Phase 1: the non-empty blocks of each group of 64, counted on the device.
+    const cl::Program& program = cl.program(kKernel_blocks);
+    cl::Kernel count_kernel(program, "block_counts"), compact_kernel(program, "compact_blocks");
+    const uint64_t groups = (block_count + kGroupBlocks - 1) / kGroupBlocks;
+    const cl::Buffer counts = batch_buffer(cl.context, CL_MEM_READ_WRITE, groups * sizeof(cl_uint));
+    auto run_groups = [&](cl::Kernel& kernel) {
+        run_sliced(cl.queue, groups * kGroupBlocks, kGroupBlocks,
+                   [&](uint64_t first, uint64_t count) {
+                       kernel.setArg(2, cl_uint(first));
+                       launch(cl.queue, kernel, count, kGroupBlocks);
+                   },
+                   {});
+    };
+    set_args(count_kernel, 0, bits, cl_uint(block_count), cl_uint(0), counts);
+    run_groups(count_kernel);
+
+    // Phase 2: each group's first place in the compact list, on the host.
+    std::vector<cl_uint> offsets(groups);
+    cl.queue.enqueueReadBuffer(counts, CL_TRUE, 0, groups * sizeof(cl_uint), offsets.data());
+    stats.bytes_downloaded += groups * sizeof(cl_uint);
+    uint64_t total = 0;
+    for (cl_uint& offset : offsets) {
+        const uint64_t count = offset;
+        offset = cl_uint(total);
+        total += count;
+    }
+    if (total == 0) {
+        stats.seconds_download += seconds_since(start);
+        return;
+    }
+
+    // Phase 3: the non-empty blocks, in block order, compacted on the device and read back.
+    const cl::Buffer offset_buffer = upload(cl.context, cl.queue, offsets);
+    const cl::Buffer indices = batch_buffer(cl.context, CL_MEM_READ_WRITE, total * sizeof(cl_uint));
+    const cl::Buffer words =
+        batch_buffer(cl.context, CL_MEM_READ_WRITE, 2 * total * sizeof(cl_uint));
+    set_args(compact_kernel, 0, bits, cl_uint(block_count), cl_uint(0), offset_buffer, indices,
+             words);
+    run_groups(compact_kernel);
+    std::vector<cl_uint> index_back(total), words_back(2 * total);
+    cl.queue.enqueueReadBuffer(indices, CL_FALSE, 0, total * sizeof(cl_uint), index_back.data());
+    cl.queue.enqueueReadBuffer(words, CL_TRUE, 0, 2 * total * sizeof(cl_uint), words_back.data());
+    stats.bytes_downloaded += 3 * total * sizeof(cl_uint);
+
+    // Phase 4: per unit with blocks, its whole block array.
+    for (size_t i = 0; i < total;) {
+        const size_t unit = index_back[i] / blocks_per_unit;
+        std::fill(blocks.begin(), blocks.end(), 0);
+        for (; i < total && index_back[i] / blocks_per_unit == unit; ++i)
+            blocks[index_back[i] % blocks_per_unit] =
+                uint64_t(words_back[2 * i]) | uint64_t(words_back[2 * i + 1]) << 32;
+        merge(unit, blocks.data());
+    }
+    stats.seconds_download += seconds_since(start);
+}
+
+}  // namespace oclvox::detail
