@@ -13,8 +13,10 @@ Measures, each with the load average beside it (other jobs on a shared machine s
 - a shard's voxelize call on the whole mesh against on the triangles that reach it;
 - a batch: --batch scaled and moved copies of the mesh through voxelize_many on 1 and 2 workers;
 - a projection for --project^3 on 100 workers from the measured per-brick cost and result bytes
-  (oclvox.candidate_bricks gives the brick count at that size without voxelizing).
-Prints a Markdown report (and writes it to --out).
+  (oclvox.candidate_bricks gives the brick count at that size without voxelizing);
+- one distance field (--mesh at --sdf-resolution, band 3) through sdf_sharded on 2 workers, dense
+  and sparse: wall time, what the client holds, and the two compared sample for sample.
+--sdf-only runs the last section alone. Prints a Markdown report (and writes it to --out).
 """
 
 import argparse
@@ -31,7 +33,7 @@ import numpy as np
 
 import distributed
 import oclvox
-from oclvox.distributed import voxelize_many, voxelize_sharded
+from oclvox.distributed import sdf_sharded, voxelize_many, voxelize_sharded
 
 MESHES = pathlib.Path(os.environ.get("OCLVOX_MESH_DIR", "/work/shared/data/meshes"))
 # One PoCL thread per worker process: a worker is one core, as it would be one device.
@@ -188,6 +190,41 @@ def batch(mesh, count, resolution, workers, folder):
                 load=f"{before}/{load()}")
 
 
+def sharded_fields(mesh, resolution, workers=2):
+    """sdf_sharded dense and sparse (band 3) on one cluster: wall seconds, the bytes the client
+    ends up holding, and whether the two fields are the same samples."""
+    with cluster(workers) as c, distributed.Client(c) as client:
+        warm_up(client, mesh)
+        runs = {}
+        for sparse in (False, True):
+            before = load()
+            start = time.perf_counter()
+            field = sdf_sharded(mesh, resolution, client=client, band=3.0, sparse=sparse)
+            wall = time.perf_counter() - start
+            held = len(pickle.dumps(field, protocol=5)) if sparse else field.to_numpy().nbytes
+            runs[sparse] = dict(wall=wall, held=held, load=f"{before}/{load()}", field=field)
+    dense, sparse = runs[False]["field"], runs[True]["field"]
+    same = np.array_equal(sparse.to_field().to_numpy().view(np.uint32),
+                          dense.to_numpy().view(np.uint32))
+    return runs, same, sparse.leaf_count, dense.dims
+
+
+def sdf_section(mesh, resolution):
+    runs, same, leaves, dims = sharded_fields(mesh, resolution)
+    lines = ["", f"## One distance field: {resolution} (grid {dims[0]}x{dims[1]}x{dims[2]}), "
+             "band 3, sdf_sharded on 2 workers", "",
+             "| field | wall s | the client holds | load |", "|---|---:|---:|---|"]
+    for sparse, run in runs.items():
+        what = (f"{run['held'] / 2**20:.1f} MiB ({leaves} leaves and the inside bits, pickled)"
+                if sparse else f"{run['held'] / 2**20:.1f} MiB (4 bytes a voxel; twice that "
+                               "while the slabs are copied in)")
+        lines.append(f"| {'sparse' if sparse else 'dense'} | {run['wall']:.2f} | {what} | "
+                     f"{run['load']} |")
+    lines += ["", f"- sparse == dense, sample for sample: {same}"]
+    assert same
+    return lines
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--mesh", default=str(MESHES / "bunny00.off"))
@@ -198,9 +235,15 @@ def main():
     parser.add_argument("--batch", type=int, default=50)
     parser.add_argument("--batch-resolution", type=int, default=256)
     parser.add_argument("--project", type=int, default=32768)
+    parser.add_argument("--sdf-resolution", type=int, default=512)
+    parser.add_argument("--sdf-only", action="store_true")
     parser.add_argument("--out")
     args = parser.parse_args()
     mesh = pathlib.Path(args.mesh)
+    if args.sdf_only:
+        report([f"# oclvox on local Dask clusters ({mesh.name})"] +
+               sdf_section(mesh, args.sdf_resolution), args.out)
+        return
     lines = [f"# oclvox on local Dask clusters ({mesh.name})", "",
              f"{os.cpu_count()} cores; each worker a process with a one-thread PoCL device; "
              f"load average (1 min) shown as before/after each run.", "", "## Scheduling", ""]
@@ -294,10 +337,14 @@ def main():
               f"of taking and merging shards, one process",
               f"- one .vdb: {vdb_seconds:.2f} s x {big / grid.brick_count:.0f} = {write:.0f} s "
               f"(scaled by result bricks from the {r}^3 write)"]
-    report = "\n".join(lines) + "\n"
-    print(report)
-    if args.out:
-        pathlib.Path(args.out).write_text(report)
+    report(lines + sdf_section(mesh, args.sdf_resolution), args.out)
+
+
+def report(lines, out):
+    text = "\n".join(lines) + "\n"
+    print(text)
+    if out:
+        pathlib.Path(out).write_text(text)
 
 
 if __name__ == "__main__":

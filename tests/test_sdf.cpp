@@ -941,13 +941,85 @@ TEST(SparseSdf, GridBeyondTheDenseBudgetCompletesSparse) {
     EXPECT_EQ(f.at(int64_t(c[0]), int64_t(c[1]), int64_t(c[2])), -f.background());
 }
 
-TEST(SparseSdf, FullGridAndLayersAreRefused) {
+// Sparse fields of layer ranges (cut at multiples of 8, not of the brick size) hold the whole
+// field's leaves of those layers, sample for sample, and merged in either order (appended, or
+// interleaved) they are the whole field: leaves, samples and inside voxels. Device and reference,
+// a closed sphere (parity), the scan and open random triangles (winding number).
+TEST(SparseSdf, LayerFieldsMergeIntoTheWholeField) {
+    for (const SparseCase& c : sparse_cases())
+        for (const bool reference : {false, true}) {
+            SCOPED_TRACE(std::string(c.name) + (reference ? " reference" : " device"));
+            SdfOptions o = band(2.0);
+            o.brick_size = 12;
+            auto run = [&](const SdfOptions& options) {
+                return reference ? signed_distance_sparse_reference(c.mesh, c.grid, options)
+                                 : signed_distance_sparse(device(), c.mesh, c.grid, options);
+            };
+            const SparseField whole = run(o);
+            const auto n = whole.leaf_dims();
+            const uint64_t per_layer = uint64_t(n[0]) * uint64_t(n[1]);
+            std::vector<SparseField> parts;
+            for (const auto& [first, end] :
+                 std::vector<std::pair<int64_t, int64_t>>{{0, 8}, {8, 24}, {24, 0}}) {
+                SdfOptions part = o;
+                part.first_layer = first;
+                part.end_layer = end;
+                parts.push_back(run(part));
+                // Its leaves are the whole field's in leaf layers first / 8 up to end / 8.
+                const uint64_t lo = uint64_t(first / 8) * per_layer,
+                               hi = end ? uint64_t(end / 8) * per_layer : UINT64_MAX;
+                std::vector<uint64_t> expected;
+                for (const uint64_t leaf : whole.leaf_indices())
+                    if (leaf >= lo && leaf < hi) expected.push_back(leaf);
+                EXPECT_EQ(parts.back().leaf_indices(), expected) << first;
+                EXPECT_GT(expected.size(), 0u) << first;
+            }
+            SparseField forward = parts[0];
+            forward.merge(parts[1]);
+            forward.merge(parts[2]);
+            SparseField backward = parts[2];
+            backward.merge(parts[0]);
+            backward.merge(parts[1]);
+            for (const SparseField* merged : {&forward, &backward}) {
+                EXPECT_EQ(merged->leaf_indices(), whole.leaf_indices());
+                expect_identical(merged->to_dense(), whole.to_dense());
+                EXPECT_TRUE(merged->inside().same_voxels(whole.inside()));
+            }
+        }
+}
+
+TEST(SparseSdf, FullGridUnalignedLayersAndLayeredCsgAreRefused) {
     const SparseCase c = sparse_cases()[0];
     EXPECT_THROW(signed_distance_sparse(device(), c.mesh, c.grid, band(2.0, true)), GridError);
-    SdfOptions layers = band(2.0);
-    layers.first_layer = 3;
-    EXPECT_THROW(signed_distance_sparse_reference(c.mesh, c.grid, layers), GridError);
+    for (const auto& [first, end] :
+         std::vector<std::pair<int64_t, int64_t>>{{3, 0}, {0, 12}, {8, 8}, {0, 40}}) {
+        SdfOptions layers = band(2.0);
+        layers.first_layer = first;
+        layers.end_layer = end;
+        EXPECT_THROW(signed_distance_sparse_reference(c.mesh, c.grid, layers), GridError) << first;
+        EXPECT_THROW(signed_distance_sparse(device(), c.mesh, c.grid, layers), GridError) << first;
+    }
     EXPECT_THROW(signed_distance_sparse(device(), c.mesh, c.grid, band(-1.0)), GridError);
+    SdfOptions layers = band(2.0);
+    layers.end_layer = 16;
+    EXPECT_THROW(csg_sparse(device(), c.mesh, c.mesh, CsgOp::Union, c.grid, layers), GridError);
+}
+
+// Merging needs one grid, band and brick size, and leaves stored in only one of the fields.
+TEST(SparseField, MergeRefusesOtherGridsAndSharedLeaves) {
+    const SparseCase c = sparse_cases()[0];
+    SparseField f = signed_distance_sparse(device(), c.mesh, c.grid, band(2.0));
+    EXPECT_THROW(f.merge(f), GridError);
+    Grid other = c.grid;
+    other.origin[0] += c.grid.voxel_size;
+    EXPECT_THROW(f.merge(signed_distance_sparse(device(), c.mesh, other, band(2.0))), GridError);
+    EXPECT_THROW(f.merge(signed_distance_sparse(device(), c.mesh, c.grid, band(2.5))), GridError);
+    SdfOptions bricks = band(2.0);
+    bricks.brick_size = 16;
+    EXPECT_THROW(f.merge(signed_distance_sparse(device(), c.mesh, c.grid, bricks)), GridError);
+    const size_t leaves = f.leaf_count();
+    f.merge(SparseField(c.grid, 2.0, SparseVoxels(c.grid, 64)));  // nothing to add
+    EXPECT_EQ(f.leaf_count(), leaves);
 }
 
 TEST(SparseSdf, FilesEqualTheDenseFieldsFiles) {

@@ -125,17 +125,18 @@ Grid field_grid(const Grid& grid, const SdfOptions& options) {
     return layers;
 }
 
-void keep_layers(SdfTriangles& prepared, const SdfOptions& options) {
+void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_layers) {
     if (options.first_layer == 0 && options.end_layer == 0) return;
     const int first = int(options.first_layer);
     const int last = options.end_layer ? int(options.end_layer) - 1 : INT32_MAX;
+    const int shift = onto_layers ? first : 0;
     std::vector<OvSdfTriangle> kept;
     std::vector<uint64_t> first_item{0};
     for (OvSdfTriangle t : prepared.triangles) {
-        t.lo[2] = std::max(t.lo[2], first) - first;
-        t.hi[2] = std::min(t.hi[2], last) - first;
+        t.lo[2] = std::max(t.lo[2], first) - shift;
+        t.hi[2] = std::min(t.hi[2], last) - shift;
         if (t.lo[2] > t.hi[2]) continue;
-        t.anchor[2] -= first;
+        t.anchor[2] -= shift;
         kept.push_back(t);
         first_item.push_back(first_item.back() + item_count(t));
     }
@@ -312,9 +313,10 @@ void add_second_field_stats(VoxelizeStats& stats, const VoxelizeStats& b) {
 FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& options, bool sign,
                     bool sparse, ProgressPhases& progress, VoxelizeStats& stats) {
     const auto t = Clock::now();
-    // Prepared on the whole grid, then cut to the layers (so every sample keeps its bits).
+    // Prepared on the whole grid, then cut to the layers (so every sample keeps its bits); a
+    // sparse field keeps the whole grid's coordinates.
     FieldJob job{mesh, prepare_sdf_triangles(mesh, grid, options.band_voxels), {}};
-    keep_layers(job.prepared, options);
+    keep_layers(job.prepared, options, !sparse);
     job.phases =
         add_sdf_phases(progress, job.prepared, field_grid(grid, options), options, sign, sparse);
     stats.triangles_in = mesh.triangles.size();

@@ -76,16 +76,19 @@ class LeafWriter {
     uint64_t leaf_ = 0;
 };
 
-// A sparse field is a narrow band of the whole grid.
+// A sparse field is a narrow band of the whole grid; its layers, if given, are whole leaf layers
+// (so that a leaf is computed in one range of layers only).
 void validate_sparse(const Grid& grid, const SdfOptions& options) {
     validate_sdf_options(grid, options);
     if (options.full_grid)
         throw GridError(
             "a sparse field holds a narrow band; a full-grid field needs the dense "
             "signed_distance");
-    if (options.first_layer != 0 || options.end_layer != 0)
-        throw GridError(
-            "a sparse field covers the whole grid; layers need the dense signed_distance");
+    const int64_t end = options.end_layer ? options.end_layer : grid.dims[2];
+    if (options.first_layer % kLeaf != 0 || (end % kLeaf != 0 && end != grid.dims[2]))
+        throw GridError("the layers of a sparse field must start at a multiple of " +
+                        std::to_string(kLeaf) + " and end at one or at the top of the grid, got " +
+                        std::to_string(options.first_layer) + " to " + std::to_string(end));
 }
 
 // Prepares a mesh's triangles for a sparse field and adds its phases.
@@ -101,6 +104,7 @@ SparseField compute_sparse(Device* device, const FieldJob& job, const Grid& grid
     // Phase 1: the leaves the band reaches, and the memory their samples need (the field's
     // samples, and beside them one batch, or the reference's squared distances).
     auto t = Clock::now();
+    // Triangles are clipped to the layers (plan_field), so the leaves are those of the layers.
     const BandLeaves band =
         band_leaves(job.prepared, grid, options, progress.reporter(job.phases.leaves));
     const LeafSet& leaves = band.leaves;
@@ -155,6 +159,9 @@ SparseField sparse_csg_run(Device* device, const Mesh& a, const Mesh& b, CsgOp o
                            const SdfOptions& options, VoxelizeStats* stats_out) {
     // Phase 1: both fields' phases, so that progress runs once over both.
     validate_sparse(grid, options);
+    if (options.first_layer != 0 || options.end_layer != 0)
+        throw GridError(
+            "a sparse CSG of meshes covers the whole grid (no layers); the dense csg takes layers");
     ProgressPhases progress(options.progress, "CSG");
     VoxelizeStats stats, stats_b;
     const FieldJob job_a = plan_sparse(a, grid, options, progress, stats);

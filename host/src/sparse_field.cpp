@@ -52,6 +52,38 @@ void SparseField::append_leaf(uint64_t leaf_index, const float* samples) {
     samples_.insert(samples_.end(), samples, samples + kLeafSamples);
 }
 
+void SparseField::merge(const SparseField& other) {
+    if (!same_grid(grid_, other.grid_) || band_voxels_ != other.band_voxels_ ||
+        inside_.brick_size() != other.inside_.brick_size())
+        throw GridError("merging sparse fields needs the same grid, band and brick size");
+    for (const uint64_t brick : other.inside_.brick_indices())
+        inside_.merge_brick(brick, other.inside_.brick_blocks(brick));
+    if (other.leaf_keys_.empty()) return;
+    if (leaf_keys_.empty() || other.leaf_keys_.front() > leaf_keys_.back()) {
+        leaf_keys_.insert(leaf_keys_.end(), other.leaf_keys_.begin(), other.leaf_keys_.end());
+        samples_.insert(samples_.end(), other.samples_.begin(), other.samples_.end());
+        return;
+    }
+    // Interleaved leaves: both sorted lists merged into new ones.
+    std::vector<uint64_t> keys;
+    std::vector<float> samples;
+    keys.reserve(leaf_keys_.size() + other.leaf_keys_.size());
+    samples.reserve(samples_.size() + other.samples_.size());
+    size_t a = 0, b = 0;
+    while (a < leaf_keys_.size() || b < other.leaf_keys_.size()) {
+        const bool from_this = b == other.leaf_keys_.size() ||
+                               (a < leaf_keys_.size() && leaf_keys_[a] < other.leaf_keys_[b]);
+        if (!from_this && a < leaf_keys_.size() && leaf_keys_[a] == other.leaf_keys_[b])
+            throw GridError("leaf " + std::to_string(leaf_keys_[a]) +
+                            " is in both of the sparse fields being merged");
+        const float* leaf = from_this ? leaf_samples(a) : other.leaf_samples(b);
+        keys.push_back(from_this ? leaf_keys_[a++] : other.leaf_keys_[b++]);
+        samples.insert(samples.end(), leaf, leaf + kLeafSamples);
+    }
+    leaf_keys_ = std::move(keys);
+    samples_ = std::move(samples);
+}
+
 float SparseField::at(int64_t i, int64_t j, int64_t k) const {
     const auto& d = grid_.dims;
     if (i < 0 || j < 0 || k < 0 || i >= d[0] || j >= d[1] || k >= d[2])

@@ -201,7 +201,10 @@ def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, insi
     sparse=True: a narrow band of the whole grid kept as a SparseField (the 8x8x8 leaves the band
     reaches and the inside voxels as bits), for grids whose dense field would not fit; its
     .save() writes .vdb from the leaves or .npy a layer at a time, .to_field() gives the Field
-    (bit for bit the sparse=False result).
+    (bit for bit the sparse=False result). With layers (first and end multiples of 8, or end the
+    top) it keeps the whole grid but holds only those layers' leaves and inside voxels, and
+    SparseField.merge joins the fields of disjoint ranges into the whole field; SparseFields
+    pickle as their leaves and inside voxels.
     """
     mesh, resolution = _mesh_and_resolution(vertices, faces, resolution)
     pad = _field_pad(pad, band, origin, dims)

@@ -211,23 +211,29 @@ _SDF_OPTIONS = frozenset(inspect.signature(oclvox.sdf).parameters) - {
 
 
 def _sdf_layers(mesh, resolution, layers, device, options):
-    """A worker's task: the whole field's samples in voxel layers layers[0] <= k < layers[1]."""
+    """A worker's task: the whole field's samples in voxel layers layers[0] <= k < layers[1], as
+    an array, or with options["sparse"] as a SparseField of the whole grid holding those layers'
+    leaves."""
     field = oclvox.sdf(mesh, resolution, layers=layers, device=device, **options)
-    return np.array(field.to_numpy(), order="F")
+    return field if options.get("sparse") else np.array(field.to_numpy(), order="F")
 
 
 def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None, **options):
-    """The signed distance field of one mesh on a Dask cluster; returns the Field oclvox.sdf
-    returns (narrow band), bit for bit.
+    """The signed distance field of one mesh on a Dask cluster; returns what oclvox.sdf returns
+    (narrow band: a Field, or with sparse=True a SparseField), bit for bit.
 
-    options: sdf's (band, inside, grid options, brick_size, reference); full_grid is refused,
-    because jump flooding carries distances across the whole grid. The grid's z layers are cut
-    into slabs of `shard_layers` layers (default: about four slabs per worker, a multiple of
-    brick_size so that no brick of the sign's solid is computed twice); each slab is one task,
-    oclvox.sdf(..., layers=(first, end)), whose samples are the whole field's there. The client
-    copies each slab into the whole (dense) field as it arrives: it needs the memory of the field
-    twice at the end (4 bytes a voxel, once for the slabs, once in the Field). Each slab's sign
-    comes from a solid voxelization of its whole columns of bricks.
+    options: sdf's (band, inside, grid options, brick_size, reference, sparse); full_grid is
+    refused, because jump flooding carries distances across the whole grid. The grid's z layers
+    are cut into slabs of `shard_layers` layers (default: about four slabs per worker, a multiple
+    of brick_size so that no brick of the sign's solid is computed twice, and with sparse=True of
+    8, the leaves' size, which shard_layers must then be too); each slab is one task,
+    oclvox.sdf(..., layers=(first, end)), whose samples are the whole field's there. Each slab's
+    sign comes from a solid voxelization of its whole columns of bricks.
+    Dense: the client copies each slab into the whole field as it arrives, and needs the memory
+    of the field twice at the end (4 bytes a voxel, once for the slabs, once in the Field).
+    Sparse: each slab comes back as its leaves and inside voxels, and the client merges the slabs
+    in z order as they become contiguous (SparseField.merge): memory follows the surface, as for
+    oclvox.sdf(..., sparse=True), plus the slabs that arrived ahead of their turn.
     """
     if options.get("full_grid"):
         raise ValueError("sdf_sharded computes narrow-band fields only: full_grid's jump "
@@ -246,11 +252,14 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
         resolution, options.get("voxel_size"), options.get("origin"), options.get("dims"),
         options["pad"], options.get("cubic", False)))
     brick = options.get("brick_size", defaults["brick_size"].default)
+    sparse = options.get("sparse", False)
+    unit = math.lcm(brick, 8) if sparse else brick
     if shard_layers is None:
         workers = max(1, len(client.scheduler_info()["workers"]))
-        shard_layers = brick * max(1, math.ceil(dims[2] / (4 * workers * brick)))
-    if shard_layers < 1:
-        raise ValueError(f"shard_layers must be at least 1, got {shard_layers}")
+        shard_layers = unit * max(1, math.ceil(dims[2] / (4 * workers * unit)))
+    if shard_layers < 1 or (sparse and shard_layers % 8):
+        raise ValueError(f"shard_layers must be at least 1{' and a multiple of 8' if sparse else ''}"
+                         f", got {shard_layers}")
     cuts = list(range(0, dims[2], shard_layers)) + [dims[2]]
 
     # Phase 2: the mesh to every worker once, one task per slab.
@@ -260,6 +269,8 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
                for first, end in zip(cuts, cuts[1:])}
 
     # Phase 3: each slab into its place.
+    if sparse:
+        return _merge_slabs(client, futures, cuts)
     values = np.empty(dims, np.float32, order="F")
 
     def place(future, first):
@@ -268,6 +279,25 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
 
     _collect(client, futures, place)
     return oclvox.Field(values, origin, voxel_size, band)
+
+
+def _merge_slabs(client, futures, cuts):
+    """The SparseField of slab futures (keyed by their first layer, cuts in z order): each merged
+    in z order once the slabs below it are in, so that merging only appends leaves."""
+    held, whole, turn = {}, [None], [0]
+
+    def merge(future, first):
+        held[first] = future.result()
+        while turn[0] < len(cuts) - 1 and cuts[turn[0]] in held:
+            slab = held.pop(cuts[turn[0]])
+            if whole[0] is None:
+                whole[0] = slab
+            else:
+                whole[0].merge(slab)
+            turn[0] += 1
+
+    _collect(client, futures, merge)
+    return whole[0]
 
 
 # ---- many meshes --------------------------------------------------------------------------------

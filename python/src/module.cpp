@@ -204,12 +204,13 @@ oclvox::SdfOptions sdf_options(double band, bool full_grid, const std::string& i
     return options;
 }
 
-// A VoxelGrid's pickled state: the grid, the brick size and the stored bricks: their indices, a
-// bitmap per brick of its non-zero block words, and those words alone. A sparse result travels
-// between processes without a dense copy, and a surface brick (mostly empty blocks) costs its
-// set blocks, not its 8 bytes per block: about a tenth of the words, on bunny00's bricks.
-py::tuple voxel_grid_state(const VoxelGrid& g) {
-    const oclvox::SparseVoxels& v = g.voxels;
+// The pickled state of sparse voxels: the grid, the brick size and the stored bricks: their
+// indices, a bitmap per brick of its non-zero block words, and those words alone. A sparse result
+// travels between processes without a dense copy, and a surface brick (mostly empty blocks) costs
+// its set blocks, not its 8 bytes per block: about a tenth of the words, on bunny00's bricks.
+constexpr size_t kVoxelsStateSize = 7;
+
+py::tuple voxels_state(const oclvox::SparseVoxels& v) {
     const std::vector<uint64_t> indices = v.brick_indices();
     const size_t blocks = v.blocks_per_brick(), mask_bytes = (blocks + 7) / 8;
     py::array_t<uint8_t> masks({py::ssize_t(indices.size()), py::ssize_t(mask_bytes)});
@@ -225,26 +226,25 @@ py::tuple voxel_grid_state(const VoxelGrid& g) {
             }
     }
     return py::make_tuple(origin_tuple(v.grid()), v.grid().voxel_size, dims_tuple(v.grid()),
-                          v.brick_size(), brick_array(indices), masks, brick_array(words),
-                          g.device);
+                          v.brick_size(), brick_array(indices), masks, brick_array(words));
 }
 
-VoxelGrid voxel_grid_from_state(const py::tuple& state) {
-    const char* const kNotAGrid = "not a pickled oclvox.VoxelGrid";
-    if (state.size() != 8) throw py::value_error(kNotAGrid);
-    oclvox::Grid grid = grid_base(state[0].cast<std::array<double, 3>>(), state[1].cast<double>());
-    grid.dims = state[2].cast<std::array<int64_t, 3>>();
+// voxels_state's inverse, from state[first] on; `not_this` names the pickled type in errors.
+oclvox::SparseVoxels voxels_from_state(const py::tuple& state, size_t first,
+                                       const std::string& not_this) {
+    oclvox::Grid grid =
+        grid_base(state[first].cast<std::array<double, 3>>(), state[first + 1].cast<double>());
+    grid.dims = state[first + 2].cast<std::array<int64_t, 3>>();
     oclvox::validate_grid(grid);
-    VoxelGrid g;
-    g.voxels = oclvox::SparseVoxels(grid, state[3].cast<int>());
-    const std::vector<uint64_t> indices = brick_list(state[4]);
+    oclvox::SparseVoxels voxels(grid, state[first + 3].cast<int>());
+    const std::vector<uint64_t> indices = brick_list(state[first + 4]);
     const auto masks =
-        py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(state[5]);
-    const std::vector<uint64_t> words = brick_list(state[6]);
-    const size_t blocks = g.voxels.blocks_per_brick(), mask_bytes = (blocks + 7) / 8;
+        py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(state[first + 5]);
+    const std::vector<uint64_t> words = brick_list(state[first + 6]);
+    const size_t blocks = voxels.blocks_per_brick(), mask_bytes = (blocks + 7) / 8;
     if (!masks || masks.ndim() != 2 || size_t(masks.shape(0)) != indices.size() ||
         size_t(masks.shape(1)) != mask_bytes)
-        throw py::value_error(std::string(kNotAGrid) + ": brick masks do not match");
+        throw py::value_error(not_this + ": brick masks do not match");
     std::vector<uint64_t> brick(blocks);
     size_t next = 0;
     for (size_t b = 0; b < indices.size(); ++b) {
@@ -252,16 +252,65 @@ VoxelGrid voxel_grid_from_state(const py::tuple& state) {
         for (size_t w = 0; w < blocks; ++w) {
             const bool set = mask[w / 8] >> (w % 8) & 1;
             if (set && next == words.size())
-                throw py::value_error(std::string(kNotAGrid) + ": fewer words than masks");
+                throw py::value_error(not_this + ": fewer words than masks");
             brick[w] = set ? words[next++] : 0;
         }
-        g.voxels.merge_brick(indices[b], brick.data());
+        voxels.merge_brick(indices[b], brick.data());
     }
-    if (next != words.size())
-        throw py::value_error(std::string(kNotAGrid) + ": more words than masks");
+    if (next != words.size()) throw py::value_error(not_this + ": more words than masks");
+    return voxels;
+}
+
+// A VoxelGrid's pickled state: its voxels' and the device's name.
+py::tuple voxel_grid_state(const VoxelGrid& g) {
+    return voxels_state(g.voxels) + py::make_tuple(g.device);
+}
+
+VoxelGrid voxel_grid_from_state(const py::tuple& state) {
+    const std::string kNotAGrid = "not a pickled oclvox.VoxelGrid";
+    if (state.size() != kVoxelsStateSize + 1) throw py::value_error(kNotAGrid);
+    VoxelGrid g;
+    g.voxels = voxels_from_state(state, 0, kNotAGrid);
     g.stats.voxels_set = g.voxels.count();
-    g.device = state[7].cast<std::string>();
+    g.device = state[kVoxelsStateSize].cast<std::string>();
     return g;
+}
+
+// A SparseField's pickled state: its inside voxels', the band, the leaf indices, the leaves'
+// samples (one row of kLeafSamples per leaf) and the device's name.
+py::tuple sparse_field_state(const SparseField& f) {
+    const oclvox::SparseField& field = f.field;
+    const size_t leaves = field.leaf_count();
+    py::array_t<float> samples(
+        {py::ssize_t(leaves), py::ssize_t(oclvox::SparseField::kLeafSamples)});
+    if (leaves)
+        std::copy_n(field.leaf_samples(0), leaves * oclvox::SparseField::kLeafSamples,
+                    samples.mutable_data());
+    return voxels_state(field.inside()) + py::make_tuple(field.band_voxels(),
+                                                         brick_array(field.leaf_indices()), samples,
+                                                         f.device);
+}
+
+SparseField sparse_field_from_state(const py::tuple& state) {
+    const std::string kNotAField = "not a pickled oclvox.SparseField";
+    constexpr size_t n = kVoxelsStateSize;
+    if (state.size() != n + 4) throw py::value_error(kNotAField);
+    oclvox::SparseVoxels inside = voxels_from_state(state, 0, kNotAField);
+    const oclvox::Grid grid = inside.grid();
+    SparseField f;
+    f.field = oclvox::SparseField(grid, state[n].cast<double>(), std::move(inside));
+    const std::vector<uint64_t> leaves = brick_list(state[n + 1]);
+    const auto samples =
+        py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(state[n + 2]);
+    if (!samples || samples.ndim() != 2 || size_t(samples.shape(0)) != leaves.size() ||
+        size_t(samples.shape(1)) != oclvox::SparseField::kLeafSamples)
+        throw py::value_error(kNotAField + ": leaf samples do not match the leaves");
+    f.field.reserve_leaves(leaves.size());
+    for (size_t l = 0; l < leaves.size(); ++l)
+        f.field.append_leaf(leaves[l], samples.data(py::ssize_t(l), 0));
+    f.stats.bricks_active = leaves.size();
+    f.device = state[n + 3].cast<std::string>();
+    return f;
 }
 
 // ORs `other`'s voxels into `into`; both must have the same grid and brick size.
@@ -631,7 +680,19 @@ PYBIND11_MODULE(_oclvox, m) {
             },
             "path"_a, "progress"_a = py::none(),
             "Writes .vdb from the leaves or .npy (+ .json) a layer at a time; progress as for "
-            "Field.save");
+            "Field.save")
+        .def(
+            "merge",
+            [](SparseField& into, const SparseField& other) {
+                py::gil_scoped_release release;
+                into.field.merge(other.field);
+                into.stats.bricks_active = into.field.leaf_count();
+            },
+            "other"_a,
+            "Adds another SparseField's leaves and inside voxels (same grid, band and brick "
+            "size; no leaf in both), e.g. the fields of sdf(..., sparse=True, layers=...) over "
+            "disjoint layer ranges, which merge into the whole grid's field.")
+        .def(py::pickle(&sparse_field_state, &sparse_field_from_state));
 
     m.def(
         "load_mesh",

@@ -217,9 +217,32 @@ def test_sdf_sharded_equals_single_process(client, open_spot, mesh, options):
     assert inside.any() and (~inside).any()
 
 
-def test_sdf_sharded_refuses_full_grid(client):
+@pytest.mark.parametrize("mesh,options", [
+    ("spot", dict(band=2.0)),
+    ("open", dict(band=1.5, inside="winding", pad=1)),
+])
+def test_sparse_sdf_sharded_equals_single_process(client, open_spot, mesh, options):
+    # The slabs travel as SparseFields (pickled leaves and inside voxels) and merge into the
+    # single process's sparse field: the same leaves and, densely, the same bits.
+    mesh = SPOT if mesh == "spot" else open_spot
+    options = dict(options, brick_size=12, sparse=True)
+    single = oclvox.sdf(mesh, 40, **options)
+    sharded, slabs = counting_tasks(client, lambda: sdf_sharded(mesh, 40, client=client,
+                                                                 shard_layers=8, **options))
+    assert sum(slabs) >= 4 and min(slabs) > 0
+    assert isinstance(sharded, oclvox.SparseField)
+    assert (sharded.dims, sharded.origin, sharded.voxel_size, sharded.band, sharded.leaf_count) \
+        == (single.dims, single.origin, single.voxel_size, single.band, single.leaf_count)
+    dense = single.to_field().to_numpy()
+    assert np.array_equal(sharded.to_field().to_numpy().view(np.uint32), dense.view(np.uint32))
+    assert (dense < 0).any() and (dense > 0).any()
+
+
+def test_sdf_sharded_refuses_full_grid_and_unaligned_sparse_slabs(client):
     with pytest.raises(ValueError, match="narrow-band"):
         sdf_sharded(SPOT, 24, client=client, full_grid=True)
+    with pytest.raises(ValueError, match="multiple of 8"):
+        sdf_sharded(SPOT, 24, client=client, sparse=True, shard_layers=12)
 
 
 # ---- many meshes --------------------------------------------------------------------------------

@@ -153,11 +153,33 @@ def test_sparse_csg_of_meshes_is_the_dense_csg(tmp_path):
         np.testing.assert_array_equal(sparse.to_field().to_numpy(), dense.to_numpy())
 
 
-def test_sparse_fields_refuse_full_grids_and_layers():
+def test_sparse_fields_refuse_full_grids_and_unaligned_layers():
     with pytest.raises(oclvox.GridError):
         oclvox.sdf(*box_mesh(*BOX_A), **GRID, full_grid=True, sparse=True)
-    with pytest.raises(oclvox.GridError):
-        oclvox.sdf(*box_mesh(*BOX_A), **GRID, layers=(0, 8), sparse=True)
+    with pytest.raises(oclvox.GridError, match="multiple of 8"):
+        oclvox.sdf(*box_mesh(*BOX_A), **GRID, layers=(0, 12), sparse=True)
+
+
+def test_sparse_layer_fields_pickle_and_merge_into_the_whole_field():
+    import pickle
+    whole = oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, sparse=True)
+    low = oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, sparse=True, layers=(0, 16))
+    high = pickle.loads(pickle.dumps(
+        oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, sparse=True, layers=(16, 0))))
+    assert 0 < low.leaf_count < whole.leaf_count and low.leaf_count + high.leaf_count == \
+        whole.leaf_count
+    high.merge(low)  # interleaved: the lower leaves go first
+    assert high.leaf_count == whole.leaf_count
+    np.testing.assert_array_equal(high.to_field().to_numpy(), whole.to_field().to_numpy())
+    with pytest.raises(oclvox.GridError, match="both"):
+        high.merge(low)
+    other = dict(GRID, voxel_size=0.25)
+    with pytest.raises(oclvox.GridError, match="same grid"):
+        high.merge(oclvox.sdf(*box_mesh(*BOX_A), **other, band=BAND, sparse=True))
+    state = list(whole.__getstate__())
+    state[-2] = state[-2][:-1]  # a leaf's samples missing
+    with pytest.raises(ValueError, match="pickled oclvox.SparseField"):
+        oclvox.SparseField.__new__(oclvox.SparseField).__setstate__(tuple(state))
 
 
 @pytest.mark.parametrize("method", ["marching-cubes", "surface-nets"])

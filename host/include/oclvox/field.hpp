@@ -69,6 +69,11 @@ class SparseField {
     // Appends a leaf with leaf index above every stored one; its samples are copied. Throws
     // GridError for an index out of order or outside the grid.
     void append_leaf(uint64_t leaf_index, const float* samples);
+    // Adds other's leaves and inside voxels: fields of disjoint layer ranges of one grid
+    // (signed_distance_sparse with layers) merge into the whole grid's field. Throws GridError
+    // unless other has the same grid, band and brick size, or if a leaf is stored in both. Leaves
+    // all after this field's are appended without moving the stored ones.
+    void merge(const SparseField& other);
     // Room for this many leaves in all, so appending them never copies the stored samples.
     void reserve_leaves(size_t leaves) {
         leaf_keys_.reserve(leaves);

@@ -25,9 +25,12 @@ struct SdfOptions {
     // Bricks of the solid voxelization that gives the sign.
     int brick_size = 64;
     // Compute only the voxel layers first_layer <= k < end_layer of the whole grid (end_layer 0:
-    // to the top). The field then covers just those layers (its grid starts at layer
+    // to the top). A dense field then covers just those layers (its grid starts at layer
     // first_layer), and its samples are bit for bit those of the whole grid's field there, so
-    // fields of consecutive layer ranges, computed anywhere, stack into the whole field.
+    // fields of consecutive layer ranges, computed anywhere, stack into the whole field. A sparse
+    // field (signed_distance_sparse; layers at multiples of 8, the leaves' size) keeps the whole
+    // grid but holds only the leaves and inside voxels of those layers, the whole field's bit
+    // for bit, and fields of disjoint ranges merge (SparseField::merge) into the whole field.
     // Narrow-band fields only: jump flooding (full_grid) crosses layers.
     int64_t first_layer = 0, end_layer = 0;
     // Called as the work goes on (at most about every 0.05 s, and once more at the end with
@@ -99,9 +102,9 @@ ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const 
 // and the same solid for the sign), and the device result equals the reference's. Memory follows
 // the surface: bunny00's field at 2048^3 took 1.8 GB (the whole process) where the dense one
 // needs 27 GB. stats as signed_distance's, with bricks_total / bricks_active / batches counting
-// the grid's leaves, the stored leaves and the device batches. Throws GridError for full_grid or
-// layers (those need the dense field), or a leaf set that does not fit the host memory budget;
-// DeviceError on OpenCL failures.
+// the grid's leaves, the stored leaves and the device batches. Throws GridError for full_grid,
+// layers not at multiples of 8 (see SdfOptions), or a leaf set that does not fit the host memory
+// budget; DeviceError on OpenCL failures.
 SparseField signed_distance_sparse(Device& device, const Mesh& mesh, const Grid& grid,
                                    const SdfOptions& options, VoxelizeStats* stats = nullptr);
 SparseField signed_distance_sparse_reference(const Mesh& mesh, const Grid& grid,
@@ -144,8 +147,8 @@ ScalarField csg_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& gr
 SparseField csg(const SparseField& a, const SparseField& b, CsgOp op);
 
 // CSG of two meshes through their sparse narrow-band fields (signed_distance_sparse; options as
-// there), with one progress over both. Its to_dense() equals csg's dense field of the same
-// meshes bit for bit; the device result equals the reference's.
+// there, but not layers), with one progress over both. Its to_dense() equals csg's dense field of
+// the same meshes bit for bit; the device result equals the reference's.
 SparseField csg_sparse(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
                        const SdfOptions& options, VoxelizeStats* stats = nullptr);
 SparseField csg_sparse_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
