@@ -162,8 +162,6 @@ if [ "$RC" -eq 0 ] && cmp -s "$WORK/whole.binvox" "$WORK/blocks.binvox" &&
 else
     fail "--download blocks" "rc=$RC bytes=$blocks_bytes whole=$whole_bytes err=$ERR"
 fi
-expect_failure "--download with --workers" "$WORK/workers.binvox" 'download.*workers' \
-    voxelize "$MESH" --download blocks --workers 2 -o "$WORK/workers.binvox"
 
 run voxelize "$MESH" -r 32 --test pef -o "$WORK/sat.npy" --stats
 sat_ones=$(npy_ones "$WORK/sat.npy")

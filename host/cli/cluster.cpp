@@ -27,23 +27,14 @@ const char* const kBootstrap =
     "({error})')\n"
     "sys.exit(main(sys.argv[1:]))\n";
 
-// The options of oclvox.voxelize, as keyword arguments.
-std::string voxelize_keywords(const ClusterRun& run) {
-    const oclvox::GridFit& fit = *run.fit;
-    nlohmann::json keywords = {{"mode", run.voxelization->mode},
-                               {"test", run.voxelization->test},
-                               {"inside", run.voxelization->inside},
-                               {"boundary", run.voxelization->boundary},
-                               {"brick_size", run.tiling->brick_size},
-                               {"device_memory", run.tiling->device_mib},
-                               {"host_memory", run.tiling->host_mib},
-                               {"pad", fit.pad},
-                               {"cubic", fit.cubic},
-                               {"reference", run.device->reference}};
+// The grid's keyword options, as every Python call takes them.
+void add_grid_keywords(const oclvox::GridFit& fit, bool reference, nlohmann::json& keywords) {
+    keywords["pad"] = fit.pad;
+    keywords["cubic"] = fit.cubic;
+    keywords["reference"] = reference;
     if (fit.voxel_size > 0) keywords["voxel_size"] = fit.voxel_size;
     if (fit.has_origin) keywords["origin"] = fit.origin;
     if (fit.has_dims) keywords["dims"] = fit.dims;
-    return keywords.dump();  // doubles as the shortest text that reads back to the same double
 }
 
 void refuse_unsupported(const ClusterRun& run) {
@@ -57,6 +48,14 @@ void refuse_unsupported(const ClusterRun& run) {
 }
 
 }  // namespace
+
+nlohmann::json voxelize_keywords(const VoxelizationArgs& voxelization, const TilingArgs& tiling,
+                                 const std::string& download) {
+    return {{"mode", voxelization.mode},       {"test", voxelization.test},
+            {"inside", voxelization.inside},   {"boundary", voxelization.boundary},
+            {"brick_size", tiling.brick_size}, {"device_memory", tiling.device_mib},
+            {"host_memory", tiling.host_mib},  {"download", download}};
+}
 
 void add_cluster_options(CLI::App& command, ClusterArgs& args, bool sharded) {
     auto* workers = command
@@ -96,7 +95,10 @@ void run_on_cluster(const ClusterRun& run) {
         args.insert(args.end(), {"--scheduler", run.cluster->scheduler});
     args.insert(args.end(), {"-r", std::to_string(run.fit->resolution)});
     if (run.device_given) args.insert(args.end(), {"--device", run.device->selector});
-    args.insert(args.end(), {"--options", voxelize_keywords(run)});
+    nlohmann::json keywords = run.keywords;
+    add_grid_keywords(*run.fit, run.device->reference, keywords);
+    // dump() doubles as the shortest text that reads back to the same double.
+    args.insert(args.end(), {"--options", keywords.dump()});
     if (run.reporting->quiet) args.push_back("--quiet");
 
     std::vector<char*> argv;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -23,22 +24,26 @@ struct ClusterArgs {
 };
 void add_cluster_options(CLI::App& command, ClusterArgs& args, bool sharded);
 
-// What the back end is asked to do: its command ("voxelize" or "batch") with its own arguments
-// (input, -o, ...), then the options every voxelization shares.
+// What the back end is asked to do: its command ("voxelize", "batch" or "sdf") with its own
+// arguments (input, -o, ...), the Python call's keyword options (beside the grid's, which
+// run_on_cluster adds from `fit`), and where it runs.
 struct ClusterRun {
     std::vector<std::string> command;
+    nlohmann::json keywords;
     const ClusterArgs* cluster;
     const oclvox::GridFit* fit;
-    const VoxelizationArgs* voxelization;
     const DeviceArgs* device;
     bool device_given;  // --device on the command line; else each worker picks its own
-    const TilingArgs* tiling;
     const ReportingArgs* reporting;
 };
 
-// Refuses what the back end cannot do (stdin/stdout, --cubic=min, --stats, --json,
-// --stats-json) with a UsageError, then execs the back end. Returns only if that fails, with an
-// Error naming the interpreter.
+// oclvox.voxelize's keyword options (without the grid's) for voxelize and batch.
+nlohmann::json voxelize_keywords(const VoxelizationArgs& voxelization, const TilingArgs& tiling,
+                                 const std::string& download);
+
+// Refuses what the back end cannot do (--cubic=min, --stats, --json, --stats-json) with a
+// UsageError, then execs the back end. Returns only if that fails, with an Error naming the
+// interpreter.
 [[noreturn]] void run_on_cluster(const ClusterRun& run);
 
 }  // namespace oclvox_cli

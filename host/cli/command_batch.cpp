@@ -55,12 +55,11 @@ int run(BatchArgs& args) {
     if (!args.cluster.wanted()) args.cluster.workers = 1;
     run_on_cluster(
         {{"batch", args.input, "-o", args.output_dir, "--output-format", args.output_format},
+         voxelize_keywords(args.voxelization, args.tiling, "auto"),
          &args.cluster,
          &args.fit,
-         &args.voxelization,
          &args.device,
          args.device_option->count() > 0,
-         &args.tiling,
          &args.reporting});
 }
 

@@ -1,4 +1,5 @@
 // `oclvox sdf`: the signed distance field of a mesh, as .npy or .vdb, optionally with its mesh.
+#include "cluster.hpp"
 #include "commands.hpp"
 #include "field_commands.hpp"
 #include "interrupt.hpp"
@@ -11,6 +12,8 @@ namespace {
 
 struct SdfArgs : FieldArgs {
     std::string preview;
+    CLI::Option* device_option = nullptr;
+    ClusterArgs cluster;
 };
 
 void add_options(CLI::App& command, SdfArgs& args) {
@@ -37,6 +40,7 @@ void add_options(CLI::App& command, SdfArgs& args) {
     describe_field_padding(args.grid_options);
     add_distance_options(command, args);
     add_device_options(command, args.device, "Distance");
+    args.device_option = command.get_option("--device");
     command
         .add_option("--mesh", args.mesh_output,
                     "also write the field's zero level set as a mesh: .obj, .ply or .stl")
@@ -44,9 +48,30 @@ void add_options(CLI::App& command, SdfArgs& args) {
         ->group("Meshing");
     add_mesher_option(command, args);
     add_reporting_options(command, args.reporting);
+    add_cluster_options(command, args.cluster, false);
+}
+
+// --workers / --scheduler: the same checks of the output, then the Python back end computes the
+// narrow band in slabs of layers, kept sparse, and writes it.
+[[noreturn]] void run_sharded(const SdfArgs& args) {
+    if (args.input == "-" || args.output == "-" || !args.preview.empty() ||
+        !args.mesh_output.empty() || args.full)
+        throw UsageError(
+            "stdin, stdout, --preview, --mesh and --full are not available with "
+            "--workers/--scheduler");
+    check_output(args.output, {args.input}, kFieldExtensions, args.files);
+    const oclvox::GridFit fit = field_fit(args);
+    run_on_cluster({{"sdf", args.input, "-o", args.output},
+                    {{"band", args.band}, {"inside", args.inside}},
+                    &args.cluster,
+                    &fit,
+                    &args.device,
+                    args.device_option->count() > 0,
+                    &args.reporting});
 }
 
 int run(const SdfArgs& args) {
+    if (args.cluster.wanted()) run_sharded(args);
     const Clock::time_point start = Clock::now();
     RunRecord record;
     record.command = "sdf";

@@ -73,17 +73,14 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
     if (args.input == "-" || args.output == "-" || !args.preview.empty())
         throw UsageError(
             "stdin, stdout and --preview are not available with --workers/--scheduler");
-    if (args.download != "auto")
-        throw UsageError(
-            "--download is not available with --workers/--scheduler (the workers "
-            "choose for their own devices)");
     check_output(args.output, {args.input}, kVoxelExtensions, args.files);
     std::vector<std::string> command{"voxelize", args.input, "-o", args.output};
     if (args.cluster.shard_bricks > 0)
         command.insert(command.end(),
                        {"--shard-bricks", std::to_string(args.cluster.shard_bricks)});
-    run_on_cluster({command, &args.cluster, &args.fit, &args.voxelization, &args.device,
-                    args.device_option->count() > 0, &args.tiling, &args.reporting});
+    run_on_cluster({command, voxelize_keywords(args.voxelization, args.tiling, args.download),
+                    &args.cluster, &args.fit, &args.device, args.device_option->count() > 0,
+                    &args.reporting});
 }
 
 int run(const VoxelizeArgs& args) {

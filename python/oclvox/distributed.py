@@ -218,7 +218,8 @@ def _sdf_layers(mesh, resolution, layers, device, options):
     return field if options.get("sparse") else np.array(field.to_numpy(), order="F")
 
 
-def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None, **options):
+def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None, progress=None,
+                **options):
     """The signed distance field of one mesh on a Dask cluster; returns what oclvox.sdf returns
     (narrow band: a Field, or with sparse=True a SparseField), bit for bit.
 
@@ -234,6 +235,8 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
     Sparse: each slab comes back as its leaves and inside voxels, and the client merges the slabs
     in z order as they become contiguous (SparseField.merge): memory follows the surface, as for
     oclvox.sdf(..., sparse=True), plus the slabs that arrived ahead of their turn.
+    progress: called as progress(layers_done, layers_total) as slabs arrive; returning False
+    cancels (oclvox.Cancelled), and the slabs not yet finished are cancelled on the cluster.
     """
     if options.get("full_grid"):
         raise ValueError("sdf_sharded computes narrow-band fields only: full_grid's jump "
@@ -269,19 +272,26 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
                for first, end in zip(cuts, cuts[1:])}
 
     # Phase 3: each slab into its place.
+    done = [0]
+
+    def report(first):
+        done[0] += cuts[cuts.index(first) + 1] - first
+        _report(progress, done[0], dims[2])
+
     if sparse:
-        return _merge_slabs(client, futures, cuts)
+        return _merge_slabs(client, futures, cuts, report)
     values = np.empty(dims, np.float32, order="F")
 
     def place(future, first):
         slab = future.result()
         values[:, :, first:first + slab.shape[2]] = slab
+        report(first)
 
     _collect(client, futures, place)
     return oclvox.Field(values, origin, voxel_size, band)
 
 
-def _merge_slabs(client, futures, cuts):
+def _merge_slabs(client, futures, cuts, report):
     """The SparseField of slab futures (keyed by their first layer, cuts in z order): each merged
     in z order once the slabs below it are in, so that merging only appends leaves."""
     held, whole, turn = {}, [None], [0]
@@ -295,6 +305,7 @@ def _merge_slabs(client, futures, cuts):
             else:
                 whole[0].merge(slab)
             turn[0] += 1
+        report(first)
 
     _collect(client, futures, merge)
     return whole[0]
@@ -449,18 +460,22 @@ def _parse_args(argv):
     parser = argparse.ArgumentParser(
         prog="python3 -m oclvox.distributed",
         description="oclvox on a Dask cluster (the back end of `oclvox voxelize --workers/"
-                    "--scheduler` and `oclvox batch`).")
+                    "--scheduler`, `oclvox sdf --workers/--scheduler` and `oclvox batch`).")
     commands = parser.add_subparsers(dest="command", required=True)
     sharded = commands.add_parser("voxelize", help="one mesh, its bricks in shards")
     sharded.add_argument("input")
     sharded.add_argument("-o", "--output", required=True)
     sharded.add_argument("--shard-bricks", type=int,
                          help="bricks per task (default: about four tasks per worker)")
+    field = commands.add_parser("sdf", help="one mesh's narrow-band distance field, in slabs, "
+                                            "kept sparse")
+    field.add_argument("input")
+    field.add_argument("-o", "--output", required=True, help=".vdb or .npy")
     batch = commands.add_parser("batch", help="one output per mesh of a folder or list file")
     batch.add_argument("input", help="a folder of meshes or a list file (one path a line)")
     batch.add_argument("-o", "--output", required=True, help="output folder")
     batch.add_argument("--output-format", default="binvox")
-    for command in (sharded, batch):
+    for command in (sharded, field, batch):
         where = command.add_mutually_exclusive_group()
         where.add_argument("--scheduler", help="address of a running scheduler, tcp://host:8786")
         where.add_argument("--workers", type=int, default=1,
@@ -469,8 +484,8 @@ def _parse_args(argv):
         command.add_argument("--device", help="OpenCL device selector on the workers (default: "
                                               "each worker's $OCLVOX_DEVICE, else its first GPU)")
         command.add_argument("--options", default="{}",
-                             help="oclvox.voxelize's keyword options as a JSON object, e.g. "
-                                  "'{\"mode\": \"solid\", \"pad\": 2}'")
+                             help="oclvox.voxelize's (sdf: oclvox.sdf's) keyword options as a "
+                                  "JSON object, e.g. '{\"mode\": \"solid\", \"pad\": 2}'")
         command.add_argument("-q", "--quiet", action="store_true")
     return parser.parse_args(argv)
 
@@ -482,14 +497,21 @@ def main(argv=None):
         options = json.loads(args.options)
         with _cluster_client(args) as client:
             start = time.perf_counter()
-            if args.command == "voxelize":
-                grid = voxelize_sharded(args.input, args.resolution, client=client,
-                                        shard_bricks=args.shard_bricks, device=args.device,
-                                        progress=_progress_line("bricks", args.quiet), **options)
-                grid.save(args.output)
+            if args.command in ("voxelize", "sdf"):
+                if args.command == "voxelize":
+                    result = voxelize_sharded(
+                        args.input, args.resolution, client=client,
+                        shard_bricks=args.shard_bricks, device=args.device,
+                        progress=_progress_line("bricks", args.quiet), **options)
+                    made = f"{result.count} voxels set"
+                else:
+                    result = sdf_sharded(args.input, args.resolution, client=client,
+                                         device=args.device, sparse=True,
+                                         progress=_progress_line("layers", args.quiet), **options)
+                    made = f"{result.leaf_count} leaves"
+                result.save(args.output)
                 if not args.quiet:
-                    print(f"{args.output}: {grid.count} voxels set in "
-                          f"{'x'.join(map(str, grid.dims))}, "
+                    print(f"{args.output}: {made} in {'x'.join(map(str, result.dims))}, "
                           f"{time.perf_counter() - start:.2f} s", file=sys.stderr)
                 return 0
             summary = voxelize_many(mesh_paths(args.input), args.output, args.resolution,

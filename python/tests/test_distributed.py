@@ -336,12 +336,23 @@ def test_cli_cluster_paths_write_the_plain_paths_files(mesh_folder, tmp_path):
 
     grid = ["-r", 100, "--brick-size", 16, "--mode", "thin", "--pad", 2]
     run_cli("voxelize", SPOT, *grid, "-o", tmp_path / "plain.npy")
-    run_cli("voxelize", SPOT, *grid, "--workers", 2, "--shard-bricks", 10, "-o",
-            tmp_path / "sharded.npy")
+    run_cli("voxelize", SPOT, *grid, "--workers", 2, "--shard-bricks", 10, "--download",
+            "blocks", "-o", tmp_path / "sharded.npy")
     assert filecmp.cmp(tmp_path / "plain.npy", tmp_path / "sharded.npy", shallow=False)
     sidecars = [json.loads((tmp_path / f"{name}.npy.json").read_text())
                 for name in ("plain", "sharded")]
     assert sidecars[0].pop("file") == "plain.npy" and sidecars[1].pop("file") == "sharded.npy"
+    assert sidecars[0] == sidecars[1]
+
+    # A distance field in slabs of layers, kept sparse, written as the plain run writes it.
+    field = ["-r", 40, "--band", 2, "--inside", "winding"]
+    run_cli("sdf", SPOT, *field, "-o", tmp_path / "plain_sdf.npy")
+    run_cli("sdf", SPOT, *field, "--workers", 2, "-o", tmp_path / "sharded_sdf.npy")
+    assert filecmp.cmp(tmp_path / "plain_sdf.npy", tmp_path / "sharded_sdf.npy", shallow=False)
+    sidecars = [json.loads((tmp_path / f"{name}_sdf.npy.json").read_text())
+                for name in ("plain", "sharded")]
+    assert sidecars[0].pop("file") == "plain_sdf.npy"
+    assert sidecars[1].pop("file") == "sharded_sdf.npy"
     assert sidecars[0] == sidecars[1]
 
 
@@ -359,5 +370,9 @@ def test_cli_cluster_paths_fail_clearly(mesh_folder, tmp_path):
     assert no_python.returncode == 1 and "OCLVOX_PYTHON" in no_python.stderr
     for refused in (["--stats"], ["--cubic=min"], ["--preview", tmp_path / "p.png"]):
         run = run_cli("voxelize", SPOT, "-o", tmp_path / "x.vdb", "--workers", 2, *refused,
+                      check=False)
+        assert run.returncode == 2 and "not available with --workers" in run.stderr, refused
+    for refused in (["--full"], ["--mesh", tmp_path / "m.obj"], ["--json"]):
+        run = run_cli("sdf", SPOT, "-o", tmp_path / "x.vdb", "--workers", 2, *refused,
                       check=False)
         assert run.returncode == 2 and "not available with --workers" in run.stderr, refused
