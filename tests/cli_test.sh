@@ -87,6 +87,13 @@ if [ "$RC" -eq 0 ] && grep -qE '^[0-9]+:[0-9]+ ' <<<"$OUT" && grep -q 'platform'
 else
     fail "devices" "rc=$RC out=$OUT err=$ERR"
 fi
+# Whose memory each device works in (what --download auto goes by).
+if [ "$(grep -c 'memory ' <<<"$OUT")" = "$(grep -cE "memory .*, (the host's|its own)$" <<<"$OUT")" ]
+then
+    pass "devices says whose memory each device works in"
+else
+    fail "devices memory" "$OUT"
+fi
 
 run
 if [ "$RC" -eq 2 ]; then pass "no command is a usage error (exit 2)"; else fail "no command" "rc=$RC"; fi

@@ -88,8 +88,9 @@ std::string devices_text(const RunRecord& r) {
         text += format("     platform  %s\n", d.platform.c_str());
         text += format("     version   %s\n", d.version.c_str());
         text += format("     driver    %s\n", d.driver_version.c_str());
-        text += format("     memory    %s global, %s per allocation\n",
-                       bytes_text(d.global_memory).c_str(), bytes_text(d.max_alloc).c_str());
+        text += format("     memory    %s global, %s per allocation%s\n",
+                       bytes_text(d.global_memory).c_str(), bytes_text(d.max_alloc).c_str(),
+                       d.host_unified_memory ? ", the host's" : ", its own");
     }
     return text;
 }
@@ -195,7 +196,8 @@ Json device_json(const oclvox::DeviceInfo& d) {
             {"opencl_version", d.version},
             {"driver_version", d.driver_version},
             {"global_memory_bytes", d.global_memory},
-            {"max_allocation_bytes", d.max_alloc}};
+            {"max_allocation_bytes", d.max_alloc},
+            {"host_unified_memory", d.host_unified_memory}};
 }
 
 Json record_json(const RunRecord& r) {

@@ -96,7 +96,13 @@ void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, siz
     cl.queue.enqueueReadBuffer(words, CL_TRUE, 0, 2 * total * sizeof(cl_uint), words_back.data());
     stats.bytes_downloaded += 3 * total * sizeof(cl_uint);
 
-    // Phase 4: per unit with blocks, its whole block array.
+    // Phase 4: per unit with blocks, its whole block array. The indices come from the device: a
+    // driver that breaks them is an error, never a write out of bounds.
+    for (size_t i = 0; i < total; ++i)
+        if (index_back[i] >= block_count || (i > 0 && index_back[i] <= index_back[i - 1]))
+            throw DeviceError("the device's compacted blocks are out of order or range (block " +
+                              std::to_string(index_back[i]) + " at " + std::to_string(i) + " of " +
+                              std::to_string(total) + ")");
     for (size_t i = 0; i < total;) {
         const size_t unit = index_back[i] / blocks_per_unit;
         std::fill(blocks.begin(), blocks.end(), 0);

@@ -471,7 +471,8 @@ py::list devices() {
         list.append(py::dict("id"_a = i.id, "platform"_a = i.platform, "name"_a = i.name,
                              "vendor"_a = i.vendor, "version"_a = i.version,
                              "driver_version"_a = i.driver_version, "type"_a = i.type,
-                             "global_memory"_a = i.global_memory, "max_alloc"_a = i.max_alloc));
+                             "global_memory"_a = i.global_memory, "max_alloc"_a = i.max_alloc,
+                             "host_unified_memory"_a = i.host_unified_memory));
     return list;
 }
 
