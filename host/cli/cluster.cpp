@@ -49,12 +49,11 @@ void refuse_unsupported(const ClusterRun& run) {
 
 }  // namespace
 
-nlohmann::json voxelize_keywords(const VoxelizationArgs& voxelization, const TilingArgs& tiling,
-                                 const std::string& download) {
+nlohmann::json voxelize_keywords(const VoxelizationArgs& voxelization, const TilingArgs& tiling) {
     return {{"mode", voxelization.mode},       {"test", voxelization.test},
             {"inside", voxelization.inside},   {"boundary", voxelization.boundary},
             {"brick_size", tiling.brick_size}, {"device_memory", tiling.device_mib},
-            {"host_memory", tiling.host_mib},  {"download", download}};
+            {"host_memory", tiling.host_mib},  {"download", tiling.download}};
 }
 
 void add_cluster_options(CLI::App& command, ClusterArgs& args, bool sharded) {

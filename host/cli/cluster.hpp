@@ -38,8 +38,7 @@ struct ClusterRun {
 };
 
 // oclvox.voxelize's keyword options (without the grid's) for voxelize and batch.
-nlohmann::json voxelize_keywords(const VoxelizationArgs& voxelization, const TilingArgs& tiling,
-                                 const std::string& download);
+nlohmann::json voxelize_keywords(const VoxelizationArgs& voxelization, const TilingArgs& tiling);
 
 // Refuses what the back end cannot do (--cubic=min, --stats, --json, --stats-json) with a
 // UsageError, then execs the back end. Returns only if that fails, with an Error naming the

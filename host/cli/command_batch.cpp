@@ -55,7 +55,7 @@ int run(BatchArgs& args) {
     if (!args.cluster.wanted()) args.cluster.workers = 1;
     run_on_cluster(
         {{"batch", args.input, "-o", args.output_dir, "--output-format", args.output_format},
-         voxelize_keywords(args.voxelization, args.tiling, "auto"),
+         voxelize_keywords(args.voxelization, args.tiling),
          &args.cluster,
          &args.fit,
          &args.device,

@@ -16,7 +16,6 @@ namespace {
 
 struct VoxelizeArgs {
     std::string input, output, preview;
-    std::string download = "auto";
     FileArgs files;
     oclvox::GridFit fit;
     VoxelizationArgs voxelization;
@@ -55,15 +54,6 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
     add_device_options(command, args.device, "Voxelization");
     args.device_option = command.get_option("--device");
     add_tiling_options(command, args.tiling);
-    command
-        .add_option("--download", args.download,
-                    "how the device's voxels come back: auto (only the non-empty 4^3 blocks from "
-                    "a device with memory of its own, whole batches read in place on CPUs), whole "
-                    "or blocks; the voxels are the same")
-        ->type_name("HOW")
-        ->check(CLI::IsMember({"auto", "whole", "blocks"}))
-        ->capture_default_str()
-        ->group("Tiling");
     add_reporting_options(command, args.reporting);
     add_cluster_options(command, args.cluster, true);
 }
@@ -78,9 +68,8 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
     if (args.cluster.shard_bricks > 0)
         command.insert(command.end(),
                        {"--shard-bricks", std::to_string(args.cluster.shard_bricks)});
-    run_on_cluster({command, voxelize_keywords(args.voxelization, args.tiling, args.download),
-                    &args.cluster, &args.fit, &args.device, args.device_option->count() > 0,
-                    &args.reporting});
+    run_on_cluster({command, voxelize_keywords(args.voxelization, args.tiling), &args.cluster,
+                    &args.fit, &args.device, args.device_option->count() > 0, &args.reporting});
 }
 
 int run(const VoxelizeArgs& args) {
@@ -116,7 +105,7 @@ int run(const VoxelizeArgs& args) {
     options.brick_size = args.tiling.brick_size;
     options.device_budget_bytes = args.tiling.device_mib << 20;
     options.host_budget_bytes = args.tiling.host_mib << 20;
-    options.download = oclvox::download_from_string(args.download);
+    options.download = oclvox::download_from_string(args.tiling.download);
     oclvox::VoxelizeStats stats;
     const oclvox::SparseVoxels voxels = timed(record.seconds.compute, [&] {
         ProgressBar bar("voxelizing", "bricks", args.reporting);

@@ -260,6 +260,15 @@ void add_tiling_options(CLI::App& command, TilingArgs& args) {
         ->check(CLI::Range(uint64_t(0), uint64_t(1) << 24))
         ->capture_default_str()
         ->group("Tiling");
+    command
+        .add_option("--download", args.download,
+                    "how the device's voxels come back: auto (only the non-empty 4^3 blocks from "
+                    "a device with memory of its own, whole batches read in place on CPUs), whole "
+                    "or blocks; the voxels are the same")
+        ->type_name("HOW")
+        ->check(CLI::IsMember({"auto", "whole", "blocks"}))
+        ->capture_default_str()
+        ->group("Tiling");
 }
 
 void add_reporting_options(CLI::App& command, ReportingArgs& args, bool has_breakdown) {

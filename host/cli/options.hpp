@@ -55,11 +55,12 @@ void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& 
 // stderr because it can take tens of seconds.
 std::optional<oclvox::Device> open_device(const DeviceArgs& args, double& seconds);
 
-// --brick-size, --device-memory, --host-memory.
+// --brick-size, --device-memory, --host-memory, --download.
 struct TilingArgs {
     int brick_size = oclvox::VoxelizeOptions{}.brick_size;
     uint64_t device_mib = oclvox::VoxelizeOptions{}.device_budget_bytes >> 20;
     uint64_t host_mib = 0;
+    std::string download = "auto";
 };
 void add_tiling_options(CLI::App& command, TilingArgs& args);
 

@@ -324,7 +324,7 @@ def run_cli(*args, check=True, **env):
 @pytest.mark.skipif(not CLI, reason="OCLVOX_CLI (the oclvox tool) not given")
 def test_cli_cluster_paths_write_the_plain_paths_files(mesh_folder, tmp_path):
     batch = run_cli("batch", mesh_folder, "-o", tmp_path / "batch", "-r", 20, "--mode", "filled",
-                    "--workers", 2, check=False)
+                    "--download", "blocks", "--workers", 2, check=False)
     # A failed mesh: exit code 1, the file named; the others written.
     assert batch.returncode == 1 and "corrupt.obj" in batch.stderr, batch.stderr
     assert len(list((tmp_path / "batch").iterdir())) == 19
