@@ -149,10 +149,15 @@ Batch make_batch(const ColumnBins& bins, const std::vector<OvParityTriangle>& tr
     return batch;
 }
 
+// The brick index of brick `row` (from the bottom) of brick column `column`.
+uint64_t column_brick(const Layout& l, uint64_t column, uint64_t row) {
+    return column + uint64_t(l.nbx) * uint64_t(l.nby) * row;
+}
+
 // Merges the bricks of one packed brick column (bricks bottom to top, blocks as 64-bit words).
 void merge_column(SparseVoxels& result, const Layout& l, uint64_t column, const uint64_t* blocks) {
     for (int64_t row = 0; row < l.nbz; ++row)
-        result.merge_brick(column + uint64_t(l.nbx) * uint64_t(l.nby) * uint64_t(row),
+        result.merge_brick(column_brick(l, column, uint64_t(row)),
                            blocks + size_t(row) * l.blocks_per_brick);
 }
 }  // namespace
@@ -255,8 +260,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
             cl, block_buffer, batch.column_count * size_t(l.nbz), l.blocks_per_brick,
             options.download, stats, [&](size_t unit, const uint64_t* blocks) {
                 const uint64_t column = bins.columns[batch.first_column + unit / size_t(l.nbz)];
-                const uint64_t row = unit % size_t(l.nbz);
-                result.merge_brick(column + uint64_t(l.nbx) * uint64_t(l.nby) * row, blocks);
+                result.merge_brick(column_brick(l, column, unit % size_t(l.nbz)), blocks);
             });
         ++stats.batches;
         const size_t finished = done + batch.column_count;
