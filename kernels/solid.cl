@@ -11,16 +11,15 @@
 // parity_pack: one work item per 4x4 voxel columns and 32 layers copies the bits into the bricks'
 // block layout.
 #include "solid_math.h"
-#include "work_items.h"
 
 __kernel void parity_flip(__global const OvParityTriangle* triangles,
                           __global const uint* pair_triangle, __global const uint* pair_slot,
-                          __global const uint* pair_first_item, uint pair_count,
+                          __global const uint* pair_first_item, __global const uint* item_pair,
                           __global const int* slot_column, uint item_base, uint item_end,
                           int brick_size, int nx, int ny, int nz, uint words, __global uint* bits) {
     uint item = item_base + (uint)get_global_id(0);
     if (item >= item_end) return;
-    uint p = find_pair(pair_first_item, pair_count, item);
+    uint p = item_pair[item];
     uint slot = pair_slot[p];
     OvParityTriangle t = triangles[pair_triangle[p]];
     int bx = slot_column[2 * slot], by = slot_column[2 * slot + 1];

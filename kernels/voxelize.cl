@@ -1,37 +1,14 @@
 // Conservative (26-separating) surface voxelization, OpenCL C 1.2.
 //
-// Two phases. setup_*: one work item per triangle computes the per-triangle constants of the
-// overlap test, and its voxel range, once. voxelize_*: one work item per (triangle, run of up to
-// OV_BLOCKS_PER_ITEM 4x4x4 blocks) tests each block's voxels a row of 4 at a time, gathers a 64-bit
-// mask privately and ORs it into the brick's bits with at most two 32-bit atomics. Work items are
-// numbered pair by pair; an item finds its (triangle, brick) pair by binary search in the pairs'
-// first-item offsets, so a huge triangle spreads over many items instead of serialising on one.
+// One work item per (triangle, run of up to OV_BLOCKS_PER_ITEM 4x4x4 blocks): it computes its
+// triangle's overlap-test constants and voxel range, tests each block's voxels a row of 4 at a
+// time, gathers a 64-bit mask privately and ORs it into the brick's bits with at most two 32-bit
+// atomics. The constants are computed by every item rather than once per triangle in a setup pass:
+// most triangles have one or two items, and a setup pass's buffer (up to 184 bytes a triangle,
+// written once and read once) cost more than the arithmetic, in fresh memory on CPU devices above
+// all. Each item is given its (triangle, brick) pair's index, so a huge triangle spreads over
+// many items instead of serialising on one.
 #include "voxel_math.h"
-#include "work_items.h"
-
-__kernel void setup_sat(__global const OvTriangle* triangles, uint count, int half_open,
-                        __global OvSatTriangle* out, __global OvRange* ranges) {
-    uint i = get_global_id(0);
-    if (i >= count) return;
-    out[i] = ov_setup_sat(triangles[i], half_open);
-    ranges[i] = ov_triangle_range(triangles[i], half_open);
-}
-
-__kernel void setup_pef(__global const OvTriangle* triangles, uint count, int half_open,
-                        __global OvPefTriangle* out, __global OvRange* ranges) {
-    uint i = get_global_id(0);
-    if (i >= count) return;
-    out[i] = ov_setup_pef(triangles[i], half_open);
-    ranges[i] = ov_triangle_range(triangles[i], half_open);
-}
-
-__kernel void setup_thin(__global const OvTriangle* triangles, uint count, int half_open,
-                         __global OvThinTriangle* out, __global OvRange* ranges) {
-    uint i = get_global_id(0);
-    if (i >= count) return;
-    out[i] = ov_setup_thin(triangles[i], half_open);
-    ranges[i] = ov_triangle_range(triangles[i], half_open);
-}
 
 typedef struct {
     uint triangle, slot;
@@ -41,18 +18,19 @@ typedef struct {
 } Item;
 
 // Returns 0 for the padding items past the end of the launch.
-static int decode_item(__global const uint* pair_triangle, __global const uint* pair_slot,
-                       __global const uint* pair_first_item, uint pair_count,
-                       __global const int* slot_brick, __global const OvRange* ranges,
-                       uint item_base, uint item_end, int brick_size, int nx, int ny, int nz,
-                       Item* it) {
+static int decode_item(__global const OvTriangle* triangles, int half_open,
+                       __global const uint* pair_triangle, __global const uint* pair_slot,
+                       __global const uint* pair_first_item, __global const uint* item_pair,
+                       __global const int* slot_brick, uint item_base, uint item_end,
+                       int brick_size, int nx, int ny, int nz, Item* it, OvTriangle* t) {
     uint item = item_base + (uint)get_global_id(0);
     if (item >= item_end) return 0;
-    uint p = find_pair(pair_first_item, pair_count, item);
+    uint p = item_pair[item];
     it->triangle = pair_triangle[p];
     it->slot = pair_slot[p];
     for (int k = 0; k < 3; ++k) it->brick[k] = slot_brick[3 * it->slot + k];
-    OvRange r = ranges[it->triangle];
+    *t = triangles[it->triangle];
+    OvRange r = ov_triangle_range(*t, half_open);
     int blocks = ov_pair_work(r, it->brick[0], it->brick[1], it->brick[2], brick_size, nx, ny, nz,
                               &it->work);
     it->block_first = (int)(item - pair_first_item[p]) * OV_BLOCKS_PER_ITEM;
@@ -80,20 +58,22 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
     if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
 }
 
-// One voxelize kernel per predicate, written once: SETUP is the per-triangle struct, OVERLAPS4
-// its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside the pair's voxel range
-// are dropped.
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, OVERLAPS4)                                                \
-    __kernel void NAME(__global const SETUP* setups, __global const OvRange* ranges,              \
+// One voxelize kernel per predicate, written once: SETUP is the per-triangle struct made by
+// SETUP_FN, OVERLAPS4 its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside
+// the pair's voxel range are dropped.
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, OVERLAPS4)                                      \
+    __kernel void NAME(__global const OvTriangle* triangles, int half_open,                       \
                        __global const uint* pair_triangle, __global const uint* pair_slot,        \
-                       __global const uint* pair_first_item, uint pair_count,                     \
+                       __global const uint* pair_first_item, __global const uint* item_pair,      \
                        __global const int* slot_brick, uint item_base, uint item_end,             \
                        int brick_size, int nx, int ny, int nz, __global uint* bits) {             \
         Item it;                                                                                  \
-        if (!decode_item(pair_triangle, pair_slot, pair_first_item, pair_count, slot_brick,       \
-                         ranges, item_base, item_end, brick_size, nx, ny, nz, &it))               \
+        OvTriangle t;                                                                             \
+        if (!decode_item(triangles, half_open, pair_triangle, pair_slot, pair_first_item,         \
+                         item_pair, slot_brick, item_base, item_end, brick_size, nx, ny, nz, &it, \
+                         &t))                                                                     \
             return;                                                                               \
-        SETUP s = setups[it.triangle];                                                            \
+        SETUP s = SETUP_FN(t, half_open);                                                         \
         for (int b = it.block_first; b < it.block_end; ++b) {                                     \
             int block[3];                                                                         \
             item_block(&it, b, block);                                                            \
@@ -126,6 +106,6 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
         }                                                                                         \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_sat_overlaps4)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_pef_overlaps4)
-OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_thin_overlaps4)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_overlaps4)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_overlaps4)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_setup_thin, ov_thin_overlaps4)

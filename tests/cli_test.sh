@@ -15,6 +15,12 @@ trap 'rm -rf "$WORK"' EXIT
 
 source "$(dirname "${BASH_SOURCE[0]}")/shell_checks.sh"
 
+# The checks read outputs with numpy; Debian's python3-numpy (what scripts/install_deps.sh
+# installs) lives in the system Python, which another python3 first on PATH may lack.
+if ! python3 -c "import numpy" 2>/dev/null && /usr/bin/python3 -c "import numpy" 2>/dev/null; then
+    python3() { /usr/bin/python3 "$@"; }
+fi
+
 # Runs oclvox with the given arguments; leaves its exit code, stdout and stderr in RC, OUT, ERR.
 run() {
     "$OCLVOX" "$@" >"$WORK/stdout" 2>"$WORK/stderr"

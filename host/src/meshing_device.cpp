@@ -77,15 +77,8 @@ Mesh mesh_on_device(Device& device, const ScalarField& field, float iso,
         cl.queue.enqueueWriteBuffer(brick_base, CL_FALSE, 0, layout.base.size() * sizeof(cl_uint),
                                     layout.base.data());
         // A CPU device reads the field where it is: copying a dense field costs as much as
-        // meshing it. Other devices get a copy in their own memory. (The kernels never write it.)
-        const bool cpu = cl.info.type == "CPU";
-        const cl::Buffer values =
-            cpu ? cl::Buffer(cl.context, CL_MEM_READ_ONLY | CL_MEM_USE_HOST_PTR, n * sizeof(float),
-                             const_cast<float*>(field.values.data()))
-                : buffer(cl, CL_MEM_READ_ONLY, n * sizeof(float));
-        if (!cpu)
-            cl.queue.enqueueWriteBuffer(values, CL_FALSE, 0, n * sizeof(float),
-                                        field.values.data());
+        // meshing it. (The kernels never write it.)
+        const cl::Buffer values = detail::read_in_place(cl, field.values);
         cl::Buffer table;
         if (!nets) {
             const std::vector<uint8_t>& table_data = detail::marching_cubes_table();

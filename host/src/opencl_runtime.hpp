@@ -118,3 +118,18 @@ inline Device::Impl& device_impl(Device& device) {
 }
 
 }  // namespace oclvox::detail
+
+namespace oclvox::detail {
+
+// A read-only buffer of `data` that a device working in the host's memory reads where it lies:
+// copying into a fresh buffer costs a page fault per 4 KiB there, more than most kernels reading
+// it. Other devices get a copy in their own memory (upload). So `data` must stay alive and
+// unchanged while the buffer is in use.
+template <typename T, typename Allocator>
+cl::Buffer read_in_place(const Device::Impl& cl, const std::vector<T, Allocator>& data) {
+    if (!cl.info.host_unified_memory || data.empty()) return upload(cl.context, cl.queue, data);
+    return cl::Buffer(cl.context, CL_MEM_READ_ONLY | CL_MEM_USE_HOST_PTR, data.size() * sizeof(T),
+                      const_cast<T*>(data.data()));
+}
+
+}  // namespace oclvox::detail

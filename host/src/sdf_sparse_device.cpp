@@ -29,16 +29,16 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
     if (leaves.count == 0) return;
     const std::string doing = "computing a sparse distance field on " + cl.info.name;
     try {
-        // Phase 1: the triangles, each slot's list and its leaf up (the uploads do not block, so
-        // their sources live as long as the buffers).
+        // Phase 1: the triangles, each slot's list and its leaf up (read in place or uploaded
+        // without blocking, so their sources live as long as the buffers).
         auto t = Clock::now();
         std::vector<cl_ulong> slot_leaf(size_t(leaves.count));
         for (uint64_t slot = 0, leaf = 0; slot < leaves.count; ++slot, ++leaf)
             slot_leaf[size_t(slot)] = leaf = leaves.set_from(leaf);
-        const cl::Buffer triangles = upload(cl.context, cl.queue, prepared.triangles);
-        const cl::Buffer first = upload(cl.context, cl.queue, band.first);
-        const cl::Buffer lists = upload(cl.context, cl.queue, band.triangles);
-        const cl::Buffer leaf_of_slot = upload(cl.context, cl.queue, slot_leaf);
+        const cl::Buffer triangles = read_in_place(cl, prepared.triangles);
+        const cl::Buffer first = read_in_place(cl, band.first);
+        const cl::Buffer lists = read_in_place(cl, band.triangles);
+        const cl::Buffer leaf_of_slot = read_in_place(cl, slot_leaf);
         cl.queue.finish();
         stats.seconds_upload += seconds_since(t);
 

@@ -105,7 +105,7 @@ ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Lay
 
 struct Batch {
     size_t first_column = 0, column_count = 0;
-    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item;
+    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
     std::vector<cl_int> slot_column;
     uint64_t items = 0;
 };
@@ -143,6 +143,8 @@ Batch make_batch(const ColumnBins& bins, const std::vector<OvParityTriangle>& tr
             batch.pair_triangle.push_back(bins.pair_triangle[bins.first_pair[c] + i]);
             batch.pair_slot.push_back(slot);
             batch.pair_first_item.push_back(cl_uint(batch.items));
+            batch.item_pair.insert(batch.item_pair.end(), counts[i],
+                                   cl_uint(batch.pair_triangle.size() - 1));
             batch.items += counts[i];
         }
     }
@@ -201,7 +203,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
 
     const cl::Program& program = cl.program(kKernel_solid);
     t = Clock::now();
-    const cl::Buffer tri_buffer = upload(cl.context, cl.queue, triangles);
+    const cl::Buffer tri_buffer = read_in_place(cl, triangles);
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
     SlotBuffer bits(CL_MEM_READ_WRITE, column_words * sizeof(cl_uint));
@@ -220,10 +222,10 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
         const cl::Buffer& bit_buffer = bits.get(cl.context, max_columns);
         const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
         Batch batch = make_batch(bins, triangles, l, done, max_columns);
-        const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
         const cl::Buffer pair_triangle = upload(cl.context, cl.queue, batch.pair_triangle);
         const cl::Buffer pair_slot = upload(cl.context, cl.queue, batch.pair_slot);
         const cl::Buffer pair_first = upload(cl.context, cl.queue, batch.pair_first_item);
+        const cl::Buffer item_pair = upload(cl.context, cl.queue, batch.item_pair);
         const cl::Buffer slot_column = upload(cl.context, cl.queue, batch.slot_column);
         cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0,
                                    batch.column_count * column_words * sizeof(cl_uint));
@@ -232,7 +234,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
 
         // Flips, then parity per voxel column, then the brick layout.
         t = Clock::now();
-        set_args(flip, 0, tri_buffer, pair_triangle, pair_slot, pair_first, pair_count, slot_column,
+        set_args(flip, 0, tri_buffer, pair_triangle, pair_slot, pair_first, item_pair, slot_column,
                  cl_uint(0), cl_uint(batch.items), cl_int(l.brick), cl_int(l.nx), cl_int(l.ny),
                  cl_int(l.nz), cl_uint(l.words), bit_buffer);
         run_sliced(cl.queue, batch.items, flip_group,

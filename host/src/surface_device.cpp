@@ -1,12 +1,11 @@
 // Device::voxelize: the tiled conservative surface voxelization on an OpenCL device.
 //
-// Phases: prepare and bin triangles on the host; upload them and compute the per-triangle
-// constants and voxel ranges on the device once; then process the active bricks in batches that fit
-// the device budget: per batch, upload the (triangle, brick) pairs and their work-item offsets,
-// clear the batch's brick bits, run the voxel kernel over all work items, and merge the bits that
-// come back (whole, or only the non-empty blocks: block_download.hpp) into the sparse result. A
-// batch the device cannot allocate memory for is retried with half as many bricks, down to one
-// (device_batches.hpp).
+// Phases: prepare and bin triangles on the host; upload them once; then process the active bricks
+// in batches that fit the device budget: per batch, upload the (triangle, brick) pairs, their
+// work-item offsets and each work item's pair, clear the batch's brick bits, run the voxel kernel
+// over all work items, and merge the bits that come back (whole, or only the non-empty blocks:
+// block_download.hpp) into the sparse result. A batch the device cannot allocate memory for is
+// retried with half as many bricks, down to one (device_batches.hpp).
 #include <algorithm>
 #include <chrono>
 
@@ -33,7 +32,7 @@ constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 
 struct Batch {
     size_t first_brick = 0, brick_count = 0;
-    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item;
+    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
     std::vector<cl_int> slot_brick;
     uint64_t items = 0;
 };
@@ -75,6 +74,8 @@ Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles
             batch.pair_triangle.push_back(binning.pair_triangle[p]);
             batch.pair_slot.push_back(slot);
             batch.pair_first_item.push_back(cl_uint(batch.items));
+            batch.item_pair.insert(batch.item_pair.end(), counts[i],
+                                   cl_uint(batch.pair_triangle.size() - 1));
             batch.items += counts[i];
         }
     }
@@ -104,8 +105,6 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
         return out;
     }
     VoxelizeStats stats;
-    const detail::SurfaceKernels kernels =
-        detail::surface_kernels(detail::surface_test_for(options));
     const int brick_size = options.brick_size;
     Impl& cl = *impl_;
 
@@ -139,26 +138,13 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     if (!prepared.triangles.empty()) try {
             const cl::Program& program = cl.program(detail::kKernel_voxelize);
 
-            // Phase 3: triangles to the device; per-triangle constants once.
+            // Phase 3: triangles to the device, once.
             t = Clock::now();
-            const cl::Buffer triangles = detail::upload(cl.context, cl.queue, prepared.triangles);
-            const cl_uint triangle_count = cl_uint(prepared.triangles.size());
-            cl::Buffer setups(cl.context, CL_MEM_READ_WRITE, kernels.setup_bytes * triangle_count);
-            cl::Buffer ranges(cl.context, CL_MEM_READ_WRITE,
-                              sizeof(detail::OvRange) * triangle_count);
+            const cl::Buffer triangles = detail::read_in_place(cl, prepared.triangles);
             cl.queue.finish();
             stats.seconds_upload += seconds_since(t);
 
-            t = Clock::now();
-            cl::Kernel setup(program, kernels.setup);
-            detail::set_args(setup, 0, triangles, triangle_count,
-                             cl_int(options.boundary == Boundary::HalfOpen), setups, ranges);
-            detail::launch(cl.queue, setup, triangle_count,
-                           detail::work_group_size(setup, cl.device));
-            cl.queue.finish();
-            stats.seconds_kernels += seconds_since(t);
-
-            cl::Kernel voxelize(program, kernels.voxelize);
+            cl::Kernel voxelize(program, detail::surface_kernel(detail::surface_test_for(options)));
             const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
             size_t slots = std::min(max_slots, binning.bricks.size());
@@ -170,14 +156,13 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 t = Clock::now();
                 const cl::Buffer& bit_buffer = bits.get(cl.context, max_bricks);
                 Batch batch = make_batch(binning, prepared, grid, brick_size, done, max_bricks);
-                const cl_uint pair_count = cl_uint(batch.pair_triangle.size());
-                batch.pair_first_item.push_back(cl_uint(batch.items));
                 const size_t bit_words = batch.brick_count * words_per_brick;
                 const cl::Buffer pair_triangle =
                     detail::upload(cl.context, cl.queue, batch.pair_triangle);
                 const cl::Buffer pair_slot = detail::upload(cl.context, cl.queue, batch.pair_slot);
                 const cl::Buffer pair_first =
                     detail::upload(cl.context, cl.queue, batch.pair_first_item);
+                const cl::Buffer item_pair = detail::upload(cl.context, cl.queue, batch.item_pair);
                 const cl::Buffer slot_brick =
                     detail::upload(cl.context, cl.queue, batch.slot_brick);
                 cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0, bit_words * sizeof(cl_uint));
@@ -185,10 +170,11 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 stats.seconds_upload += seconds_since(t);
 
                 t = Clock::now();
-                detail::set_args(voxelize, 0, setups, ranges, pair_triangle, pair_slot, pair_first,
-                                 pair_count, slot_brick, cl_uint(0), cl_uint(batch.items),
-                                 cl_int(brick_size), cl_int(grid.dims[0]), cl_int(grid.dims[1]),
-                                 cl_int(grid.dims[2]), bit_buffer);
+                detail::set_args(voxelize, 0, triangles,
+                                 cl_int(options.boundary == Boundary::HalfOpen), pair_triangle,
+                                 pair_slot, pair_first, item_pair, slot_brick, cl_uint(0),
+                                 cl_uint(batch.items), cl_int(brick_size), cl_int(grid.dims[0]),
+                                 cl_int(grid.dims[1]), cl_int(grid.dims[2]), bit_buffer);
                 detail::run_sliced(cl.queue, batch.items, voxelize_group,
                                    [&](uint64_t first, uint64_t count) {
                                        voxelize.setArg(7, cl_uint(first));

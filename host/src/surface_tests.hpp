@@ -1,5 +1,5 @@
 // The three surface predicates (conservative SAT, conservative PEF, thin) as one description
-// each: the kernel names on the device, and the same setup/test functions on the host.
+// each: the kernel name on the device, and the same setup/test functions on the host.
 #pragma once
 
 #include "oclvox/oclvox.hpp"
@@ -15,22 +15,17 @@ inline SurfaceTest surface_test_for(const VoxelizeOptions& options) {
     return options.test == OverlapTest::SAT ? SurfaceTest::SAT : SurfaceTest::PEF;
 }
 
-struct SurfaceKernels {
-    const char* setup;
-    const char* voxelize;
-    size_t setup_bytes;
-};
-
-inline SurfaceKernels surface_kernels(SurfaceTest test) {
+// The kernel of kernels/voxelize.cl that tests with `test`.
+inline const char* surface_kernel(SurfaceTest test) {
     switch (test) {
         case SurfaceTest::SAT:
-            return {"setup_sat", "voxelize_sat", sizeof(OvSatTriangle)};
+            return "voxelize_sat";
         case SurfaceTest::PEF:
-            return {"setup_pef", "voxelize_pef", sizeof(OvPefTriangle)};
+            return "voxelize_pef";
         case SurfaceTest::Thin:
             break;
     }
-    return {"setup_thin", "voxelize_thin", sizeof(OvThinTriangle)};
+    return "voxelize_thin";
 }
 
 // Calls f(setup_function, overlap_function) with the host versions of `test`, the setup bound to
