@@ -246,7 +246,7 @@ void add_tiling_options(CLI::App& command, TilingArgs& args) {
         ->group("Tiling");
     command
         .add_option("--device-memory", args.device_mib,
-                    "device memory for one batch of bricks, in MiB")
+                    "device memory for one batch of bricks, in MiB (CPU devices: at most 64)")
         ->type_name("MIB")
         ->check(CLI::Range(uint64_t(1), uint64_t(1) << 24))
         ->capture_default_str()

@@ -25,13 +25,6 @@ inline void check_solid_memory(const SparseVoxels& result, uint64_t bricks, uint
                       "the solid result of " + std::to_string(bricks) + " bricks" + working);
 }
 
-// The device memory a solid run may take: the options' budget, within one allocation and half of
-// the device's memory.
-inline uint64_t device_budget(const Device::Impl& cl, const VoxelizeOptions& options) {
-    return std::min<uint64_t>(
-        {options.device_budget_bytes, cl.info.max_alloc, cl.info.global_memory / 2});
-}
-
 // Reports bricks done, throwing Cancelled when the callback says stop.
 inline void report_progress(const VoxelizeOptions& options, uint64_t done, uint64_t total) {
     if (options.progress && !options.progress(done, total))

@@ -191,7 +191,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
     if (bins.columns.empty()) return;
     check_solid_memory(result, stats.bricks_active, 0, options, "");
 
-    const uint64_t budget = device_budget(cl, options);
+    const uint64_t budget = batch_budget(cl, options.device_budget_bytes, l.slot_bytes());
     if (l.slot_bytes() > budget)
         throw GridError("one brick column of " + std::to_string(l.brick) + "^2 x " +
                         std::to_string(l.nz) + " voxels needs " + mib_text(l.slot_bytes()) +

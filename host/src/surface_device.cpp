@@ -127,8 +127,8 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
     detail::check_host_memory(
         stats.bricks_active * brick_bytes, detail::host_budget(options.host_budget_bytes),
         "the result of " + std::to_string(stats.bricks_active) + " active bricks");
-    const uint64_t device_budget = std::min<uint64_t>(
-        {options.device_budget_bytes, cl.info.max_alloc, cl.info.global_memory / 2});
+    const uint64_t device_budget =
+        detail::batch_budget(cl, options.device_budget_bytes, brick_bytes);
     if (brick_bytes > device_budget)
         throw GridError("one brick of " + std::to_string(brick_size) + "^3 voxels needs " +
                         detail::mib_text(brick_bytes) + ", over the device budget of " +

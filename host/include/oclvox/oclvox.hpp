@@ -247,8 +247,11 @@ struct VoxelizeOptions {
     Boundary boundary = Boundary::Closed;
     OverlapTest test = OverlapTest::SAT;  // measured faster on most meshes (bench/RESULTS.md)
     int brick_size = 64;                  // voxels per brick edge, a multiple of 4 in [4, 1024]
-    uint64_t device_budget_bytes = 256u << 20;  // device memory for brick bits per batch
-    uint64_t host_budget_bytes = 0;             // 0: half of physical memory
+    // Device memory for brick bits per batch. A device working in the host's memory (a CPU)
+    // takes batches of at most 64 MiB whatever this says, unless one brick needs more: its
+    // buffers are fresh host pages, and smaller batches reuse them.
+    uint64_t device_budget_bytes = 256u << 20;
+    uint64_t host_budget_bytes = 0;  // 0: half of physical memory
     Download download = Download::Auto;
     ProgressCallback progress;
     // Compute only these bricks of the whole grid (linear indices bx + nbx*(by + nby*bz) of
