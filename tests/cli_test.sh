@@ -431,6 +431,32 @@ sys.exit(a != b)" "$WORK/csg_narrow.npy" "$WORK/csg_of_vdbs.npy"; then
 else
     fail "csg of two .vdb level sets" "rc=$RC err=$ERR"
 fi
+# Level sets on one lattice but different grids (b's origin whole voxels away, its dims
+# smaller) combine on the box of both; half a voxel away they are refused.
+moved_grid() {  # the csg grid's options with the origin moved by (dx, dy, dz) voxels
+    python3 -c "
+import json, sys
+s = json.load(open(sys.argv[1]))
+h, move = s['voxel_size'], [float(v) for v in sys.argv[2:5]]
+print('--origin', ','.join(repr(o + m * h) for o, m in zip(s['origin'], move)), '--voxel-size',
+      repr(h), '--dims', ','.join(str(d - 4) for d in s['dims']))" "$@"
+}
+read -r -a lattice_grid <<<"$(moved_grid "$WORK/csg_narrow.npy.json" 3 -2 5)"
+"$OCLVOX" sdf "$WORK/spot_moved.obj" "${lattice_grid[@]}" -q -o "$WORK/lattice_b.vdb"
+run csg "$WORK/csg_a.vdb" union "$WORK/lattice_b.vdb" -o "$WORK/lattice.vdb" --json
+if [ "$RC" -eq 0 ] && python3 -c "
+import json, sys
+grid, before = json.loads(sys.argv[1])['grid'], json.load(open(sys.argv[2]))
+want = [max(d, m + d - 4) - min(0, m) for d, m in zip(before['dims'], (3, -2, 5))]
+sys.exit(grid['dims'] != want)" "$OUT" "$WORK/csg_narrow.npy.json"; then
+    pass "csg of .vdb level sets on one lattice covers the box of both grids"
+else
+    fail "csg of .vdb level sets on one lattice" "rc=$RC out=$OUT err=$ERR"
+fi
+read -r -a off_lattice <<<"$(moved_grid "$WORK/csg_narrow.npy.json" 0.5 0 0)"
+"$OCLVOX" sdf "$WORK/spot_moved.obj" "${off_lattice[@]}" -q -o "$WORK/off_lattice.vdb"
+expect_failure "csg of .vdb level sets half a voxel apart" "$WORK/off.vdb" 'one voxel lattice' \
+    csg "$WORK/csg_a.vdb" union "$WORK/off_lattice.vdb" -o "$WORK/off.vdb"
 expect_failure "csg of a .npy and a .vdb field" "$WORK/mixed.npy" 'two \.npy fields or two \.vdb' \
     csg "$WORK/csg_narrow.npy" union "$WORK/csg_a.vdb" -o "$WORK/mixed.npy"
 expect_failure "mesh of a .vdb on a named device" "$WORK/vdb_on_device.obj" 'host.*--device' \

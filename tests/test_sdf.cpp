@@ -3,6 +3,8 @@
 // projection-or-edges formulation).
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Composite.h>
+#include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <unistd.h>
 
@@ -1297,8 +1299,127 @@ TEST(SparseCsg, ToDenseIsTheDenseCsgBitForBitForEveryOperation) {
     wide.band_voxels = 3.0;
     EXPECT_THROW(csg(sa, signed_distance_sparse(device(), b, g, wide), CsgOp::Union), GridError);
     Grid moved = g;
-    moved.origin[0] += g.voxel_size;
-    EXPECT_THROW(csg(sa, signed_distance_sparse(device(), b, moved, o), CsgOp::Union), GridError);
+    moved.origin[0] += 0.5 * g.voxel_size;
+    try {
+        csg(sa, signed_distance_sparse(device(), b, moved, o), CsgOp::Union);
+        ADD_FAILURE() << "fields half a voxel apart were combined";
+    } catch (const GridError& e) {
+        EXPECT_NE(std::string(e.what()).find("lattice"), std::string::npos) << e.what();
+    }
+}
+
+// Fields on grids of one lattice (origins whole voxels apart, different sizes) combine on the
+// box of both, and every sample of the result is the operation on the two fields' own samples
+// there, +background beyond a field's grid: by voxel moves (offsets not multiples of 4) and by
+// 64-bit block moves (multiples of 4), and with the grids either way round.
+TEST(SparseCsg, FieldsOnOneLatticeCombineOnTheBoxOfBoth) {
+    const Mesh a = icosphere(kCentre, 1.6, 3);
+    const Mesh b = icosphere({kCentre[0] + 1.1, kCentre[1] - 0.3, kCentre[2] + 0.2}, 1.0, 3);
+    GridFit fit;
+    fit.resolution = 32;
+    fit.pad = 3;
+    const Grid ga = fit_grid(a, fit);
+    const SdfOptions o = band(2.5);
+    const SparseField fa = signed_distance_sparse(device(), a, ga, o);
+    for (const std::array<int64_t, 3> offset :
+         {std::array<int64_t, 3>{3, -5, 7}, {8, -16, 4}, {0, 0, 0}}) {
+        SCOPED_TRACE(::testing::PrintToString(offset));
+        Grid gb = ga;
+        for (int k = 0; k < 3; ++k) gb.origin[k] += double(offset[k]) * ga.voxel_size;
+        gb.dims = {ga.dims[0] - 6, ga.dims[1] + 5, ga.dims[2] - 9};
+        const SparseField fb = signed_distance_sparse(device(), b, gb, o);
+        for (const bool swap : {false, true}) {
+            const SparseField& x = swap ? fb : fa;
+            const SparseField& y = swap ? fa : fb;
+            for (CsgOp op : {CsgOp::Union, CsgOp::Intersection, CsgOp::Difference}) {
+                SCOPED_TRACE(std::string(to_string(op)) + (swap ? " swapped" : ""));
+                const SparseField r = csg(x, y, op);
+                const Grid& g = r.grid();
+                std::array<int64_t, 3> sx, sy;  // each field's voxel (0, 0, 0) in the result
+                for (int k = 0; k < 3; ++k) {
+                    EXPECT_EQ(g.origin[k], std::min(x.grid().origin[k], y.grid().origin[k]));
+                    sx[k] = std::llround((x.grid().origin[k] - g.origin[k]) / g.voxel_size);
+                    sy[k] = std::llround((y.grid().origin[k] - g.origin[k]) / g.voxel_size);
+                    EXPECT_EQ(g.dims[k],
+                              std::max(sx[k] + x.grid().dims[k], sy[k] + y.grid().dims[k]));
+                }
+                auto sample = [](const SparseField& f, const std::array<int64_t, 3>& shift,
+                                 int64_t i, int64_t j, int64_t k) {
+                    const std::array<int64_t, 3> p = {i - shift[0], j - shift[1], k - shift[2]};
+                    for (int a = 0; a < 3; ++a)
+                        if (p[a] < 0 || p[a] >= f.grid().dims[a]) return f.background();
+                    return f.at(p[0], p[1], p[2]);
+                };
+                const ScalarField dense = r.to_dense();
+                size_t inside = 0;
+                for (int64_t k = 0; k < g.dims[2]; ++k)
+                    for (int64_t j = 0; j < g.dims[1]; ++j)
+                        for (int64_t i = 0; i < g.dims[0]; ++i) {
+                            float want = sample(x, sx, i, j, k);
+                            const float other = sample(y, sy, i, j, k);
+                            detail::combine_samples(&want, &other, 1, op);
+                            ASSERT_EQ(dense.at(i, j, k), want) << i << " " << j << " " << k;
+                            inside += want < 0;
+                        }
+                EXPECT_GT(inside, 100u);
+            }
+        }
+    }
+}
+
+// Two level sets OpenVDB made with one transform (so their leaf boxes differ) combine as
+// OpenVDB's own CSG combines them, sample for sample over the whole result grid.
+TEST(LevelSetFiles, TwoOpenVdbLevelSetsOnOneTransformCombineAsOpenVdbsCsg) {
+    openvdb::initialize();
+    const float voxel = 0.1f, half_width = 3.0f;
+    auto sphere = [&](float radius, const openvdb::Vec3f& centre, const std::string& name) {
+        auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(radius, centre, voxel,
+                                                                             half_width);
+        const std::string path = temp_path(name);
+        openvdb::io::File file(path);
+        file.write({grid});
+        file.close();
+        return std::make_pair(grid, path);
+    };
+    const auto [va, pa] = sphere(1.3f, {0.2f, -0.4f, 0.1f}, "lattice_a.vdb");
+    const auto [vb, pb] = sphere(0.9f, {1.5f, 0.3f, -0.6f}, "lattice_b.vdb");
+    const SparseField a = read_sparse_field(pa), b = read_sparse_field(pb);
+    EXPECT_FALSE(same_grid(a.grid(), b.grid()));
+    for (CsgOp op : {CsgOp::Union, CsgOp::Intersection, CsgOp::Difference}) {
+        SCOPED_TRACE(to_string(op));
+        openvdb::FloatGrid::Ptr want;
+        switch (op) {
+            case CsgOp::Union:
+                want = openvdb::tools::csgUnionCopy(*va, *vb);
+                break;
+            case CsgOp::Intersection:
+                want = openvdb::tools::csgIntersectionCopy(*va, *vb);
+                break;
+            case CsgOp::Difference:
+                want = openvdb::tools::csgDifferenceCopy(*va, *vb);
+                break;
+        }
+        const SparseField r = csg(a, b, op);
+        const Grid& g = r.grid();
+        const auto read = want->getConstAccessor();
+        size_t inside = 0;
+        for (int64_t k = 0; k < g.dims[2]; ++k)
+            for (int64_t j = 0; j < g.dims[1]; ++j)
+                for (int64_t i = 0; i < g.dims[0]; ++i) {
+                    const openvdb::Vec3d index = want->worldToIndex(
+                        openvdb::Vec3d(g.origin[0] + (double(i) + 0.5) * g.voxel_size,
+                                       g.origin[1] + (double(j) + 0.5) * g.voxel_size,
+                                       g.origin[2] + (double(k) + 0.5) * g.voxel_size));
+                    const openvdb::Coord at(int(std::lround(index[0])), int(std::lround(index[1])),
+                                            int(std::lround(index[2])));
+                    ASSERT_NEAR((index - at.asVec3d()).length(), 0.0, 1e-6);
+                    ASSERT_EQ(r.at(i, j, k), read.getValue(at)) << i << " " << j << " " << k;
+                    inside += r.at(i, j, k) < 0;
+                }
+        EXPECT_GT(inside, 100u);
+    }
+    std::remove(pa.c_str());
+    std::remove(pb.c_str());
 }
 
 }  // namespace

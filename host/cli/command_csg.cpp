@@ -83,8 +83,9 @@ int run(const FieldArgs& args) {
             b = read_sparse_field_input(args.input_b, record.inputs[1]);
             return 0;
         });
-        record.grid = a->grid();
-        sparse = oclvox::csg(*a, *b, op);
+        // On grids of one lattice the result covers both: its grid is the one to report.
+        sparse = timed(record.seconds.compute, [&] { return oclvox::csg(*a, *b, op); });
+        record.grid = sparse->grid();
         stop_if_interrupted();
     } else if (fields_in) {
         record.inputs.resize(2);
@@ -173,7 +174,9 @@ Command add_csg_command(CLI::App& app) {
     command->footer(
         std::string(kExitCodesText) +
         "Both signed distance fields are computed on one grid fitted to both meshes and\n"
-        "padded by band + 1 voxels, so the result's surface closes inside it.\n"
+        "padded by band + 1 voxels, so the result's surface closes inside it. Two .npy fields\n"
+        "need one grid; two .vdb level sets one voxel lattice (the same voxel size, origins\n"
+        "whole voxels apart), and the result covers the box of both.\n"
         "Example: oclvox csg a.obj difference b.obj -r 128 -o a_minus_b.obj");
     auto args = std::make_shared<FieldArgs>();
     add_options(*command, *args);

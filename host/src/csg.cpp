@@ -3,8 +3,10 @@
 // meshes, which computes their fields first, is in sdf.cpp with the other distance-field runs.)
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdint>
 #include <iterator>
+#include <unordered_map>
 
 #include "file_names.hpp"
 #include "host_memory.hpp"
@@ -34,6 +36,130 @@ SparseVoxels with_brick_size(const SparseVoxels& b, int brick_size) {
     if (b.brick_size() == brick_size) return b;
     SparseVoxels out(b.grid(), brick_size);
     b.for_each([&](int64_t i, int64_t j, int64_t k) { out.set(i, j, k); });
+    return out;
+}
+
+using Index3 = std::array<int64_t, 3>;
+
+// Whether b's voxels lie on a's lattice: the same voxel size and origins a whole number of voxels
+// apart (to rounding: files give origins through transforms). `offset` is then the index of b's
+// voxel (0, 0, 0) on a's lattice.
+bool same_lattice(const Grid& a, const Grid& b, Index3& offset) {
+    if (!(std::abs(a.voxel_size - b.voxel_size) <= 1e-9 * a.voxel_size)) return false;
+    for (int k = 0; k < 3; ++k) {
+        const double voxels = (b.origin[k] - a.origin[k]) / a.voxel_size;
+        const double whole = std::round(voxels);
+        if (!(std::abs(voxels - whole) <= 1e-6)) return false;
+        offset[k] = int64_t(whole);
+    }
+    return true;
+}
+
+// The box of both grids on their lattice (b at `offset` of a): its origin on each axis is that of
+// the grid that starts lower, so exact. shift_a, shift_b: where each grid's voxel (0, 0, 0) lands.
+Grid covering_grid(const Grid& a, const Grid& b, const Index3& offset, Index3& shift_a,
+                   Index3& shift_b) {
+    Grid out = a;
+    for (int k = 0; k < 3; ++k) {
+        const int64_t lo = std::min<int64_t>(0, offset[k]);
+        const int64_t hi = std::max(a.dims[k], offset[k] + b.dims[k]);
+        out.origin[k] = offset[k] >= 0 ? a.origin[k] : b.origin[k];
+        out.dims[k] = hi - lo;
+        shift_a[k] = -lo;
+        shift_b[k] = offset[k] - lo;
+    }
+    validate_grid(out);
+    return out;
+}
+
+// v's voxels on `target`, voxel (i, j, k) moved to (i, j, k) + shift. Shifts by whole 4x4x4 blocks
+// move 64-bit words (as the two grids of level sets read from OpenVDB files are, their boxes
+// starting on leaves); others move voxel by voxel.
+SparseVoxels moved_voxels(const SparseVoxels& v, const Grid& target, const Index3& shift) {
+    SparseVoxels out(target, v.brick_size());
+    const int64_t block = SparseVoxels::kBlock;
+    if (shift[0] % block || shift[1] % block || shift[2] % block) {
+        v.for_each([&](int64_t i, int64_t j, int64_t k) {
+            out.set(i + shift[0], j + shift[1], k + shift[2]);
+        });
+        return out;
+    }
+    const int64_t nb = v.blocks_per_brick_axis();
+    const Index3 from = v.brick_dims(), to = out.brick_dims();
+    std::unordered_map<uint64_t, std::vector<uint64_t>> bricks;
+    for (const uint64_t index : v.brick_indices()) {
+        const uint64_t* blocks = v.brick_blocks(index);
+        const Index3 brick = {int64_t(index % uint64_t(from[0])),
+                              int64_t(index / uint64_t(from[0]) % uint64_t(from[1])),
+                              int64_t(index / uint64_t(from[0] * from[1]))};
+        for (int64_t b = 0; b < nb * nb * nb; ++b) {
+            if (!blocks[b]) continue;
+            const Index3 local = {b % nb, b / nb % nb, b / (nb * nb)};
+            Index3 at, in;  // the block's brick and place in it, on the target
+            for (int k = 0; k < 3; ++k) {
+                const int64_t g = brick[k] * nb + local[k] + shift[k] / block;
+                at[k] = g / nb;
+                in[k] = g % nb;
+            }
+            std::vector<uint64_t>& words =
+                bricks[uint64_t(at[0] + to[0] * (at[1] + to[1] * at[2]))];
+            words.resize(v.blocks_per_brick());
+            words[size_t(in[0] + nb * (in[1] + nb * in[2]))] |= blocks[b];
+        }
+    }
+    for (const auto& [index, words] : bricks) out.merge_brick(index, words.data());
+    return out;
+}
+
+// f on `target`, voxel (i, j, k) moved to (i, j, k) + shift, its leaves cut again at the target's
+// multiples of 8. Beyond f's grid every sample is +background: a level set's shape lies within
+// its grid, as beyond an OpenVDB tree the background is outside.
+SparseField moved_field(const SparseField& f, const Grid& target, const Index3& shift) {
+    SparseField out(target, f.band_voxels(), moved_voxels(f.inside(), target, shift));
+    const int64_t leaf = SparseField::kLeaf;
+    const Index3 to = out.leaf_dims();
+    const auto& dims = f.grid().dims;
+
+    // Phase 1: the target leaves that f's leaves reach within f's grid (up to 8 each).
+    std::vector<uint64_t> keys;
+    for (const uint64_t index : f.leaf_indices()) {
+        const Index3 o = f.leaf_origin(index);
+        Index3 lo, hi;
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = (o[k] + shift[k]) / leaf;
+            hi[k] = (std::min(o[k] + leaf, dims[k]) - 1 + shift[k]) / leaf;
+        }
+        for (int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (int64_t x = lo[0]; x <= hi[0]; ++x)
+                    keys.push_back(uint64_t(x + to[0] * (y + to[1] * z)));
+    }
+    std::sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    detail::check_host_memory(keys.size() * SparseField::kLeafSamples * sizeof(float),
+                              detail::default_host_budget(),
+                              "the " + std::to_string(keys.size()) + " leaves of a moved field");
+
+    // Phase 2: each target leaf, from the samples of f's grid it covers.
+    out.reserve_leaves(keys.size());
+    float samples[SparseField::kLeafSamples], box[SparseField::kLeafSamples];
+    for (const uint64_t key : keys) {
+        const Index3 o = out.leaf_origin(key);
+        Index3 lo, hi;  // the leaf's box in f's voxels, within f's grid
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::max<int64_t>(0, o[k] - shift[k]);
+            hi[k] = std::min(dims[k], o[k] - shift[k] + leaf);
+        }
+        std::fill_n(samples, SparseField::kLeafSamples, f.background());
+        f.copy_box(lo, hi, box);
+        const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1];
+        for (int64_t z = lo[2]; z < hi[2]; ++z)
+            for (int64_t y = lo[1]; y < hi[1]; ++y)
+                std::copy_n(box + wx * ((y - lo[1]) + wy * (z - lo[2])), wx,
+                            samples + (lo[0] + shift[0] - o[0]) +
+                                leaf * ((y + shift[1] - o[1]) + leaf * (z + shift[2] - o[2])));
+        out.append_leaf(key, samples);
+    }
     return out;
 }
 
@@ -75,11 +201,24 @@ ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op) {
 }
 
 SparseField csg(const SparseField& a, const SparseField& b, CsgOp op) {
-    require_same_grid(a.grid(), b.grid(), "fields");
     if (a.background() != b.background())
         throw GridError("CSG needs both sparse fields with the same band, got " +
                         std::to_string(a.band_voxels()) + " and " +
                         std::to_string(b.band_voxels()) + " voxels");
+    // Grids on one lattice: both fields moved onto the box of both.
+    Index3 offset;
+    if (!same_grid(a.grid(), b.grid())) {
+        if (!same_lattice(a.grid(), b.grid(), offset))
+            throw GridError(
+                "CSG needs both fields on one voxel lattice (the same voxel size, "
+                "origins a whole number of voxels apart), got " +
+                describe(a.grid()) + " and " + describe(b.grid()) +
+                ": give both one voxel size and origins whole voxels apart, or compute both "
+                "on one grid (fit_grid of both meshes)");
+        Index3 shift_a, shift_b;
+        const Grid both = covering_grid(a.grid(), b.grid(), offset, shift_a, shift_b);
+        return csg(moved_field(a, both, shift_a), moved_field(b, both, shift_b), op);
+    }
     // Away from both fields' leaves every sample is +-background, so the result's sign there is
     // the same operation on the inside voxels; the leaves of either field are combined sample by
     // sample, whatever the other field holds there.

@@ -223,9 +223,14 @@ def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", v
       options, and progress over both fields, as for sdf), combined by min / max / max(a, -b);
       returns a Field, or with sparse=True a SparseField combined leaf by leaf (as sdf's);
     - two Fields on the same grid: returns a Field;
+    - two SparseFields (from sdf(sparse=True) or load_field of .vdb level sets) with the same
+      band, on the same grid or on grids of one voxel lattice (the same voxel size, origins a
+      whole number of voxels apart, as OpenVDB level sets with one transform are): returns a
+      SparseField on the box of both, where a field counts as outside beyond its own grid;
     - two VoxelGrids on the same grid: a | b, a & b, a & ~b; returns a VoxelGrid.
     """
-    if isinstance(a, Field) and isinstance(b, Field):
+    if (isinstance(a, Field) and isinstance(b, Field)) or \
+            (isinstance(a, SparseField) and isinstance(b, SparseField)):
         _no_grid_options(resolution, voxel_size, origin, dims, pad, cubic)
         return _oclvox.csg_fields(a, op, b)
     if isinstance(a, VoxelGrid) and isinstance(b, VoxelGrid):
@@ -238,7 +243,7 @@ def csg(a, op, b, resolution=256, *, band=3.0, full_grid=False, inside="auto", v
                                   band=band, full_grid=full_grid, inside=inside,
                                   brick_size=brick_size, device=_selector(device),
                                   reference=reference, progress=progress, sparse=sparse)
-    raise TypeError("csg takes two meshes, two Fields or two VoxelGrids; got "
+    raise TypeError("csg takes two meshes, two Fields, two SparseFields or two VoxelGrids; got "
                     f"{type(a).__name__} and {type(b).__name__}")
 
 

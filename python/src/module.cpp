@@ -409,9 +409,11 @@ Result csg_meshes(const oclvox::Mesh& a, const std::string& op_name, const oclvo
     return result;
 }
 
-Field csg_fields(const Field& a, const std::string& op_name, const Field& b) {
+// Two Fields, or two SparseFields (which may lie on different grids of one lattice).
+template <typename F>
+F csg_fields(const F& a, const std::string& op_name, const F& b) {
     const oclvox::CsgOp op = oclvox::csg_op_from_string(op_name);
-    Field result;
+    F result;
     py::gil_scoped_release release;
     result.field = oclvox::csg(a.field, b.field, op);
     return result;
@@ -806,7 +808,8 @@ PYBIND11_MODULE(_oclvox, m) {
         },
         "a"_a, "op"_a, "b"_a, "fit"_a, "band"_a, "full_grid"_a, "inside"_a, "brick_size"_a,
         "device"_a, "reference"_a, "progress"_a, "sparse"_a = false);
-    m.def("csg_fields", &csg_fields, "a"_a, "op"_a, "b"_a);
+    m.def("csg_fields", &csg_fields<Field>, "a"_a, "op"_a, "b"_a);
+    m.def("csg_fields", &csg_fields<SparseField>, "a"_a, "op"_a, "b"_a);
     m.def("csg_voxels", &csg_voxels, "a"_a, "op"_a, "b"_a);
     m.def("mesh", &extract_surface, "field"_a, "iso"_a, "method"_a, "device"_a, "reference"_a,
           "progress"_a);

@@ -153,6 +153,47 @@ def test_sparse_csg_of_meshes_is_the_dense_csg(tmp_path):
         np.testing.assert_array_equal(sparse.to_field().to_numpy(), dense.to_numpy())
 
 
+def test_sparse_fields_on_one_lattice_combine_on_the_box_of_both(tmp_path):
+    # b's grid starts 3, -5 and 9 voxels from a's and is smaller on two axes; both go through
+    # .vdb files, as level sets to combine usually come.
+    voxel = GRID["voxel_size"]
+    offset = np.array([3, -5, 9])
+    other = dict(voxel_size=voxel, dims=(30, 40, 20),
+                 origin=tuple(np.array(GRID["origin"]) + offset * voxel))
+    a = oclvox.sdf(*box_mesh(*BOX_A), **GRID, band=BAND, sparse=True)
+    b = oclvox.sdf(*box_mesh(*BOX_B), **other, band=BAND, sparse=True)
+    a.save(tmp_path / "a.vdb")
+    b.save(tmp_path / "b.vdb")
+    a, b = oclvox.load_field(tmp_path / "a.vdb"), oclvox.load_field(tmp_path / "b.vdb")
+    # Each field's samples placed in the box of both, +background (outside) beyond its grid.
+    lo = np.minimum(0, offset)
+    shape = tuple(np.maximum(GRID["dims"], offset + other["dims"]) - lo)
+    background = np.float32(BAND * voxel)
+
+    def placed(field, at):
+        values = np.full(shape, background, dtype=np.float32)
+        d = field.dims
+        values[at[0]:at[0] + d[0], at[1]:at[1] + d[1], at[2]:at[2] + d[2]] = \
+            field.to_field().to_numpy()
+        return values
+
+    va, vb = placed(a, -lo), placed(b, offset - lo)
+    expected = {"union": np.minimum(va, vb), "intersection": np.maximum(va, vb),
+                "difference": np.maximum(va, -vb)}
+    for op, want in expected.items():
+        result = oclvox.csg(a, op, b)
+        assert isinstance(result, oclvox.SparseField) and result.dims == shape
+        assert np.allclose(result.origin, np.array(GRID["origin"]) + lo * voxel, rtol=0,
+                           atol=1e-12)
+        np.testing.assert_array_equal(result.to_field().to_numpy(), want)
+        assert (want < 0).sum() > 100
+    shifted = dict(other, origin=tuple(np.array(other["origin"]) + 0.5 * voxel))
+    with pytest.raises(oclvox.GridError, match="lattice"):
+        oclvox.csg(a, "union", oclvox.sdf(*box_mesh(*BOX_B), **shifted, band=BAND, sparse=True))
+    with pytest.raises(TypeError, match="SparseFields"):
+        oclvox.csg(a, "union", b.to_field())
+
+
 def test_sparse_fields_refuse_full_grids_and_unaligned_layers():
     with pytest.raises(oclvox.GridError):
         oclvox.sdf(*box_mesh(*BOX_A), **GRID, full_grid=True, sparse=True)

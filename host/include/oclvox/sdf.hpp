@@ -140,10 +140,13 @@ ScalarField csg(Device& device, const Mesh& a, const Mesh& b, CsgOp op, const Gr
 ScalarField csg_reference(const Mesh& a, const Mesh& b, CsgOp op, const Grid& grid,
                           const SdfOptions& options, VoxelizeStats* stats = nullptr);
 
-// CSG of two sparse fields on the same grid with the same band, leaf by leaf: the leaves of
-// either field, combined sample by sample as above, and the inside voxels combined by the same
-// operation on occupancy (which is what the rule gives away from both fields' leaves). Its
-// to_dense() equals csg(a.to_dense(), b.to_dense(), op) bit for bit. Throws GridError otherwise.
+// CSG of two sparse fields with the same band, leaf by leaf: the leaves of either field, combined
+// sample by sample as above, and the inside voxels combined by the same operation on occupancy
+// (which is what the rule gives away from both fields' leaves). On the same grid its to_dense()
+// equals csg(a.to_dense(), b.to_dense(), op) bit for bit. Grids on one voxel lattice (the same
+// voxel size, origins a whole number of voxels apart, as two OpenVDB level sets with one transform
+// are) give a field on the box of both, where every sample beyond a field's own grid counts as
+// +background (outside it). Throws GridError for other grids or bands.
 SparseField csg(const SparseField& a, const SparseField& b, CsgOp op);
 
 // CSG of two meshes through their sparse narrow-band fields (signed_distance_sparse; options as
