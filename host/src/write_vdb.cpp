@@ -8,10 +8,16 @@
 // set nor a fog volume.
 //
 // The tree is built straight from the bricks: each 4^3 block word lands in one 8^3 leaf
-// (blocks are 4-aligned), found once per block through a cached accessor, and its bits are ORed
-// into the leaf's active and value words four rows of 16 at a time. Whole leaves that end up full
-// are then pruned to active tiles, so a solid interior costs a tile, not 512 bits. No dense copy of
-// the grid is ever made.
+// (blocks are 4-aligned), and its bits are ORed into the leaf's active and value words four rows
+// of 16 at a time. Bricks whose edge is a multiple of 8 hold whole leaves, so their leaves are
+// built in parallel, brick by brick, and then handed to the tree; other brick sizes share leaves
+// between bricks and are built in one pass through a cached accessor. Whole leaves that end up
+// full are then pruned to active tiles, so a solid interior costs a tile, not 512 bits. No dense
+// copy of the grid is ever made.
+
+#include <tbb/parallel_for.h>
+
+#include <memory>
 
 #include "brick_layout.hpp"
 #include "vdb_format.hpp"
@@ -34,6 +40,24 @@ uint64_t yz_square(uint64_t shifted) {
     return square;
 }
 
+// ORs block `mask` (at voxel `o`, 4-aligned) into its leaf's active and value words.
+void add_block(openvdb::BoolTree::LeafNodeType& leaf, const std::array<int64_t, 3>& o,
+               uint64_t mask) {
+    uint64_t* active = &leaf.getValueMask().template getWord<uint64_t>(0);
+    uint64_t* values = leaf.buffer().data();
+    // A leaf's offsets run z fastest, (x & 7) << 6 | (y & 7) << 3 | (z & 7): word x & 7 holds an
+    // 8x8 square of (y, z), bit (y & 7) * 8 + (z & 7). The block is a 4x4 corner of four such
+    // words.
+    const int first_word = int(o[0] & 7), shift = int(o[1] & 7) * 8 + int(o[2] & 7);
+    for (int x = 0; x < 4; ++x) {
+        const uint64_t bits = yz_square(mask >> x) << shift;
+        active[first_word + x] |= bits;
+        values[first_word + x] |= bits;
+    }
+}
+
+using Leaf = openvdb::BoolTree::LeafNodeType;
+
 }  // namespace
 
 void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress) {
@@ -44,32 +68,52 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
     // The tree and the file cost about the same; the file has no progress of its own.
     const size_t tree = progress.add(1), file = progress.add(1);
 
-    // Phase 1: every set voxel becomes an active true voxel, block by block, a leaf word at a time.
+    // Phase 1: every set voxel becomes an active true voxel, block by block, a leaf word at a
+    // time; the leaves of a group of bricks at once, then the next group's.
     openvdb::tree::ValueAccessor<openvdb::BoolTree> access(vdb->tree());
     const BrickLayout layout(voxels);
     const std::vector<uint64_t> bricks = voxels.brick_indices();
-    for (size_t b = 0; b < bricks.size(); ++b) {
+    const bool whole_leaves = voxels.brick_size() % 8 == 0;
+    // The leaves of brick b of the group being built (only with whole leaves).
+    std::vector<std::vector<std::unique_ptr<Leaf>>> leaves;
+    auto build_brick = [&](size_t b, std::vector<std::unique_ptr<Leaf>>* own) {
         const uint64_t index = bricks[b];
-        progress.report(tree, b, bricks.size());
         const uint64_t* blocks = voxels.brick_blocks(index);
+        const auto corner = layout.brick_origin(index);
+        const int64_t n = voxels.brick_size() / 8;              // whole leaves along a brick edge
+        std::vector<Leaf*> found(own ? size_t(n * n * n) : 0);  // own leaves, x fastest
         for (size_t w = 0; w < layout.blocks_per_brick(); ++w) {
             const uint64_t mask = blocks[w];
             if (!mask) continue;
             const auto o = layout.block_origin(index, w);
             const openvdb::Coord origin{int(o[0]), int(o[1]), int(o[2])};
-            openvdb::BoolTree::LeafNodeType* leaf = access.touchLeaf(origin);
-            uint64_t* active = &leaf->getValueMask().template getWord<uint64_t>(0);
-            uint64_t* values = leaf->buffer().data();
-            // A leaf's offsets run z fastest, (x & 7) << 6 | (y & 7) << 3 | (z & 7): word x & 7
-            // holds an 8x8 square of (y, z), bit (y & 7) * 8 + (z & 7). The block is a 4x4 corner
-            // of four such words.
-            const int first_word = int(o[0] & 7), shift = int(o[1] & 7) * 8 + int(o[2] & 7);
-            for (int x = 0; x < 4; ++x) {
-                const uint64_t bits = yz_square(mask >> x) << shift;
-                active[first_word + x] |= bits;
-                values[first_word + x] |= bits;
+            if (!own) {
+                add_block(*access.touchLeaf(origin), o, mask);
+                continue;
             }
+            Leaf*& leaf =
+                found[size_t((o[0] - corner[0]) / 8 +
+                             n * ((o[1] - corner[1]) / 8 + n * ((o[2] - corner[2]) / 8)))];
+            if (!leaf) {
+                own->push_back(std::make_unique<Leaf>(origin & ~7, false));
+                leaf = own->back().get();
+            }
+            add_block(*leaf, o, mask);
         }
+    };
+    const size_t group = whole_leaves ? 256 : bricks.size();
+    for (size_t first = 0; first < bricks.size(); first += group) {
+        progress.report(tree, first, bricks.size());
+        const size_t end = std::min(bricks.size(), first + group);
+        if (!whole_leaves) {
+            for (size_t b = first; b < end; ++b) build_brick(b, nullptr);
+            continue;
+        }
+        leaves.clear();
+        leaves.resize(end - first);
+        tbb::parallel_for(first, end, [&](size_t b) { build_brick(b, &leaves[b - first]); });
+        for (auto& own : leaves)
+            for (auto& leaf : own) access.addLeaf(leaf.release());
     }
 
     // Phase 2: full leaves become tiles, then the file.
