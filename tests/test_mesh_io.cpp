@@ -410,6 +410,25 @@ TEST_F(MeshFiles, BinaryStlFacetsAreWeldedAtSharedCorners) {
     EXPECT_EQ(mesh.positions[mesh.triangles[1][2]], (Vec3{0, 1, 0.25}));
 }
 
+TEST_F(MeshFiles, WeldingNumbersPositionsInTheOrderTheTrianglesMeetThem) {
+    // Vertices 1 and 5 share a place, 3 and 6 differ only by the sign of a zero, 4 is unused.
+    // The triangles meet the places in the order 7 (vertex 7), 2, 1=5, 3=6: so they are welded
+    // vertices 0, 1, 2, 3, holding the coordinates of the first vertex met at each place.
+    const std::string obj =
+        "v 1 0 0\nv 0 1 0\nv -0.0 0 2\nv 9 9 9\nv 1 0 0\nv 0 0 2\nv 0 0 7\n"
+        "f 7 2 1\nf 5 3 2\nf 6 7 5\n";
+    const Mesh mesh = oclvox::load_mesh(write("weld_order.obj", obj));
+    ASSERT_EQ(mesh.positions.size(), 4u);
+    EXPECT_EQ(mesh.positions[0], (Vec3{0, 0, 7}));
+    EXPECT_EQ(mesh.positions[1], (Vec3{0, 1, 0}));
+    EXPECT_EQ(mesh.positions[2], (Vec3{1, 0, 0}));
+    EXPECT_TRUE(std::signbit(mesh.positions[3][0]));  // vertex 3's -0.0, met before vertex 6
+    const std::vector<std::array<uint32_t, 3>> expected = {{0, 1, 2}, {2, 3, 1}, {3, 0, 2}};
+    ASSERT_EQ(mesh.triangles.size(), expected.size());
+    for (size_t t = 0; t < expected.size(); ++t)
+        for (int c = 0; c < 3; ++c) EXPECT_EQ(mesh.triangles[t][c], expected[t][c]) << t << c;
+}
+
 TEST_F(MeshFiles, AsciiStlWithSeveralSolidsLoadsEverySolid) {
     std::string text;
     for (const char* z : {"0", "1", "2"})

@@ -1,6 +1,7 @@
 // Loading triangle meshes into one welded Mesh, whatever the format (each reader is in its own
 // read_*.cpp), and checking meshes before anything voxelizes them.
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +9,6 @@
 #include <filesystem>
 #include <limits>
 #include <sstream>
-#include <unordered_map>
 
 #include "file_names.hpp"
 #include "mesh_reading.hpp"
@@ -36,17 +36,8 @@ std::string position_text(const Position& p) {
 
 struct PositionKey {
     std::array<uint64_t, 3> bits;
-    bool operator==(const PositionKey& other) const { return bits == other.bits; }
-};
-
-struct PositionKeyHash {
-    size_t operator()(const PositionKey& key) const {
-        uint64_t h = 0x9e3779b97f4a7c15ull;
-        for (uint64_t b : key.bits) {
-            h ^= b + 0x9e3779b97f4a7c15ull + (h << 6) + (h >> 2);
-            h *= 0xff51afd7ed558ccdull;
-        }
-        return size_t(h ^ (h >> 33));
+    bool operator==(const PositionKey& other) const {
+        return bits[0] == other.bits[0] && bits[1] == other.bits[1] && bits[2] == other.bits[2];
     }
 };
 
@@ -63,26 +54,52 @@ PositionKey key_of(const Position& p) {
 // corners per facet and a scene's meshes are merged side by side, so this is what gives them a
 // shared topology. Positions are unchanged, so the geometry is too.
 Mesh welded(const Mesh& raw) {
-    Mesh mesh;
-    std::unordered_map<PositionKey, uint32_t, PositionKeyHash> index_at;
-    index_at.reserve(raw.positions.size());
-    constexpr uint32_t kUnseen = std::numeric_limits<uint32_t>::max();
-    std::vector<uint32_t> new_index(raw.positions.size(), kUnseen);
-    mesh.triangles.reserve(raw.triangles.size());
-    for (const Triangle& triangle : raw.triangles) {
-        Triangle renumbered;
-        for (int c = 0; c < 3; ++c) {
-            uint32_t& index = new_index[triangle[c]];
-            if (index == kUnseen) {
-                const Position& p = raw.positions[triangle[c]];
-                const auto inserted = index_at.emplace(key_of(p), uint32_t(mesh.positions.size()));
-                if (inserted.second) mesh.positions.push_back(p);
-                index = inserted.first->second;
-            }
-            renumbered[c] = index;
-        }
-        mesh.triangles.push_back(renumbered);
+    const size_t n = raw.positions.size();
+    const size_t corners = raw.triangles.size() * 3;
+
+    // Phase 1: each vertex's first use, as the number of the first corner naming it.
+    constexpr uint64_t kUnused = std::numeric_limits<uint64_t>::max();
+    std::vector<uint64_t> first_use(n, kUnused);
+    for (size_t c = corners; c-- > 0;) first_use[raw.triangles[c / 3][c % 3]] = c;
+
+    // Phase 2: the used vertices sorted by position, then by first use, so equal positions form
+    // a run led by the vertex met first; every vertex gets its run's leader. (A sort rather than
+    // a hash map of positions: no node per vertex, and it runs on every core.)
+    struct Entry {
+        PositionKey key;
+        uint64_t first_use;
+        uint32_t vertex;
+    };
+    std::vector<Entry> entries;
+    entries.reserve(n);
+    for (size_t v = 0; v < n; ++v)
+        if (first_use[v] != kUnused)
+            entries.push_back({key_of(raw.positions[v]), first_use[v], uint32_t(v)});
+    tbb::parallel_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+        for (int k = 0; k < 3; ++k)
+            if (a.key.bits[k] != b.key.bits[k]) return a.key.bits[k] < b.key.bits[k];
+        return a.first_use < b.first_use;
+    });
+    std::vector<uint32_t> leader(n);
+    for (size_t i = 0, run = 0; i < entries.size(); ++i) {
+        if (!(entries[i].key == entries[run].key)) run = i;
+        leader[entries[i].vertex] = entries[run].vertex;
     }
+
+    // Phase 3: the leaders numbered in the order the triangles meet them, corner by corner.
+    constexpr uint32_t kUnnumbered = std::numeric_limits<uint32_t>::max();
+    std::vector<uint32_t> new_index(n, kUnnumbered);
+    Mesh mesh;
+    mesh.triangles.resize(raw.triangles.size());
+    for (size_t t = 0; t < raw.triangles.size(); ++t)
+        for (int c = 0; c < 3; ++c) {
+            const uint32_t first = leader[raw.triangles[t][c]];
+            if (new_index[first] == kUnnumbered) {
+                new_index[first] = uint32_t(mesh.positions.size());
+                mesh.positions.push_back(raw.positions[first]);
+            }
+            mesh.triangles[t][c] = new_index[first];
+        }
     return mesh;
 }
 
