@@ -429,6 +429,48 @@ TEST_F(MeshFiles, WeldingNumbersPositionsInTheOrderTheTrianglesMeetThem) {
         for (int c = 0; c < 3; ++c) EXPECT_EQ(mesh.triangles[t][c], expected[t][c]) << t << c;
 }
 
+// Files over a mebibyte are parsed in parts in parallel: relative indices reaching back into
+// earlier parts, and errors in late parts, read as in one pass. Quads of 4 vertices and one face
+// each: with relative indices the mesh equals the one written with absolute indices, whether the
+// parts (cut after a line end, about a mebibyte apart) split quads or, with each face line padded
+// by a long comment, fall between them; an error on a late line names that line.
+TEST_F(MeshFiles, LargeObjReadsInPartsAsInOnePass) {
+    auto obj = [](int quads, bool relative, size_t pad, int bad_quad, const char* bad_face) {
+        std::string text;
+        for (int q = 0; q < quads; ++q) {
+            for (int v = 0; v < 4; ++v)
+                text += "v " + std::to_string(q) + "." + std::to_string(v) + "25 " +
+                        std::to_string(v & 1) + " " + std::to_string(v >> 1) + "\n";
+            if (q == bad_quad)
+                text += bad_face;
+            else if (relative)
+                text += "f -4 -3/1 -2//1 -1/1/1";
+            else
+                text += "f " + std::to_string(4 * q + 1) + " " + std::to_string(4 * q + 2) + " " +
+                        std::to_string(4 * q + 3) + " " + std::to_string(4 * q + 4);
+            text += (pad ? " # " + std::string(pad, 'x') : "") + "\n";
+        }
+        return text;
+    };
+    for (const auto& [quads, pad] : {std::pair<int, size_t>{60000, 0}, {200, 20000}}) {
+        SCOPED_TRACE(std::to_string(quads) + " quads, comments of " + std::to_string(pad));
+        const std::string relative = obj(quads, true, pad, -1, "");
+        ASSERT_GT(relative.size(), size_t(3) << 20);
+        const Mesh a = oclvox::load_mesh(write("relative.obj", relative));
+        const Mesh b = oclvox::load_mesh(write("absolute.obj", obj(quads, false, pad, -1, "")));
+        EXPECT_EQ(a.triangles.size(), size_t(2 * quads));
+        EXPECT_EQ(a.positions, b.positions);
+        EXPECT_EQ(a.triangles, b.triangles);
+    }
+    // Quad 50000's face is line 5 * 50000 + 5 and face 50001, after 200004 vertices.
+    const std::string bad =
+        input_error_of(write("bad.obj", obj(60000, true, 0, 50000, "f -1 -2 x")));
+    EXPECT_TRUE(contains(bad, "line 250005:")) << bad;
+    const std::string before =
+        input_error_of(write("before.obj", obj(60000, true, 0, 50000, "f -1 -2 -200005")));
+    EXPECT_TRUE(contains(before, "line 250005: face 50001 has a relative vertex index")) << before;
+}
+
 TEST_F(MeshFiles, AsciiStlWithSeveralSolidsLoadsEverySolid) {
     std::string text;
     for (const char* z : {"0", "1", "2"})

@@ -9,17 +9,30 @@
 // parse of the structure then cost as much as the strict reading: half the load of a large file.
 // The structure is small: a face corner is v, v/vt, v//vn or v/vt/vn, and a negative index counts
 // back from the last vertex read so far.
+//
+// Large files are read in parts of whole lines on all cores (number parsing is most of a load),
+// and the parts joined in order; relative indices are resolved once the vertices before each part
+// are known. A part that fails sends the whole file through the plain one-pass parse, so an error
+// is the first one in the file, with its line number.
+#include <tbb/parallel_for.h>
+
 #include "mesh_reading.hpp"
 
 namespace oclvox::mesh_reading {
 
 namespace {
 
+// Relative indices met in a part of the file parsed on its own, whose vertices before it are not
+// known yet: the places in Polygons::corners holding one, as `value + vertices read so far in
+// the part` (negative when it points into an earlier part).
+using RelativeCorners = std::vector<size_t>;
+
 // The 0-based vertex index of one face corner (Polygons::first_index = 1 makes triangulated() name
 // out-of-range indices as the file numbers them). The texture and normal indices are checked as
-// integers too, as a corrupt file shows there as much as anywhere.
+// integers too, as a corrupt file shows there as much as anywhere. A relative index counts back
+// from vertices_so_far; with `relative`, it is only recorded there (the caller resolves it).
 int64_t corner_index(const TextCursor& line, std::string_view corner, size_t vertices_so_far,
-                     size_t face_number) {
+                     size_t face_number, bool* relative) {
     int64_t vertex = 0;
     for (size_t at = 0, part = 0; at <= corner.size(); ++part) {
         const size_t slash = std::min(corner.find('/', at), corner.size());
@@ -35,22 +48,21 @@ int64_t corner_index(const TextCursor& line, std::string_view corner, size_t ver
     }
     if (vertex > 0) return vertex - 1;
     vertex += int64_t(vertices_so_far);  // -1 is the last vertex read so far
+    if (relative) {
+        *relative = true;
+        return vertex;
+    }
     if (vertex < 0)
         line.fail("face " + std::to_string(face_number) +
                   " has a relative vertex index that points before the first vertex");
     return vertex;
 }
 
-}  // namespace
-
-Polygons read_obj(const std::string& path, const ParseReport& report) {
-    const std::string bytes = read_whole_file(path);
-    const std::string_view text(bytes);
-    ParseProgress progress(report, text.size());
-    Polygons out;
-    out.first_index = 1;
-
-    // Line by line; "\r\n", "\n" or a lone "\r" ends one, and '#' starts a comment.
+// Parses the whole lines of `text` into out. Line by line; "\r\n", "\n" or a lone "\r" ends one,
+// and '#' starts a comment. With `relative` (a part of the file), relative indices are recorded
+// there instead of resolved, and line and face numbers count from the part's start.
+void parse_lines(const std::string& path, std::string_view text, Polygons& out,
+                 RelativeCorners* relative, ParseProgress* progress) {
     size_t face_number = 0;
     size_t at = 0;
     for (size_t line_number = 1; at < text.size(); ++line_number) {
@@ -75,15 +87,100 @@ Polygons read_obj(const std::string& path, const ParseReport& report) {
             uint32_t corners = 0;
             for (std::string_view corner = line.word_on_line(); !corner.empty();
                  corner = line.word_on_line()) {
-                out.corners.push_back(
-                    corner_index(line, corner, out.positions.size(), face_number));
+                bool is_relative = false;
+                out.corners.push_back(corner_index(line, corner, out.positions.size(), face_number,
+                                                   relative ? &is_relative : nullptr));
+                if (is_relative) relative->push_back(out.corners.size() - 1);
                 ++corners;
             }
             out.corner_counts.push_back(corners);
         }
         at = line_end;
         if (at < text.size() && text[at++] == '\r' && at < text.size() && text[at] == '\n') ++at;
-        progress.at(at);
+        if (progress) progress->at(at);
+    }
+}
+
+// A file is parsed in parts of about this many bytes, each ending after a '\n', in parallel a
+// wave of kPartsPerWave parts at a time (progress and cancelling between waves).
+constexpr size_t kPartBytes = size_t(1) << 20;
+constexpr size_t kPartsPerWave = 16;
+
+struct Part {
+    std::string_view text;
+    Polygons polygons;
+    RelativeCorners relative;
+    bool failed = false;
+};
+
+}  // namespace
+
+Polygons read_obj(const std::string& path, const ParseReport& report) {
+    const std::string bytes = read_whole_file(path);
+    const std::string_view text(bytes);
+    Polygons out;
+    out.first_index = 1;
+
+    // Phase 1: parts of whole lines. (Cut after a '\n', a part never splits a "\r\n"; a file
+    // without any is one part.)
+    std::vector<Part> parts;
+    for (size_t at = 0; at < text.size();) {
+        size_t end = text.find('\n', std::min(text.size(), at + kPartBytes));
+        end = end == std::string_view::npos ? text.size() : end + 1;
+        parts.emplace_back().text = text.substr(at, end - at);
+        at = end;
+    }
+    // One part: the plain parse, with its progress.
+    if (parts.size() <= 1) {
+        ParseProgress progress(report, text.size());
+        parse_lines(path, text, out, nullptr, &progress);
+        return out;
+    }
+
+    // Phase 2: the parts in parallel. A part that fails is parsed again below with the whole file,
+    // so that the error is the one a plain parse meets first, with its line number.
+    size_t done_bytes = 0;
+    for (size_t first = 0; first < parts.size(); first += kPartsPerWave) {
+        const size_t end = std::min(parts.size(), first + kPartsPerWave);
+        tbb::parallel_for(first, end, [&](size_t i) {
+            try {
+                parse_lines(path, parts[i].text, parts[i].polygons, &parts[i].relative, nullptr);
+            } catch (const InputError&) {
+                parts[i].failed = true;
+            }
+        });
+        for (size_t i = first; i < end; ++i) done_bytes += parts[i].text.size();
+        if (report) report(done_bytes, text.size());
+    }
+
+    // Phase 3: the parts joined, relative indices counted back from all the vertices before them.
+    bool failed = false;
+    size_t vertices = 0, corners = 0, polygons = 0;
+    for (Part& part : parts) {
+        failed = failed || part.failed;
+        for (const size_t c : part.relative) {
+            part.polygons.corners[c] += int64_t(vertices);
+            failed = failed || part.polygons.corners[c] < 0;
+        }
+        vertices += part.polygons.positions.size();
+        corners += part.polygons.corners.size();
+        polygons += part.polygons.corner_counts.size();
+    }
+    if (failed) {
+        Polygons again;
+        again.first_index = 1;
+        parse_lines(path, text, again, nullptr, nullptr);
+        return again;  // (the plain parse fails where a part did)
+    }
+    out.positions.reserve(vertices);
+    out.corners.reserve(corners);
+    out.corner_counts.reserve(polygons);
+    for (const Part& part : parts) {
+        const Polygons& p = part.polygons;
+        out.positions.insert(out.positions.end(), p.positions.begin(), p.positions.end());
+        out.corners.insert(out.corners.end(), p.corners.begin(), p.corners.end());
+        out.corner_counts.insert(out.corner_counts.end(), p.corner_counts.begin(),
+                                 p.corner_counts.end());
     }
     return out;
 }
