@@ -49,7 +49,7 @@ SparseVoxels run_solid(const Mesh& mesh, const Grid& grid, const VoxelizeOptions
     stats.triangles_in = mesh.triangles.size();
     stats.bricks_total = uint64_t(nb[0]) * uint64_t(nb[1]) * uint64_t(nb[2]);
 
-    std::vector<OvParityTriangle> triangles;
+    ParityTriangles triangles;
     const bool fits = parity_triangles(mesh, grid, triangles);
     const Choice choice = choose_inside_test(mesh, options.inside, fits);
     stats.inside_test = to_string(choice.test);
@@ -82,7 +82,7 @@ MeshEdgeReport mesh_edge_report(const Mesh& mesh) {
     return report;
 }
 InsideTest whole_mesh_inside_test(const Mesh& mesh, const Grid& grid, InsideTest requested) {
-    std::vector<OvParityTriangle> triangles;
+    ParityTriangles triangles;
     return choose_inside_test(mesh, requested, parity_triangles(mesh, grid, triangles)).test;
 }
 SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,
@@ -90,7 +90,7 @@ SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,
     try {
         return run_solid(
             mesh, grid, options, stats,
-            [&](const std::vector<OvParityTriangle>& triangles, SparseVoxels& result) {
+            [&](const ParityTriangles& triangles, SparseVoxels& result) {
                 parity_device(cl, triangles, result, options, stats);
             },
             [&](SparseVoxels& result) { winding_device(cl, mesh, result, options, stats); });
@@ -104,7 +104,7 @@ SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeO
     const auto start = Clock::now();
     SparseVoxels result = run_solid(
         mesh, grid, options, stats,
-        [&](const std::vector<OvParityTriangle>& triangles, SparseVoxels& out) {
+        [&](const ParityTriangles& triangles, SparseVoxels& out) {
             parity_reference(triangles, out, options, stats);
         },
         [&](SparseVoxels& out) { winding_reference(mesh, out, options); });

@@ -34,15 +34,18 @@ inline void report_progress(const VoxelizeOptions& options, uint64_t done, uint6
 
 // ---- parity (solid_parity.cpp) ----
 
+// A mesh's triangles for parity, in fixed-point grid units (filled in full right after sizing).
+using ParityTriangles = FilledLaterVector<OvParityTriangle>;
+
 // Vertices snapped to fixed-point grid units, or false if a vertex lies too far outside the grid
 // for the exact integer arithmetic of solid_math.h.
-bool parity_triangles(const Mesh& mesh, const Grid& grid, std::vector<OvParityTriangle>& out);
+bool parity_triangles(const Mesh& mesh, const Grid& grid, ParityTriangles& out);
 
 // The solid by crossing parity into `result`, on the device and on the host (bit for bit the
 // same); stats get the timings and counts.
-void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triangles,
-                   SparseVoxels& result, const VoxelizeOptions& options, VoxelizeStats& stats);
-void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxels& result,
+void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVoxels& result,
+                   const VoxelizeOptions& options, VoxelizeStats& stats);
+void parity_reference(const ParityTriangles& triangles, SparseVoxels& result,
                       const VoxelizeOptions& options, VoxelizeStats& stats);
 
 // ---- winding number (solid_winding.cpp) ----

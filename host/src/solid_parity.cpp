@@ -4,7 +4,10 @@
 // one bit per (triangle, covered voxel column), prefix-XOR every voxel column, pack the bits into
 // bricks and merge the non-empty ones. A voxel column never crosses a batch, so the result cannot
 // depend on the brick size. The host reference does the same flips, prefix and packing.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 
 #include "block_download.hpp"
@@ -63,7 +66,7 @@ void for_each_column_of(const OvParityTriangle& tri, const Layout& l, F&& f) {
             f(uint64_t(bx) + uint64_t(l.nbx) * uint64_t(by));
 }
 
-ColumnBins bin_columns(const std::vector<OvParityTriangle>& triangles, const Layout& l,
+ColumnBins bin_columns(const ParityTriangles& triangles, const Layout& l,
                        const BrickSelection& selection) {
     // (column, triangle) pairs in triangle order, then sorted by column, then triangle: by a
     // stable counting sort when the grid has few brick columns for its pairs (the usual case),
@@ -111,8 +114,8 @@ struct Batch {
 };
 
 // Brick columns [first, ...) into one batch, limited by slots and work items.
-Batch make_batch(const ColumnBins& bins, const std::vector<OvParityTriangle>& triangles,
-                 const Layout& l, size_t first, size_t max_slots) {
+Batch make_batch(const ColumnBins& bins, const ParityTriangles& triangles, const Layout& l,
+                 size_t first, size_t max_slots) {
     Batch batch;
     batch.first_column = first;
     std::vector<cl_uint> counts;
@@ -166,22 +169,29 @@ void merge_column(SparseVoxels& result, const Layout& l, uint64_t column, const 
 
 // Vertices snapped to fixed-point grid units, or false if a vertex lies too far outside the grid
 // for the exact integer arithmetic of solid_math.h.
-bool parity_triangles(const Mesh& mesh, const Grid& grid, std::vector<OvParityTriangle>& out) {
+bool parity_triangles(const Mesh& mesh, const Grid& grid, ParityTriangles& out) {
     const double limit = double(OVS_MAX_UNITS) / OVS_UNITS;
     const double inv = 1.0 / grid.voxel_size;
-    out.resize(mesh.triangles.size());
-    for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    // Triangle t snapped into out[t]; false if a vertex is beyond the limit.
+    auto snap = [&](size_t t) {
         for (int v = 0; v < 3; ++v)
             for (int k = 0; k < 3; ++k) {
                 const double g = (mesh.positions[mesh.triangles[t][v]][k] - grid.origin[k]) * inv;
                 if (!(std::fabs(g) < limit)) return false;
                 out[t].v[3 * v + k] = std::llround(g * OVS_UNITS);
             }
-    return true;
+        return true;
+    };
+    out.resize(mesh.triangles.size());
+    std::atomic<bool> fits{true};
+    tbb::parallel_for(size_t(0), mesh.triangles.size(), [&](size_t t) {
+        if (!snap(t)) fits = false;
+    });
+    return fits;
 }
 
-void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triangles,
-                   SparseVoxels& result, const VoxelizeOptions& options, VoxelizeStats& stats) {
+void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVoxels& result,
+                   const VoxelizeOptions& options, VoxelizeStats& stats) {
     auto t = Clock::now();
     const Layout l = make_layout(result);
     const ColumnBins bins = bin_columns(triangles, l, BrickSelection(options.bricks, result));
@@ -274,7 +284,7 @@ void parity_device(Device::Impl& cl, const std::vector<OvParityTriangle>& triang
 }
 
 // The same flips, prefix and packing on the host, one brick column at a time.
-void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxels& result,
+void parity_reference(const ParityTriangles& triangles, SparseVoxels& result,
                       const VoxelizeOptions& options, VoxelizeStats& stats) {
     const Layout l = make_layout(result);
     const ColumnBins bins = bin_columns(triangles, l, BrickSelection({}, result));
@@ -323,7 +333,7 @@ void parity_reference(const std::vector<OvParityTriangle>& triangles, SparseVoxe
 }
 void for_each_parity_column(const Mesh& mesh, const Grid& grid, int brick_size,
                             const std::function<void(uint32_t, uint64_t)>& f) {
-    std::vector<OvParityTriangle> triangles;
+    ParityTriangles triangles;
     if (!parity_triangles(mesh, grid, triangles))
         throw GridError("parity columns asked for a mesh beyond exact parity arithmetic");
     const Layout l = make_layout(SparseVoxels(grid, brick_size));
