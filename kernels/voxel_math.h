@@ -16,13 +16,9 @@
 #ifdef __OPENCL_VERSION__
 #pragma OPENCL FP_CONTRACT OFF
 #define OV_FN static inline
-#define OV_FLOOR floor
-#define OV_CEIL ceil
 #else
 #include <cmath>
 #define OV_FN static inline
-#define OV_FLOOR std::floor
-#define OV_CEIL std::ceil
 using std::fabs;
 using std::nextafter;
 namespace oclvox::detail {
@@ -52,6 +48,18 @@ typedef struct {
     int anchor[3];
     float u[9];
 } OvTriangle;
+
+// floor(x) and ceil(x) as ints, through truncation, exact for |x| < 2^31: (int)x is exact there
+// and so is (float)(int)x, since a float of magnitude 2^24 or more is a whole number. Baseline
+// x86-64 has no instruction for floor (roundss is SSE4.1), and the host computes millions.
+OV_FN int ov_floor_int(float x) {
+    int i = (int)x;
+    return x < (float)i ? i - 1 : i;
+}
+OV_FN int ov_ceil_int(float x) {
+    int i = (int)x;
+    return x > (float)i ? i + 1 : i;
+}
 
 // Voxel index range [lo, hi] (inclusive, global voxel indices, not clipped to the grid) of the
 // voxels whose boxes meet the triangle's bounding box. A closed voxel i spans [i, i+1], so it
@@ -103,8 +111,8 @@ OV_FN OvRange ov_triangle_range(OvTriangle t, int half_open) {
     for (int k = 0; k < 3; ++k) {
         float lo = ov_min3(t.u[k], t.u[3 + k], t.u[6 + k]);
         float hi = ov_max3(t.u[k], t.u[3 + k], t.u[6 + k]);
-        r.lo[k] = t.anchor[k] + (half_open ? (int)OV_FLOOR(lo) : (int)OV_CEIL(lo) - 1);
-        r.hi[k] = t.anchor[k] + (int)OV_FLOOR(hi);
+        r.lo[k] = t.anchor[k] + (half_open ? ov_floor_int(lo) : ov_ceil_int(lo) - 1);
+        r.hi[k] = t.anchor[k] + ov_floor_int(hi);
     }
     return r;
 }

@@ -188,8 +188,8 @@ TEST(Preparation, SkippingTheCountGivesTheCountedTriangles) {
         ASSERT_EQ(fast.triangles.size(), inside.triangles.size());
         ASSERT_EQ(counted.triangles.size(), inside.triangles.size());
         for (size_t t = 0; t < fast.triangles.size(); ++t) {
-            ASSERT_EQ(fast.source[t], t);
-            ASSERT_EQ(counted.source[t], t);
+            ASSERT_EQ(fast.source_of(t), t);
+            ASSERT_EQ(counted.source_of(t), t);
             ASSERT_EQ(
                 std::memcmp(&fast.triangles[t], &counted.triangles[t], sizeof(detail::OvTriangle)),
                 0);
@@ -246,7 +246,7 @@ TEST(Binning, EveryPointOfATriangleIsInOneOfItsBricks) {
         detail::bin_triangles(prepared, g, 8, detail::BrickSelection({}, SparseVoxels(g, 8)));
     std::set<std::pair<uint64_t, uint32_t>> binned;  // (brick, mesh triangle)
     for (const auto& [brick, piece] : binned_pairs(binning))
-        binned.emplace(brick, prepared.source[piece]);
+        binned.emplace(brick, prepared.source_of(piece));
     constexpr int kSteps = 12;
     uint64_t checked = 0;
     for (uint32_t t = 0; t < m.triangles.size(); ++t)

@@ -243,6 +243,42 @@ TEST(Tiling, TheFirstTriangleOutsideGridCoordinatesIsNamed) {
     }
 }
 
+// Preparation checks vertex indices on its way instead of validating the mesh first; the error
+// must still be validation's, naming the first bad triangle, even where a triangle before it does
+// not fit grid coordinates.
+TEST(Tiling, AMissingVertexIsNamedAsValidationWouldNameIt) {
+    Mesh m;
+    for (int t = 0; t < 30000; ++t) {
+        const double x = 1e-3 * (t % 100);
+        add_triangle(m, {x, 0, 0}, {x + 1e-3, 0, 0}, {x, 1e-3, 0});
+    }
+    m.triangles[25000][2] = uint32_t(m.positions.size());
+    m.triangles[20000][0] = uint32_t(m.positions.size() + 7);
+    const std::string expected =
+        "triangle 20000 refers to vertex " + std::to_string(m.positions.size() + 7);
+    // Every vertex in the grid (prepared without a pass to count pieces), and a mesh whose
+    // triangle 10000 does not fit grid coordinates.
+    Grid fitted;
+    fitted.voxel_size = 1e-3;
+    fitted.dims = {128, 8, 8};
+    Mesh overflowing = m;
+    overflowing.positions[m.triangles[10000][1]][2] = 1e10;
+    Grid tiny = fitted;
+    tiny.voxel_size = 1e-300;
+    for (const auto& [mesh, g] : {std::pair{m, fitted}, std::pair{overflowing, tiny}})
+        for (bool on_device : {false, true}) {
+            try {
+                if (on_device)
+                    device().voxelize(mesh, g, VoxelizeOptions{});
+                else
+                    voxelize_reference(mesh, g, VoxelizeOptions{});
+                ADD_FAILURE() << "no InputError";
+            } catch (const InputError& e) {
+                EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+            }
+        }
+}
+
 TEST(Tiling, AbsurdGridIsRefusedBeforeAllocating) {
     const Grid g = unit_grid(kMaxGridAxis, kMaxGridAxis, kMaxGridAxis);
     const Mesh m = box_mesh({0, 0, 0}, {double(kMaxGridAxis), double(kMaxGridAxis), 1});

@@ -107,7 +107,7 @@ SelectionTriangles selection_triangles(const Mesh& mesh, const Grid& grid,
         std::fill(last.begin(), last.end(), -1);
         detail::for_each_triangle_brick(prepared, grid, options.brick_size,
                                         [&](uint32_t piece, uint64_t brick) {
-                                            give(brick_owners, brick, prepared.source[piece]);
+                                            give(brick_owners, brick, prepared.source_of(piece));
                                         });
     }
     if (solid) {

@@ -39,11 +39,18 @@ Polygon clip_against(const Polygon& in, int axis, double bound, double sign) {
     return out;
 }
 
+// floor(x) as an int for the coordinates of prepared triangles, which the clip bounds to well
+// within int: by truncation, as baseline x86-64 has no instruction for floor.
+int floor_to_int(double x) {
+    const int i = int(x);
+    return x < double(i) ? i - 1 : i;
+}
+
 OvTriangle round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
     OvTriangle t;
     for (int k = 0; k < 3; ++k) {
-        const double anchor = std::floor(std::min({a[k], b[k], c[k]}));
-        t.anchor[k] = int(anchor);
+        const int anchor = floor_to_int(std::min({a[k], b[k], c[k]}));
+        t.anchor[k] = anchor;
         t.u[k] = float(a[k] - anchor);
         t.u[3 + k] = float(b[k] - anchor);
         t.u[6 + k] = float(c[k] - anchor);
@@ -51,22 +58,30 @@ OvTriangle round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
     return t;
 }
 
-[[noreturn]] void throw_outside_grid_coordinates(size_t t) {
+// Throws for triangle t, which refers to a vertex the mesh lacks or does not fit grid coordinates:
+// validate_mesh's error if the mesh is invalid (so the message, and the triangle it names, are
+// those of checking the mesh first), else that t does not fit.
+[[noreturn]] void throw_unpreparable(const Mesh& mesh, size_t t) {
+    validate_mesh(mesh);
     throw InputError("triangle " + std::to_string(t) +
                      " does not fit in grid coordinates (the voxel size is too small for its "
                      "coordinates)");
 }
 
 // Triangle t's vertices in grid coordinates (voxel units), in double. Throws InputError for a
-// triangle that does not fit them.
+// triangle that refers to a missing vertex or does not fit grid coordinates. Checking here, on
+// the way, spares a pass over the mesh that validating it first would cost.
 inline void grid_coordinates(const Mesh& mesh, const Grid& grid, double inv, size_t t, Vec3d g[3]) {
-    bool finite = true;
-    for (int i = 0; i < 3; ++i)
+    bool valid = true;
+    for (int i = 0; i < 3; ++i) {
+        const uint32_t v = mesh.triangles[t][i];
+        if (v >= mesh.positions.size()) throw_unpreparable(mesh, t);
         for (int k = 0; k < 3; ++k) {
-            g[i][k] = (mesh.positions[mesh.triangles[t][i]][k] - grid.origin[k]) * inv;
-            finite = finite && std::isfinite(g[i][k]);
+            g[i][k] = (mesh.positions[v][k] - grid.origin[k]) * inv;
+            valid = valid && std::isfinite(g[i][k]);
         }
-    if (!finite) throw_outside_grid_coordinates(t);
+    }
+    if (!valid) throw_unpreparable(mesh, t);
 }
 
 // The triangles that grid triangle g prepares into: none if it misses the closed grid box, itself
@@ -116,7 +131,7 @@ bool every_vertex_in_grid(const Mesh& mesh, const Grid& grid, double inv) {
 }  // namespace
 
 PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary boundary) {
-    validate_mesh(mesh);
+    if (mesh.triangles.empty()) validate_mesh(mesh);  // throws: no triangles
     validate_grid(grid);
     // Triangles are independent, so fixed chunks of them are prepared in parallel. A first pass
     // counts each chunk's pieces, so the second writes them straight to their place: the result,
@@ -142,7 +157,8 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
     // Pass 1: pieces per chunk. A grid fitted to the mesh holds every vertex, and then every
     // triangle is one piece: a pass over the vertices says so, cheaper than one over the triangles.
     std::vector<size_t> offset(chunks + 1, 0);
-    if (every_vertex_in_grid(mesh, grid, inv)) {
+    const bool one_piece_each = every_vertex_in_grid(mesh, grid, inv);
+    if (one_piece_each) {
         for (size_t c = 0; c < chunks; ++c)
             offset[c + 1] = std::min(mesh.triangles.size(), (c + 1) * kChunk);
     } else {
@@ -157,10 +173,11 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
         for (size_t c = 0; c < chunks; ++c) offset[c + 1] += offset[c];
     }
 
-    // Pass 2: each chunk's pieces, rounded once to float, with their voxel ranges.
+    // Pass 2: each chunk's pieces, rounded once to float, with their voxel ranges (and their
+    // sources, unless each triangle is its own piece).
     PreparedTriangles out;
     out.triangles.resize(offset[chunks]);
-    out.source.resize(offset[chunks]);
+    if (!one_piece_each) out.source.resize(offset[chunks]);
     out.ranges.resize(offset[chunks]);
     const int half_open = boundary == Boundary::HalfOpen;
     for_each_chunk([&](size_t c, size_t begin, size_t end) {
@@ -171,7 +188,7 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
             prepared_pieces(g, grid, [&](const Vec3d& p0, const Vec3d& p1, const Vec3d& p2) {
                 out.triangles[next] = round_to_anchor(p0, p1, p2);
                 out.ranges[next] = ov_triangle_range(out.triangles[next], half_open);
-                out.source[next] = uint32_t(t);
+                if (!one_piece_each) out.source[next] = uint32_t(t);
                 ++next;
             });
         }

@@ -13,8 +13,13 @@ namespace oclvox::detail {
 struct PreparedTriangles {
     FilledLaterVector<OvTriangle> triangles;
     FilledLaterVector<OvRange> ranges;  // ov_triangle_range of each triangle
-    FilledLaterVector<uint32_t>
-        source;  // the mesh triangle each came from (clipping can split one)
+    // The mesh triangle each came from (clipping can split one, or drop it); empty when every
+    // mesh triangle prepared into exactly itself.
+    FilledLaterVector<uint32_t> source;
+
+    uint32_t source_of(size_t piece) const {
+        return source.empty() ? uint32_t(piece) : source[piece];
+    }
 };
 
 // Validates mesh and grid, maps vertices to grid coordinates (voxel units) in double, drops

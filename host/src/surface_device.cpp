@@ -6,7 +6,10 @@
 // over all work items, and merge the bits that come back (whole, or only the non-empty blocks:
 // block_download.hpp) into the sparse result. A batch the device cannot allocate memory for is
 // retried with half as many bricks, down to one (device_batches.hpp).
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <array>
 #include <chrono>
 
 #include "binning.hpp"
@@ -25,6 +28,7 @@ namespace oclvox {
 namespace {
 
 using detail::Clock;
+using detail::FilledLaterVector;
 using detail::seconds_since;
 
 // Work items of one batch are numbered with 32-bit offsets.
@@ -32,53 +36,90 @@ constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 
 struct Batch {
     size_t first_brick = 0, brick_count = 0;
-    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
+    FilledLaterVector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
     std::vector<cl_int> slot_brick;
     uint64_t items = 0;
 };
 
-// Gathers bricks [first, ...) into one batch, limited by slots and work items.
+// Gathers bricks [first, ...) into one batch, limited by slots and work items. Bricks are
+// independent, so their pairs are counted and then written in parallel; only the cut by work
+// items and the prefix sums are serial, one step a brick.
 Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles& prepared,
                  const Grid& grid, int brick_size, size_t first, size_t max_slots) {
     const auto nbx = uint64_t((grid.dims[0] + brick_size - 1) / brick_size);
     const auto nby = uint64_t((grid.dims[1] + brick_size - 1) / brick_size);
-    Batch batch;
-    batch.first_brick = first;
-    for (size_t b = first; b < binning.bricks.size() && batch.brick_count < max_slots; ++b) {
+    auto brick_of = [&](size_t b) {
         const uint64_t index = binning.bricks[b];
-        const int brick[3] = {int(index % nbx), int(index / nbx % nby), int(index / (nbx * nby))};
-        // Count this brick's items before committing it to the batch.
-        uint64_t brick_items = 0;
-        std::vector<cl_uint> counts;
+        return std::array<int, 3>{int(index % nbx), int(index / nbx % nby),
+                                  int(index / (nbx * nby))};
+    };
+    const size_t last = std::min(binning.bricks.size(), first + max_slots);
+    const uint64_t pair_base = binning.brick_first_pair[first];
+
+    // Phase 1: the work items of every pair of the candidate bricks, and per brick the items and
+    // the pairs that have any.
+    FilledLaterVector<cl_uint> pair_items(binning.brick_first_pair[last] - pair_base);
+    std::vector<uint64_t> brick_items(last - first), brick_pairs(last - first);
+    tbb::parallel_for(first, last, [&](size_t b) {
+        const std::array<int, 3> brick = brick_of(b);
+        uint64_t items = 0, pairs = 0;
         for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1]; ++p) {
             detail::OvPairWork work;
-            const int n = detail::ov_pair_work(prepared.ranges[binning.pair_triangle[p]], brick[0],
-                                               brick[1], brick[2], brick_size, int(grid.dims[0]),
-                                               int(grid.dims[1]), int(grid.dims[2]), &work);
-            counts.push_back(cl_uint(detail::ov_pair_items(n)));
-            brick_items += counts.back();
+            const int blocks = detail::ov_pair_work(
+                prepared.ranges[binning.pair_triangle[p]], brick[0], brick[1], brick[2], brick_size,
+                int(grid.dims[0]), int(grid.dims[1]), int(grid.dims[2]), &work);
+            pair_items[p - pair_base] = cl_uint(detail::ov_pair_items(blocks));
+            items += pair_items[p - pair_base];
+            pairs += blocks > 0;
         }
-        if (batch.items + brick_items > kMaxItemsPerBatch) {
-            if (batch.brick_count == 0)
-                throw GridError("brick " + std::to_string(index) + " needs " +
-                                std::to_string(brick_items) +
+        brick_items[b - first] = items;
+        brick_pairs[b - first] = pairs;
+    });
+
+    // Phase 2: as many bricks as fit the batch's work items, and where each one's pairs and items
+    // start (the prefix sums, in place).
+    Batch batch;
+    batch.first_brick = first;
+    uint64_t pairs = 0;
+    for (size_t b = first; b < last; ++b) {
+        const uint64_t items = brick_items[b - first];
+        if (batch.items + items > kMaxItemsPerBatch) {
+            if (b == first)
+                throw GridError("brick " + std::to_string(binning.bricks[b]) + " needs " +
+                                std::to_string(items) +
                                 " work items, more than one batch can hold: use smaller bricks");
             break;
         }
-        const cl_uint slot = cl_uint(batch.brick_count++);
-        for (int k = 0; k < 3; ++k) batch.slot_brick.push_back(brick[k]);
-        size_t i = 0;
-        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1];
-             ++p, ++i) {
-            if (counts[i] == 0) continue;
-            batch.pair_triangle.push_back(binning.pair_triangle[p]);
-            batch.pair_slot.push_back(slot);
-            batch.pair_first_item.push_back(cl_uint(batch.items));
-            batch.item_pair.insert(batch.item_pair.end(), counts[i],
-                                   cl_uint(batch.pair_triangle.size() - 1));
-            batch.items += counts[i];
-        }
+        brick_items[b - first] = batch.items;
+        batch.items += items;
+        const uint64_t brick_pair_count = brick_pairs[b - first];
+        brick_pairs[b - first] = pairs;
+        pairs += brick_pair_count;
+        ++batch.brick_count;
     }
+
+    // Phase 3: the batch's pairs and each work item's pair, bricks in parallel.
+    batch.pair_triangle.resize(pairs);
+    batch.pair_slot.resize(pairs);
+    batch.pair_first_item.resize(pairs);
+    batch.item_pair.resize(batch.items);
+    batch.slot_brick.resize(3 * batch.brick_count);
+    tbb::parallel_for(size_t(0), batch.brick_count, [&](size_t slot) {
+        const size_t b = first + slot;
+        const std::array<int, 3> brick = brick_of(b);
+        for (int k = 0; k < 3; ++k) batch.slot_brick[3 * slot + k] = brick[k];
+        uint64_t pair = brick_pairs[slot], item = brick_items[slot];
+        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1]; ++p) {
+            const cl_uint n = pair_items[p - pair_base];
+            if (n == 0) continue;
+            batch.pair_triangle[pair] = binning.pair_triangle[p];
+            batch.pair_slot[pair] = cl_uint(slot);
+            batch.pair_first_item[pair] = cl_uint(item);
+            std::fill_n(batch.item_pair.begin() + ptrdiff_t(item), n, cl_uint(pair));
+            ++pair;
+            item += n;
+        }
+    });
     return batch;
 }
 
@@ -157,14 +198,11 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 const cl::Buffer& bit_buffer = bits.get(cl.context, max_bricks);
                 Batch batch = make_batch(binning, prepared, grid, brick_size, done, max_bricks);
                 const size_t bit_words = batch.brick_count * words_per_brick;
-                const cl::Buffer pair_triangle =
-                    detail::upload(cl.context, cl.queue, batch.pair_triangle);
-                const cl::Buffer pair_slot = detail::upload(cl.context, cl.queue, batch.pair_slot);
-                const cl::Buffer pair_first =
-                    detail::upload(cl.context, cl.queue, batch.pair_first_item);
-                const cl::Buffer item_pair = detail::upload(cl.context, cl.queue, batch.item_pair);
-                const cl::Buffer slot_brick =
-                    detail::upload(cl.context, cl.queue, batch.slot_brick);
+                const cl::Buffer pair_triangle = detail::read_in_place(cl, batch.pair_triangle);
+                const cl::Buffer pair_slot = detail::read_in_place(cl, batch.pair_slot);
+                const cl::Buffer pair_first = detail::read_in_place(cl, batch.pair_first_item);
+                const cl::Buffer item_pair = detail::read_in_place(cl, batch.item_pair);
+                const cl::Buffer slot_brick = detail::read_in_place(cl, batch.slot_brick);
                 cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0, bit_words * sizeof(cl_uint));
                 cl.queue.finish();
                 stats.seconds_upload += seconds_since(t);
