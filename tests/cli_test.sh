@@ -761,6 +761,14 @@ json_case() {  # NAME, command, expected extra keys (space-separated), oclvox ar
 json_case "devices" devices "devices"
 json_case "voxelize" voxelize "${common_keys[*]} voxels_set seconds.voxelize seconds.kernels mode test" \
     "$MESH" -r 24 -o "$WORK/json.npy"
+python3 - "$WORK/run.json" <<'EOF_PY' && pass "voxelize --json: the voxelize phase's parts add up to it" ||
+import json, sys
+s = json.load(open(sys.argv[1]))["seconds"]
+parts = sum(s[k] for k in ("binning", "upload", "kernels", "download", "other"))
+sys.exit(not (min(s[k] for k in ("binning", "upload", "kernels", "download", "other")) >= 0
+              and abs(parts - s["voxelize"]) <= 1e-6 + 1e-9 * s["voxelize"]))
+EOF_PY
+    fail "voxelize --json parts of the voxelize phase" "$(cat "$WORK/run.json")"
 [ "$(json_field "$WORK/run.json" voxels_set)" = "$(npy_ones "$WORK/json.npy")" ] &&
     pass "voxelize --json voxels_set equals the ones in the .npy" ||
     fail "voxelize --json voxels_set" "$(json_field "$WORK/run.json" voxels_set)"

@@ -2,6 +2,7 @@
 // after a run; --stats adds the breakdown; the JSON document holds all of it for programs.
 #include "report.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -131,6 +132,16 @@ std::string summary_text(const RunRecord& r) {
     return text;
 }
 
+// The voxelize phase beyond its four measured parts: kernel programs loaded from the cache (or
+// compiled), a solid's choice of inside test (the closed-mesh check) and snapping, and the
+// sparse result's bookkeeping.
+constexpr const char* kOtherComputeText = "program loading, inside-test choice, bookkeeping";
+double other_compute_seconds(const RunRecord& r) {
+    const oclvox::VoxelizeStats& s = *r.stats;
+    return std::max(0.0, r.seconds.compute - s.seconds_binning - s.seconds_upload -
+                             s.seconds_kernels - s.seconds_download);
+}
+
 std::string stats_text(const RunRecord& r) {
     if (r.command == "devices") return "";
     const Timings& t = r.seconds;
@@ -146,6 +157,8 @@ std::string stats_text(const RunRecord& r) {
             text += format("    kernels     %9.4f\n", r.stats->seconds_kernels);
             text += format("    download    %9.4f  (%.1f MiB)\n", r.stats->seconds_download,
                            double(r.stats->bytes_downloaded) / (1 << 20));
+            text += format("    other       %9.4f  (%s)\n", other_compute_seconds(r),
+                           kOtherComputeText);
         }
     } else {
         text += format("  field         %9.4f\n", t.compute);
@@ -239,6 +252,7 @@ Json record_json(const RunRecord& r) {
             seconds["upload"] = r.stats->seconds_upload;
             seconds["kernels"] = r.stats->seconds_kernels;
             seconds["download"] = r.stats->seconds_download;
+            seconds["other"] = other_compute_seconds(r);
         }
     } else {
         seconds["field"] = t.compute;
