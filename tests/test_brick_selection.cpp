@@ -110,6 +110,28 @@ TEST(BrickSelection, ShardsRebuildParitySolidAndFilled) {
                                     kReference);
 }
 
+// The stats' voxel count is the result's, in every mode, with and without a selection (the solid
+// counts once and recounts only when the surface or a selection changes it).
+TEST(BrickSelection, TheReportedVoxelCountIsTheResults) {
+    const Mesh m = load_mesh(mesh_path("spot.obj"));
+    const Grid g = fitted(m, 40);
+    for (VoxelizeMode mode :
+         {VoxelizeMode::Surface, VoxelizeMode::Thin, VoxelizeMode::Solid, VoxelizeMode::Filled}) {
+        SCOPED_TRACE(to_string(mode));
+        VoxelizeOptions o = options_for(mode, InsideTest::Parity);
+        const std::vector<uint64_t> candidates = candidate_bricks(m, g, o);
+        for (bool selected : {false, true}) {
+            o.bricks = selected ? deal(candidates, 2)[0] : std::vector<uint64_t>{};
+            VoxelizeStats on_device, on_host;
+            const SparseVoxels a = device().voxelize(m, g, o, &on_device);
+            const SparseVoxels b = voxelize_reference(m, g, o, &on_host);
+            ASSERT_GT(a.count(), 0u);
+            EXPECT_EQ(on_device.voxels_set, a.count());
+            EXPECT_EQ(on_host.voxels_set, b.count());
+        }
+    }
+}
+
 TEST(BrickSelection, ShardsRebuildWindingSolidOfAnOpenMesh) {
     const Mesh m = load_mesh(mesh_path("stanford-bunny.obj"));
     const Grid g = fitted(m, 40);

@@ -9,6 +9,7 @@
 #include <functional>
 #include <vector>
 
+#include "bit_count.hpp"
 #include "kernel_sources.hpp"
 #include "oclvox/sdf.hpp"
 #include "progress.hpp"
@@ -166,7 +167,7 @@ struct LeafSet {
     }
     uint64_t slot(uint64_t leaf) const {
         const size_t word = size_t(leaf >> 5);
-        return rank[word] + uint64_t(__builtin_popcount(bits[word] & ((1u << (leaf & 31)) - 1u)));
+        return rank[word] + uint64_t(popcount64(bits[word] & ((1u << (leaf & 31)) - 1u)));
     }
     // The leaf of a slot below count.
     uint64_t leaf_at(uint64_t slot) const;

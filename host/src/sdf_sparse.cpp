@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "bit_count.hpp"
 #include "host_memory.hpp"
 #include "sdf_internal.hpp"
 
@@ -194,7 +195,7 @@ void LeafSet::rank_bits() {
     count = 0;
     for (size_t w = 0; w < bits.size(); ++w) {
         rank[w] = uint32_t(count);
-        count += uint64_t(__builtin_popcount(bits[w]));
+        count += uint64_t(popcount64(bits[w]));
     }
 }
 

@@ -5,6 +5,7 @@
 #include <functional>
 #include <string>
 
+#include "brick_selection.hpp"
 #include "kernel_sources.hpp"
 #include "oclvox/oclvox.hpp"
 
@@ -41,12 +42,17 @@ SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,
 SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                              VoxelizeStats& stats);
 
-// Filled = solid united with the conservative surface: ORs `surface` into `solid` and updates the
-// voxel count.
-inline void add_surface(SparseVoxels& solid, const SparseVoxels& surface, VoxelizeStats& stats) {
-    for (const uint64_t index : surface.brick_indices())
-        solid.merge_brick(index, surface.brick_blocks(index));
-    stats.voxels_set = solid.count();
+// The end of a solid or filled voxelization whose stats count the solid's voxels: ORs in the
+// conservative surface (Filled; `surface` is null otherwise), drops the bricks `selection` does
+// not hold, and counts the voxels again only if either step could change them (counting a large
+// solid is not free).
+inline void finish_solid(SparseVoxels& solid, const SparseVoxels* surface,
+                         const BrickSelection& selection, VoxelizeStats& stats) {
+    if (surface)
+        for (const uint64_t index : surface->brick_indices())
+            solid.merge_brick(index, surface->brick_blocks(index));
+    selection.restrict(solid);
+    if (surface || !selection.everything()) stats.voxels_set = solid.count();
 }
 
 }  // namespace oclvox::detail

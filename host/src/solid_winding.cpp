@@ -12,6 +12,7 @@
 #include <cmath>
 #include <map>
 
+#include "bit_count.hpp"
 #include "device_batches.hpp"
 #include "solid_internal.hpp"
 
@@ -222,12 +223,12 @@ class BoxBits {
     void index_ranks() {
         ranks_.assign(words_.size() + 1, 0);
         for (size_t w = 0; w < words_.size(); ++w)
-            ranks_[w + 1] = ranks_[w] + uint64_t(__builtin_popcountll(words_[w]));
+            ranks_[w + 1] = ranks_[w] + uint64_t(popcount64(words_[w]));
     }
     // The number of set cells before cell i.
     uint64_t rank(uint64_t i) const {
         const uint64_t below = words_[i >> 6] & ((uint64_t(1) << (i & 63)) - 1);
-        return ranks_[i >> 6] + uint64_t(__builtin_popcountll(below));
+        return ranks_[i >> 6] + uint64_t(popcount64(below));
     }
 
   private:

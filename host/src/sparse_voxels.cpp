@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstring>
 
+#include "bit_count.hpp"
 #include "host_memory.hpp"
 #include "oclvox/oclvox.hpp"
 
@@ -86,7 +87,7 @@ uint64_t SparseVoxels::count() const {
     uint64_t n = 0;
     for (const auto& [index, blocks] : bricks_)
         for (uint64_t w : blocks)
-            if (w) n += uint64_t(__builtin_popcountll(w));  // most words of a surface are 0
+            if (w) n += uint64_t(detail::popcount64(w));  // most words of a surface are 0
     return n;
 }
 
@@ -285,7 +286,7 @@ uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
                            const std::vector<uint64_t>& blocks) {
         for_each_block_in(origin, b, blocks_per_brick_axis(), first, last,
                           [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
-                              count += uint64_t(__builtin_popcountll(blocks[word] & mask));
+                              count += uint64_t(detail::popcount64(blocks[word] & mask));
                           });
     };
     // The box's bricks looked up, or every stored brick when they are fewer (a thin slab across

@@ -134,14 +134,15 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
         VoxelizeStats stats;
         SparseVoxels out = detail::solid_device(*impl_, mesh, grid, options, stats);
         if (options.mode == VoxelizeMode::Filled) {
-            VoxelizeOptions surface = options;
-            surface.mode = VoxelizeMode::Surface;
+            VoxelizeOptions surface_options = options;
+            surface_options.mode = VoxelizeMode::Surface;
             VoxelizeStats surface_stats;
-            detail::add_surface(out, voxelize(mesh, grid, surface, &surface_stats), stats);
+            const SparseVoxels surface = voxelize(mesh, grid, surface_options, &surface_stats);
             stats.allocation_retries += surface_stats.allocation_retries;
+            detail::finish_solid(out, &surface, selection, stats);
+        } else {
+            detail::finish_solid(out, nullptr, selection, stats);
         }
-        selection.restrict(out);
-        stats.voxels_set = out.count();
         if (stats_out) *stats_out = stats;
         return out;
     }

@@ -71,12 +71,13 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
         VoxelizeStats solid_stats;
         out = detail::solid_reference(mesh, grid, options, solid_stats);
         if (options.mode == VoxelizeMode::Filled) {
-            VoxelizeOptions surface = options;
-            surface.mode = VoxelizeMode::Surface;
-            detail::add_surface(out, voxelize_reference(mesh, grid, surface), solid_stats);
+            VoxelizeOptions surface_options = options;
+            surface_options.mode = VoxelizeMode::Surface;
+            const SparseVoxels surface = voxelize_reference(mesh, grid, surface_options);
+            detail::finish_solid(out, &surface, selection, solid_stats);
+        } else {
+            detail::finish_solid(out, nullptr, selection, solid_stats);
         }
-        selection.restrict(out);
-        solid_stats.voxels_set = out.count();
         if (stats) *stats = solid_stats;
         return out;
     }

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "atomic_file.hpp"
+#include "bit_count.hpp"
 #include "brick_layout.hpp"
 #include "little_endian.hpp"
 #include "writers.hpp"
@@ -171,7 +172,7 @@ class TileWalker {
         }
         for (Tile& tile : tiles)
             for (const TileBlock& block : blocks(tile))
-                tile.voxels += uint64_t(__builtin_popcountll(block.bits));
+                tile.voxels += uint64_t(popcount64(block.bits));
         tiles.erase(
             std::remove_if(tiles.begin(), tiles.end(), [](const Tile& t) { return t.voxels == 0; }),
             tiles.end());
