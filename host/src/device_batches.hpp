@@ -1,13 +1,19 @@
 // Device work in batches that shrink when the device runs out of memory: the one mechanism behind
 // the surface voxelizer's brick batches, the parity solid's brick-column batches and the winding
-// number's point batches. A batch whose allocation fails is retried with half as many units, down
-// to one, and each retry is counted in VoxelizeStats::allocation_retries.
+// number's point batches; and the pairs and work items of the first two's batches. A batch whose
+// allocation fails is retried with half as many units, down to one, and each retry is counted in
+// VoxelizeStats::allocation_retries.
 #pragma once
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <cstdint>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
+#include "host_memory.hpp"
 #include "opencl_runtime.hpp"
 
 namespace oclvox::detail {
@@ -69,6 +75,94 @@ class SlotBuffer {
     cl::Buffer buffer_;
     size_t slots_ = 0;
 };
+
+// Work items of one batch are numbered with 32-bit offsets.
+constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
+
+// One batch of a binning's units (bricks, brick columns) for a kernel with a work item per piece
+// of a (triangle, unit) pair: units [first_unit, first_unit + unit_count), the pairs that have
+// work (their triangle, their unit's slot in the batch, their first work item) and each work
+// item's pair.
+struct PairBatch {
+    size_t first_unit = 0, unit_count = 0;
+    FilledLaterVector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
+    uint64_t items = 0;
+};
+
+// Gathers units [first, ...) of a binning (unit u's triangles are
+// pair_triangle[first_pair[u] .. first_pair[u + 1]), its name units[u]) into one batch of at
+// most max_slots units and kMaxItemsPerBatch work items. unit_counter(u) gives a function of a
+// triangle that returns its work items in unit u (0: none). Units are independent, so their pairs
+// are counted and then written in parallel; only the cut and the prefix sums are serial, a step a
+// unit. Throws GridError, naming `unit_name`, if one unit alone has too many work items.
+template <class UnitCounter>
+PairBatch make_pair_batch(const std::vector<uint64_t>& units,
+                          const std::vector<uint64_t>& first_pair,
+                          const std::vector<uint32_t>& pair_triangle, size_t first,
+                          size_t max_slots, const char* unit_name, UnitCounter&& unit_counter) {
+    const size_t last = std::min(units.size(), first + max_slots);
+    const uint64_t pair_base = first_pair[first];
+
+    // Phase 1: the work items of every pair of the candidate units, and per unit its items and
+    // the pairs that have any.
+    FilledLaterVector<cl_uint> pair_items(first_pair[last] - pair_base);
+    std::vector<uint64_t> unit_items(last - first), unit_pairs(last - first);
+    tbb::parallel_for(first, last, [&](size_t u) {
+        const auto items_of = unit_counter(u);
+        uint64_t items = 0, pairs = 0;
+        for (uint64_t p = first_pair[u]; p < first_pair[u + 1]; ++p) {
+            const cl_uint n = items_of(pair_triangle[p]);
+            pair_items[p - pair_base] = n;
+            items += n;
+            pairs += n > 0;
+        }
+        unit_items[u - first] = items;
+        unit_pairs[u - first] = pairs;
+    });
+
+    // Phase 2: as many units as fit the batch's work items, and where each one's pairs and items
+    // start (prefix sums, in place).
+    PairBatch batch;
+    batch.first_unit = first;
+    uint64_t pairs = 0;
+    for (size_t u = first; u < last; ++u) {
+        const uint64_t items = unit_items[u - first];
+        if (batch.items + items > kMaxItemsPerBatch) {
+            if (u == first)
+                throw GridError(std::string(unit_name) + " " + std::to_string(units[u]) +
+                                " needs " + std::to_string(items) +
+                                " work items, more than one batch can hold: use smaller bricks");
+            break;
+        }
+        unit_items[u - first] = batch.items;
+        batch.items += items;
+        const uint64_t unit_pair_count = unit_pairs[u - first];
+        unit_pairs[u - first] = pairs;
+        pairs += unit_pair_count;
+        ++batch.unit_count;
+    }
+
+    // Phase 3: the batch's pairs and each work item's pair, units in parallel.
+    batch.pair_triangle.resize(pairs);
+    batch.pair_slot.resize(pairs);
+    batch.pair_first_item.resize(pairs);
+    batch.item_pair.resize(batch.items);
+    tbb::parallel_for(size_t(0), batch.unit_count, [&](size_t slot) {
+        const size_t u = first + slot;
+        uint64_t pair = unit_pairs[slot], item = unit_items[slot];
+        for (uint64_t p = first_pair[u]; p < first_pair[u + 1]; ++p) {
+            const cl_uint n = pair_items[p - pair_base];
+            if (n == 0) continue;
+            batch.pair_triangle[pair] = pair_triangle[p];
+            batch.pair_slot[pair] = cl_uint(slot);
+            batch.pair_first_item[pair] = cl_uint(item);
+            std::fill_n(batch.item_pair.begin() + ptrdiff_t(item), n, cl_uint(pair));
+            ++pair;
+            item += n;
+        }
+    });
+    return batch;
+}
 
 // Runs units [0, total) as batches: run_batch(first, slots) processes units [first, first + k)
 // for some k in [1, slots] and returns k. When it fails with a device allocation failure (it must

@@ -19,8 +19,6 @@ namespace oclvox::detail {
 
 namespace {
 
-constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
-
 struct Layout {
     int brick;              // brick edge in voxels
     int nx, ny, nz;         // grid
@@ -106,52 +104,22 @@ ColumnBins bin_columns(const ParityTriangles& triangles, const Layout& l,
     return bins;
 }
 
-struct Batch {
-    size_t first_column = 0, column_count = 0;
-    std::vector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
-    std::vector<cl_int> slot_column;
-    uint64_t items = 0;
-};
-
-// Brick columns [first, ...) into one batch, limited by slots and work items.
-Batch make_batch(const ColumnBins& bins, const ParityTriangles& triangles, const Layout& l,
-                 size_t first, size_t max_slots) {
-    Batch batch;
-    batch.first_column = first;
-    std::vector<cl_uint> counts;
-    for (size_t c = first; c < bins.columns.size() && batch.column_count < max_slots; ++c) {
-        const int bx = int(bins.columns[c] % uint64_t(l.nbx));
-        const int by = int(bins.columns[c] / uint64_t(l.nbx));
-        uint64_t column_items = 0;
-        counts.clear();
-        for (uint64_t p = bins.first_pair[c]; p < bins.first_pair[c + 1]; ++p) {
-            // A work item per voxel row of the triangle's footprint in the brick column.
-            OvColumnRange r;
-            const bool covers = ovs_column_range(&triangles[bins.pair_triangle[p]], bx, by, l.brick,
-                                                 l.nx, l.ny, &r) > 0;
-            counts.push_back(covers ? cl_uint(r.hi[1] - r.lo[1] + 1) : 0u);
-            column_items += counts.back();
-        }
-        if (batch.items + column_items > kMaxItemsPerBatch) {
-            if (batch.column_count == 0)
-                throw GridError("brick column " + std::to_string(bins.columns[c]) + " needs " +
-                                std::to_string(column_items) +
-                                " work items, more than one batch can hold: use smaller bricks");
-            break;
-        }
-        const cl_uint slot = cl_uint(batch.column_count++);
-        batch.slot_column.push_back(bx);
-        batch.slot_column.push_back(by);
-        for (size_t i = 0; i < counts.size(); ++i) {
-            batch.pair_triangle.push_back(bins.pair_triangle[bins.first_pair[c] + i]);
-            batch.pair_slot.push_back(slot);
-            batch.pair_first_item.push_back(cl_uint(batch.items));
-            batch.item_pair.insert(batch.item_pair.end(), counts[i],
-                                   cl_uint(batch.pair_triangle.size() - 1));
-            batch.items += counts[i];
-        }
-    }
-    return batch;
+// Brick columns [first, ...) as one batch: a work item per voxel row of a triangle's footprint in
+// a brick column.
+PairBatch make_batch(const ColumnBins& bins, const ParityTriangles& triangles, const Layout& l,
+                     size_t first, size_t max_slots) {
+    return make_pair_batch(bins.columns, bins.first_pair, bins.pair_triangle, first, max_slots,
+                           "brick column", [&](size_t c) {
+                               const int bx = int(bins.columns[c] % uint64_t(l.nbx));
+                               const int by = int(bins.columns[c] / uint64_t(l.nbx));
+                               return [&, bx, by](uint32_t triangle) {
+                                   OvColumnRange r;
+                                   const bool covers =
+                                       ovs_column_range(&triangles[triangle], bx, by, l.brick, l.nx,
+                                                        l.ny, &r) > 0;
+                                   return covers ? cl_uint(r.hi[1] - r.lo[1] + 1) : 0u;
+                               };
+                           });
 }
 
 // The brick index of brick `row` (from the bottom) of brick column `column`.
@@ -231,14 +199,19 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
         t = Clock::now();
         const cl::Buffer& bit_buffer = bits.get(cl.context, max_columns);
         const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
-        Batch batch = make_batch(bins, triangles, l, done, max_columns);
-        const cl::Buffer pair_triangle = upload(cl.context, cl.queue, batch.pair_triangle);
-        const cl::Buffer pair_slot = upload(cl.context, cl.queue, batch.pair_slot);
-        const cl::Buffer pair_first = upload(cl.context, cl.queue, batch.pair_first_item);
-        const cl::Buffer item_pair = upload(cl.context, cl.queue, batch.item_pair);
-        const cl::Buffer slot_column = upload(cl.context, cl.queue, batch.slot_column);
+        const PairBatch batch = make_batch(bins, triangles, l, done, max_columns);
+        std::vector<cl_int> slot_coordinates;  // each slot's brick column (bx, by)
+        for (size_t slot = 0; slot < batch.unit_count; ++slot) {
+            slot_coordinates.push_back(int(bins.columns[done + slot] % uint64_t(l.nbx)));
+            slot_coordinates.push_back(int(bins.columns[done + slot] / uint64_t(l.nbx)));
+        }
+        const cl::Buffer pair_triangle = read_in_place(cl, batch.pair_triangle);
+        const cl::Buffer pair_slot = read_in_place(cl, batch.pair_slot);
+        const cl::Buffer pair_first = read_in_place(cl, batch.pair_first_item);
+        const cl::Buffer item_pair = read_in_place(cl, batch.item_pair);
+        const cl::Buffer slot_column = read_in_place(cl, slot_coordinates);
         cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0,
-                                   batch.column_count * column_words * sizeof(cl_uint));
+                                   batch.unit_count * column_words * sizeof(cl_uint));
         cl.queue.finish();
         stats.seconds_upload += seconds_since(t);
 
@@ -253,14 +226,14 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
                        launch(cl.queue, flip, count, flip_group);
                    },
                    {});
-        const uint64_t columns = uint64_t(batch.column_count) * l.brick * l.brick;
+        const uint64_t columns = uint64_t(batch.unit_count) * l.brick * l.brick;
         set_args(prefix, 0, bit_buffer, cl_uint(columns), cl_int(l.brick), cl_uint(l.words));
         launch(cl.queue, prefix, columns, prefix_group);
         // parity_pack: an item per 4x4 voxel columns and 8 block rows (a 32-bit word of layers).
         const uint64_t block_rows = uint64_t(l.nbz) * uint64_t(l.brick / 4);
-        const uint64_t pack_items = uint64_t(batch.column_count) * uint64_t(l.brick / 4) *
+        const uint64_t pack_items = uint64_t(batch.unit_count) * uint64_t(l.brick / 4) *
                                     uint64_t(l.brick / 4) * ((block_rows + 7) / 8);
-        set_args(pack, 0, bit_buffer, cl_uint(batch.column_count), cl_int(l.brick), cl_int(l.nbz),
+        set_args(pack, 0, bit_buffer, cl_uint(batch.unit_count), cl_int(l.brick), cl_int(l.nbz),
                  cl_int(l.nz), cl_uint(l.words), block_buffer);
         launch(cl.queue, pack, pack_items, pack_group);
         cl.queue.finish();
@@ -269,15 +242,15 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
 
         // Each slot's bricks, bottom to top, are units of the download.
         download_bricks(
-            cl, block_buffer, batch.column_count * size_t(l.nbz), l.blocks_per_brick,
+            cl, block_buffer, batch.unit_count * size_t(l.nbz), l.blocks_per_brick,
             options.download, stats, [&](size_t unit, const uint64_t* blocks) {
-                const uint64_t column = bins.columns[batch.first_column + unit / size_t(l.nbz)];
+                const uint64_t column = bins.columns[batch.first_unit + unit / size_t(l.nbz)];
                 result.merge_brick(column_brick(l, column, unit % size_t(l.nbz)), blocks);
             });
         ++stats.batches;
-        const size_t finished = done + batch.column_count;
+        const size_t finished = done + batch.unit_count;
         report_progress(options, finished * uint64_t(l.nbz), bins.columns.size() * uint64_t(l.nbz));
-        return batch.column_count;
+        return batch.unit_count;
     };
     run_batches(cl.queue, bins.columns.size(), slots, stats,
                 "computing the parity solid on " + cl.info.name, "brick column", run_batch);

@@ -6,8 +6,6 @@
 // over all work items, and merge the bits that come back (whole, or only the non-empty blocks:
 // block_download.hpp) into the sparse result. A batch the device cannot allocate memory for is
 // retried with half as many bricks, down to one (device_batches.hpp).
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -28,99 +26,33 @@ namespace oclvox {
 namespace {
 
 using detail::Clock;
-using detail::FilledLaterVector;
 using detail::seconds_since;
 
-// Work items of one batch are numbered with 32-bit offsets.
-constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
-
-struct Batch {
-    size_t first_brick = 0, brick_count = 0;
-    FilledLaterVector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
-    std::vector<cl_int> slot_brick;
-    uint64_t items = 0;
-};
-
-// Gathers bricks [first, ...) into one batch, limited by slots and work items. Bricks are
-// independent, so their pairs are counted and then written in parallel; only the cut by work
-// items and the prefix sums are serial, one step a brick.
-Batch make_batch(const detail::Binning& binning, const detail::PreparedTriangles& prepared,
-                 const Grid& grid, int brick_size, size_t first, size_t max_slots) {
+// The grid coordinates of active brick b.
+std::array<int, 3> brick_coordinates(const detail::Binning& binning, const Grid& grid,
+                                     int brick_size, size_t b) {
     const auto nbx = uint64_t((grid.dims[0] + brick_size - 1) / brick_size);
     const auto nby = uint64_t((grid.dims[1] + brick_size - 1) / brick_size);
-    auto brick_of = [&](size_t b) {
-        const uint64_t index = binning.bricks[b];
-        return std::array<int, 3>{int(index % nbx), int(index / nbx % nby),
-                                  int(index / (nbx * nby))};
-    };
-    const size_t last = std::min(binning.bricks.size(), first + max_slots);
-    const uint64_t pair_base = binning.brick_first_pair[first];
+    const uint64_t index = binning.bricks[b];
+    return {int(index % nbx), int(index / nbx % nby), int(index / (nbx * nby))};
+}
 
-    // Phase 1: the work items of every pair of the candidate bricks, and per brick the items and
-    // the pairs that have any.
-    FilledLaterVector<cl_uint> pair_items(binning.brick_first_pair[last] - pair_base);
-    std::vector<uint64_t> brick_items(last - first), brick_pairs(last - first);
-    tbb::parallel_for(first, last, [&](size_t b) {
-        const std::array<int, 3> brick = brick_of(b);
-        uint64_t items = 0, pairs = 0;
-        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1]; ++p) {
-            detail::OvPairWork work;
-            const int blocks = detail::ov_pair_work(
-                prepared.ranges[binning.pair_triangle[p]], brick[0], brick[1], brick[2], brick_size,
-                int(grid.dims[0]), int(grid.dims[1]), int(grid.dims[2]), &work);
-            pair_items[p - pair_base] = cl_uint(detail::ov_pair_items(blocks));
-            items += pair_items[p - pair_base];
-            pairs += blocks > 0;
-        }
-        brick_items[b - first] = items;
-        brick_pairs[b - first] = pairs;
-    });
-
-    // Phase 2: as many bricks as fit the batch's work items, and where each one's pairs and items
-    // start (the prefix sums, in place).
-    Batch batch;
-    batch.first_brick = first;
-    uint64_t pairs = 0;
-    for (size_t b = first; b < last; ++b) {
-        const uint64_t items = brick_items[b - first];
-        if (batch.items + items > kMaxItemsPerBatch) {
-            if (b == first)
-                throw GridError("brick " + std::to_string(binning.bricks[b]) + " needs " +
-                                std::to_string(items) +
-                                " work items, more than one batch can hold: use smaller bricks");
-            break;
-        }
-        brick_items[b - first] = batch.items;
-        batch.items += items;
-        const uint64_t brick_pair_count = brick_pairs[b - first];
-        brick_pairs[b - first] = pairs;
-        pairs += brick_pair_count;
-        ++batch.brick_count;
-    }
-
-    // Phase 3: the batch's pairs and each work item's pair, bricks in parallel.
-    batch.pair_triangle.resize(pairs);
-    batch.pair_slot.resize(pairs);
-    batch.pair_first_item.resize(pairs);
-    batch.item_pair.resize(batch.items);
-    batch.slot_brick.resize(3 * batch.brick_count);
-    tbb::parallel_for(size_t(0), batch.brick_count, [&](size_t slot) {
-        const size_t b = first + slot;
-        const std::array<int, 3> brick = brick_of(b);
-        for (int k = 0; k < 3; ++k) batch.slot_brick[3 * slot + k] = brick[k];
-        uint64_t pair = brick_pairs[slot], item = brick_items[slot];
-        for (uint64_t p = binning.brick_first_pair[b]; p < binning.brick_first_pair[b + 1]; ++p) {
-            const cl_uint n = pair_items[p - pair_base];
-            if (n == 0) continue;
-            batch.pair_triangle[pair] = binning.pair_triangle[p];
-            batch.pair_slot[pair] = cl_uint(slot);
-            batch.pair_first_item[pair] = cl_uint(item);
-            std::fill_n(batch.item_pair.begin() + ptrdiff_t(item), n, cl_uint(pair));
-            ++pair;
-            item += n;
-        }
-    });
-    return batch;
+// Bricks [first, ...) as one batch: a work item per run of up to OV_BLOCKS_PER_ITEM blocks of a
+// triangle's blocks in a brick.
+detail::PairBatch make_batch(const detail::Binning& binning,
+                             const detail::PreparedTriangles& prepared, const Grid& grid,
+                             int brick_size, size_t first, size_t max_slots) {
+    return detail::make_pair_batch(
+        binning.bricks, binning.brick_first_pair, binning.pair_triangle, first, max_slots, "brick",
+        [&](size_t b) {
+            const std::array<int, 3> brick = brick_coordinates(binning, grid, brick_size, b);
+            return [&, brick](uint32_t triangle) {
+                detail::OvPairWork work;
+                return cl_uint(detail::ov_pair_items(detail::ov_pair_work(
+                    prepared.ranges[triangle], brick[0], brick[1], brick[2], brick_size,
+                    int(grid.dims[0]), int(grid.dims[1]), int(grid.dims[2]), &work)));
+            };
+        });
 }
 
 }  // namespace
@@ -197,13 +129,18 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             auto run_batch = [&](size_t done, size_t max_bricks) {
                 t = Clock::now();
                 const cl::Buffer& bit_buffer = bits.get(cl.context, max_bricks);
-                Batch batch = make_batch(binning, prepared, grid, brick_size, done, max_bricks);
-                const size_t bit_words = batch.brick_count * words_per_brick;
+                const detail::PairBatch batch =
+                    make_batch(binning, prepared, grid, brick_size, done, max_bricks);
+                std::vector<cl_int> slot_coordinates;  // each slot's brick
+                for (size_t slot = 0; slot < batch.unit_count; ++slot)
+                    for (const int k : brick_coordinates(binning, grid, brick_size, done + slot))
+                        slot_coordinates.push_back(k);
+                const size_t bit_words = batch.unit_count * words_per_brick;
                 const cl::Buffer pair_triangle = detail::read_in_place(cl, batch.pair_triangle);
                 const cl::Buffer pair_slot = detail::read_in_place(cl, batch.pair_slot);
                 const cl::Buffer pair_first = detail::read_in_place(cl, batch.pair_first_item);
                 const cl::Buffer item_pair = detail::read_in_place(cl, batch.item_pair);
-                const cl::Buffer slot_brick = detail::read_in_place(cl, batch.slot_brick);
+                const cl::Buffer slot_brick = detail::read_in_place(cl, slot_coordinates);
                 cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0, bit_words * sizeof(cl_uint));
                 cl.queue.finish();
                 stats.seconds_upload += seconds_since(t);
@@ -225,17 +162,17 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 stats.work_items += batch.items;
 
                 detail::download_bricks(
-                    cl, bit_buffer, batch.brick_count, result.blocks_per_brick(), options.download,
+                    cl, bit_buffer, batch.unit_count, result.blocks_per_brick(), options.download,
                     stats, [&](size_t slot, const uint64_t* blocks) {
-                        result.merge_brick(binning.bricks[batch.first_brick + slot], blocks);
+                        result.merge_brick(binning.bricks[batch.first_unit + slot], blocks);
                     });
                 ++stats.batches;
 
-                const size_t finished = done + batch.brick_count;
+                const size_t finished = done + batch.unit_count;
                 if (options.progress && !options.progress(finished, binning.bricks.size()))
                     throw Cancelled("voxelization cancelled after " + std::to_string(finished) +
                                     " of " + std::to_string(binning.bricks.size()) + " bricks");
-                return batch.brick_count;
+                return batch.unit_count;
             };
             detail::run_batches(cl.queue, binning.bricks.size(), slots, stats,
                                 "voxelizing on " + cl.info.name, "brick", run_batch);
