@@ -216,42 +216,54 @@ TEST(Progress, ReportsBatchesAndCancels) {
     EXPECT_THROW(device().voxelize(m, g, o), Cancelled);
 }
 
-// Triangles are prepared in parallel chunks; the error still names the first triangle that does
-// not fit grid coordinates, in a later chunk than the first thousands.
-TEST(Tiling, TheFirstTriangleOutsideGridCoordinatesIsNamed) {
+// 30000 small triangles along x, in [0, 0.1] x [0, 1e-3] x {0}: enough for several of the
+// preparation's parallel chunks.
+Mesh many_small_triangles() {
     Mesh m;
     for (int t = 0; t < 30000; ++t) {
         const double x = 1e-3 * (t % 100);
         add_triangle(m, {x, 0, 0}, {x + 1e-3, 0, 0}, {x, 1e-3, 0});
     }
-    // (1e10 - 0) / 1e-300 overflows to infinity; triangles 20000 and 10000 reach it.
-    m.positions[m.triangles[20000][1]][2] = 1e10;
-    m.positions[m.triangles[10000][2]][1] = 1e10;
-    Grid g;
-    g.voxel_size = 1e-300;
-    g.dims = {8, 8, 8};
+    return m;
+}
+
+// The InputError message of voxelizing m on g on the device and with the reference (both must
+// throw one).
+std::vector<std::string> input_errors_of(const Mesh& m, const Grid& g) {
+    std::vector<std::string> messages;
     for (bool on_device : {false, true}) {
         try {
             if (on_device)
                 device().voxelize(m, g, VoxelizeOptions{});
             else
                 voxelize_reference(m, g, VoxelizeOptions{});
-            ADD_FAILURE() << "no InputError";
+            ADD_FAILURE() << "no InputError " << (on_device ? "on the device" : "in the reference");
         } catch (const InputError& e) {
-            EXPECT_NE(std::string(e.what()).find("triangle 10000 "), std::string::npos) << e.what();
+            messages.push_back(e.what());
         }
     }
+    return messages;
+}
+
+// Triangles are prepared in parallel chunks; the error still names the first triangle that does
+// not fit grid coordinates, in a later chunk than the first thousands.
+TEST(Tiling, TheFirstTriangleOutsideGridCoordinatesIsNamed) {
+    Mesh m = many_small_triangles();
+    // (1e10 - 0) / 1e-300 overflows to infinity; triangles 20000 and 10000 reach it.
+    m.positions[m.triangles[20000][1]][2] = 1e10;
+    m.positions[m.triangles[10000][2]][1] = 1e10;
+    Grid g;
+    g.voxel_size = 1e-300;
+    g.dims = {8, 8, 8};
+    for (const std::string& message : input_errors_of(m, g))
+        EXPECT_NE(message.find("triangle 10000 "), std::string::npos) << message;
 }
 
 // Preparation checks vertex indices on its way instead of validating the mesh first; the error
 // must still be validation's, naming the first bad triangle, even where a triangle before it does
 // not fit grid coordinates.
 TEST(Tiling, AMissingVertexIsNamedAsValidationWouldNameIt) {
-    Mesh m;
-    for (int t = 0; t < 30000; ++t) {
-        const double x = 1e-3 * (t % 100);
-        add_triangle(m, {x, 0, 0}, {x + 1e-3, 0, 0}, {x, 1e-3, 0});
-    }
+    Mesh m = many_small_triangles();
     m.triangles[25000][2] = uint32_t(m.positions.size());
     m.triangles[20000][0] = uint32_t(m.positions.size() + 7);
     const std::string expected =
@@ -266,17 +278,8 @@ TEST(Tiling, AMissingVertexIsNamedAsValidationWouldNameIt) {
     Grid tiny = fitted;
     tiny.voxel_size = 1e-300;
     for (const auto& [mesh, g] : {std::pair{m, fitted}, std::pair{overflowing, tiny}})
-        for (bool on_device : {false, true}) {
-            try {
-                if (on_device)
-                    device().voxelize(mesh, g, VoxelizeOptions{});
-                else
-                    voxelize_reference(mesh, g, VoxelizeOptions{});
-                ADD_FAILURE() << "no InputError";
-            } catch (const InputError& e) {
-                EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
-            }
-        }
+        for (const std::string& message : input_errors_of(mesh, g))
+            EXPECT_NE(message.find(expected), std::string::npos) << message;
 }
 
 TEST(Tiling, AbsurdGridIsRefusedBeforeAllocating) {
