@@ -6,6 +6,7 @@
 #include <set>
 
 #include "binning.hpp"
+#include "device_batches.hpp"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -410,6 +411,65 @@ TEST(SelectionTriangles, InsideTestIsTheWholeMeshs) {
     EXPECT_TRUE(winding.whole_mesh);
     EXPECT_TRUE(winding.triangles.empty());
     EXPECT_THROW(selection_triangles(closed, gc, o, {{1u << 20}}), GridError);
+}
+
+// ---- make_pair_batch ----
+
+// Units 10, 20, 30 with triangles {7, 8}, {9}, {10, 11}; a triangle has (triangle % 3) work items
+// in any unit, so triangle 9 has none. Worked by hand: the pairs with work, their slots and first
+// items, and each item's pair, in unit order.
+struct HandBinning {
+    std::vector<uint64_t> units{10, 20, 30}, first_pair{0, 2, 3, 5};
+    std::vector<uint32_t> pair_triangle{7, 8, 9, 10, 11};
+    detail::PairBatch batch(size_t first, size_t max_slots, uint64_t max_items) const {
+        return detail::make_pair_batch(
+            units, first_pair, pair_triangle, first, max_slots, "brick",
+            [](size_t) { return [](uint32_t triangle) { return cl_uint(triangle % 3); }; },
+            max_items);
+    }
+};
+
+template <class V>
+std::vector<cl_uint> values(const V& v) {
+    return std::vector<cl_uint>(v.begin(), v.end());
+}
+
+TEST(PairBatches, HoldThePairsWithWorkAndEachItemsPair) {
+    const detail::PairBatch b = HandBinning().batch(0, 3, 100);
+    EXPECT_EQ(b.first_unit, 0u);
+    EXPECT_EQ(b.unit_count, 3u);
+    EXPECT_EQ(b.items, 6u);
+    EXPECT_EQ(values(b.pair_triangle), (std::vector<cl_uint>{7, 8, 10, 11}));
+    EXPECT_EQ(values(b.pair_slot), (std::vector<cl_uint>{0, 0, 2, 2}));
+    EXPECT_EQ(values(b.pair_first_item), (std::vector<cl_uint>{0, 1, 3, 4}));
+    EXPECT_EQ(values(b.item_pair), (std::vector<cl_uint>{0, 1, 1, 2, 3, 3}));
+}
+
+TEST(PairBatches, StopAtTheSlotsOrTheWorkItemsAndStartWhereAsked) {
+    const HandBinning h;
+    const detail::PairBatch by_slots = h.batch(0, 1, 100);
+    EXPECT_EQ(by_slots.unit_count, 1u);
+    EXPECT_EQ(values(by_slots.item_pair), (std::vector<cl_uint>{0, 1, 1}));
+    const detail::PairBatch by_items = h.batch(0, 3, 5);  // the third unit would make 6
+    EXPECT_EQ(by_items.unit_count, 2u);
+    EXPECT_EQ(by_items.items, 3u);
+    const detail::PairBatch later = h.batch(1, 3, 100);  // slots count from the first unit
+    EXPECT_EQ(later.first_unit, 1u);
+    EXPECT_EQ(later.unit_count, 2u);
+    EXPECT_EQ(values(later.pair_triangle), (std::vector<cl_uint>{10, 11}));
+    EXPECT_EQ(values(later.pair_slot), (std::vector<cl_uint>{1, 1}));
+    EXPECT_EQ(values(later.pair_first_item), (std::vector<cl_uint>{0, 1}));
+    EXPECT_EQ(values(later.item_pair), (std::vector<cl_uint>{0, 1, 1}));
+}
+
+TEST(PairBatches, AUnitOverTheWorkItemsAloneIsAnErrorNamingIt) {
+    try {
+        HandBinning().batch(2, 3, 2);
+        ADD_FAILURE() << "no GridError";
+    } catch (const GridError& e) {
+        EXPECT_NE(std::string(e.what()).find("brick 30 needs 3 work items"), std::string::npos)
+            << e.what();
+    }
 }
 
 }  // namespace

@@ -91,15 +91,16 @@ struct PairBatch {
 
 // Gathers units [first, ...) of a binning (unit u's triangles are
 // pair_triangle[first_pair[u] .. first_pair[u + 1]), its name units[u]) into one batch of at
-// most max_slots units and kMaxItemsPerBatch work items. unit_counter(u) gives a function of a
-// triangle that returns its work items in unit u (0: none). Units are independent, so their pairs
+// most max_slots units and max_items work items. unit_counter(u) gives a function of a triangle
+// that returns its work items in unit u (0: none). Units are independent, so their pairs
 // are counted and then written in parallel; only the cut and the prefix sums are serial, a step a
 // unit. Throws GridError, naming `unit_name`, if one unit alone has too many work items.
 template <class UnitCounter>
 PairBatch make_pair_batch(const std::vector<uint64_t>& units,
                           const std::vector<uint64_t>& first_pair,
                           const std::vector<uint32_t>& pair_triangle, size_t first,
-                          size_t max_slots, const char* unit_name, UnitCounter&& unit_counter) {
+                          size_t max_slots, const char* unit_name, UnitCounter&& unit_counter,
+                          uint64_t max_items = kMaxItemsPerBatch) {
     const size_t last = std::min(units.size(), first + max_slots);
     const uint64_t pair_base = first_pair[first];
 
@@ -127,7 +128,7 @@ PairBatch make_pair_batch(const std::vector<uint64_t>& units,
     uint64_t pairs = 0;
     for (size_t u = first; u < last; ++u) {
         const uint64_t items = unit_items[u - first];
-        if (batch.items + items > kMaxItemsPerBatch) {
+        if (batch.items + items > max_items) {
             if (u == first)
                 throw GridError(std::string(unit_name) + " " + std::to_string(units[u]) +
                                 " needs " + std::to_string(items) +
