@@ -117,10 +117,6 @@ inline Device::Impl& device_impl(Device& device) {
     return DeviceAccess::impl(device);
 }
 
-}  // namespace oclvox::detail
-
-namespace oclvox::detail {
-
 // A read-only buffer of `data` that a device working in the host's memory reads where it lies:
 // copying into a fresh buffer costs a page fault per 4 KiB there, more than most kernels reading
 // it. Other devices get a copy in their own memory (upload). So `data` must stay alive and

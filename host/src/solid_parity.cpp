@@ -7,6 +7,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 
@@ -104,15 +105,19 @@ ColumnBins bin_columns(const ParityTriangles& triangles, const Layout& l,
     return bins;
 }
 
+// The brick coordinates (bx, by) of brick column `column` (bx + nbx * by).
+std::array<int, 2> column_coordinates(const Layout& l, uint64_t column) {
+    return {int(column % uint64_t(l.nbx)), int(column / uint64_t(l.nbx))};
+}
+
 // Brick columns [first, ...) as one batch: a work item per voxel row of a triangle's footprint in
 // a brick column.
 PairBatch make_batch(const ColumnBins& bins, const ParityTriangles& triangles, const Layout& l,
                      size_t first, size_t max_slots) {
     return make_pair_batch(bins.columns, bins.first_pair, bins.pair_triangle, first, max_slots,
                            "brick column", [&](size_t c) {
-                               const int bx = int(bins.columns[c] % uint64_t(l.nbx));
-                               const int by = int(bins.columns[c] / uint64_t(l.nbx));
-                               return [&, bx, by](uint32_t triangle) {
+                               const auto [bx, by] = column_coordinates(l, bins.columns[c]);
+                               return [&, bx = bx, by = by](uint32_t triangle) {
                                    OvColumnRange r;
                                    const bool covers =
                                        ovs_column_range(&triangles[triangle], bx, by, l.brick, l.nx,
@@ -201,10 +206,9 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
         const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
         const PairBatch batch = make_batch(bins, triangles, l, done, max_columns);
         std::vector<cl_int> slot_coordinates;  // each slot's brick column (bx, by)
-        for (size_t slot = 0; slot < batch.unit_count; ++slot) {
-            slot_coordinates.push_back(int(bins.columns[done + slot] % uint64_t(l.nbx)));
-            slot_coordinates.push_back(int(bins.columns[done + slot] / uint64_t(l.nbx)));
-        }
+        for (size_t slot = 0; slot < batch.unit_count; ++slot)
+            for (const int k : column_coordinates(l, bins.columns[done + slot]))
+                slot_coordinates.push_back(k);
         const cl::Buffer pair_triangle = read_in_place(cl, batch.pair_triangle);
         const cl::Buffer pair_slot = read_in_place(cl, batch.pair_slot);
         const cl::Buffer pair_first = read_in_place(cl, batch.pair_first_item);
@@ -268,8 +272,7 @@ void parity_reference(const ParityTriangles& triangles, SparseVoxels& result,
     std::vector<uint64_t> blocks(size_t(l.nbz) * l.blocks_per_brick);
     const int nb = l.brick / 4;
     for (size_t c = 0; c < bins.columns.size(); ++c) {
-        const int bx = int(bins.columns[c] % uint64_t(l.nbx));
-        const int by = int(bins.columns[c] / uint64_t(l.nbx));
+        const auto [bx, by] = column_coordinates(l, bins.columns[c]);
         std::fill(bits.begin(), bits.end(), 0u);
         for (uint64_t p = bins.first_pair[c]; p < bins.first_pair[c + 1]; ++p) {
             const OvParityTriangle& tri = triangles[bins.pair_triangle[p]];

@@ -1,11 +1,12 @@
 // Device::voxelize: the tiled conservative surface voxelization on an OpenCL device.
 //
-// Phases: prepare and bin triangles on the host; upload them once; then process the active bricks
-// in batches that fit the device budget: per batch, upload the (triangle, brick) pairs, their
-// work-item offsets and each work item's pair, clear the batch's brick bits, run the voxel kernel
-// over all work items, and merge the bits that come back (whole, or only the non-empty blocks:
-// block_download.hpp) into the sparse result. A batch the device cannot allocate memory for is
-// retried with half as many bricks, down to one (device_batches.hpp).
+// Phases: prepare and bin triangles on the host; hand them to the device once; then process the
+// active bricks in batches that fit the device budget: per batch, build the (triangle, brick)
+// pairs, their work-item offsets and each work item's pair (make_pair_batch) and hand them over
+// (read in place by a device in the host's memory, else uploaded), clear the batch's brick bits,
+// run the voxel kernel over all work items, and merge the bits that come back (whole, or only the
+// non-empty blocks: block_download.hpp) into the sparse result. A batch the device cannot allocate
+// memory for is retried with half as many bricks, down to one (device_batches.hpp).
 #include <algorithm>
 #include <array>
 #include <chrono>

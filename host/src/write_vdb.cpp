@@ -40,9 +40,10 @@ uint64_t yz_square(uint64_t shifted) {
     return square;
 }
 
+using Leaf = openvdb::BoolTree::LeafNodeType;
+
 // ORs block `mask` (at voxel `o`, 4-aligned) into its leaf's active and value words.
-void add_block(openvdb::BoolTree::LeafNodeType& leaf, const std::array<int64_t, 3>& o,
-               uint64_t mask) {
+void add_block(Leaf& leaf, const std::array<int64_t, 3>& o, uint64_t mask) {
     uint64_t* active = &leaf.getValueMask().template getWord<uint64_t>(0);
     uint64_t* values = leaf.buffer().data();
     // A leaf's offsets run z fastest, (x & 7) << 6 | (y & 7) << 3 | (z & 7): word x & 7 holds an
@@ -55,8 +56,6 @@ void add_block(openvdb::BoolTree::LeafNodeType& leaf, const std::array<int64_t, 
         values[first_word + x] |= bits;
     }
 }
-
-using Leaf = openvdb::BoolTree::LeafNodeType;
 
 }  // namespace
 
