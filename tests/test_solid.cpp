@@ -12,6 +12,7 @@
 
 #include "opencl_runtime.hpp"
 #include "solid.hpp"
+#include "solid_internal.hpp"
 #include "solid_math.h"
 #include "test_support.hpp"
 
@@ -689,6 +690,81 @@ TEST(Solid, AutoPicksParityOnlyForClosedMeshes) {
     EXPECT_EQ(detail::mesh_edge_report(load("stanford-bunny.obj")).boundary, 223u);
     // STL stores every triangle's vertices separately: closed only after welding.
     EXPECT_TRUE(detail::mesh_edge_report(load("TR12J_OCC.stl")).closed());
+}
+
+// The edge report of a triangle soup (every triangle with its own three vertices, as STL stores
+// them, some zeros written as -0.0) with one triangle flipped and one doubled equals counting the
+// directed edges in a map keyed by positions (where -0.0 == 0.0): welding must join exactly the
+// equal positions, and the edges come out strictly ascending by welded ids.
+TEST(Solid, EdgeReportEqualsCountingEdgesByPosition) {
+    // Two closed meshes: the scan, and a box with a corner at the origin (zeros to sign).
+    Mesh closed = load("bunny00.off");
+    const Mesh box = box_mesh({0, 0, 0}, {5, 5, 5});
+    for (const auto& tri : box.triangles) {
+        std::array<uint32_t, 3> shifted;
+        for (int c = 0; c < 3; ++c)
+            shifted[size_t(c)] = tri[size_t(c)] + uint32_t(closed.positions.size());
+        closed.triangles.push_back(shifted);
+    }
+    closed.positions.insert(closed.positions.end(), box.positions.begin(), box.positions.end());
+    Mesh soup;
+    for (size_t t = 0; t < closed.triangles.size(); ++t) {
+        std::array<uint32_t, 3> corners;
+        for (int c = 0; c < 3; ++c) {
+            Vec3d p = closed.positions[closed.triangles[t][c]];
+            for (double& x : p)
+                if (x == 0 && t % 2) x = -0.0;
+            corners[size_t(c)] = uint32_t(soup.positions.size());
+            soup.positions.push_back(p);
+        }
+        soup.triangles.push_back(corners);
+    }
+    std::swap(soup.triangles[100][1], soup.triangles[100][2]);  // 3 misoriented edges
+    soup.triangles.push_back(soup.triangles[5000]);             // 3 edges used three times
+    soup.positions.push_back({std::nan(""), 0, 0});             // unused: welds with nothing
+
+    using Key = std::array<double, 3>;
+    std::map<std::pair<Key, Key>, std::array<int, 2>> uses;
+    for (const auto& tri : soup.triangles)
+        for (int e = 0; e < 3; ++e) {
+            Key a = soup.positions[tri[size_t(e)]], b = soup.positions[tri[size_t((e + 1) % 3)]];
+            for (double& x : a) x += 0.0;
+            for (double& x : b) x += 0.0;
+            ++uses[{std::min(a, b), std::max(a, b)}][a < b ? 0 : 1];
+        }
+    detail::MeshEdgeReport expected;
+    for (const auto& [edge, n] : uses) {
+        ++expected.edges;
+        if (n[0] + n[1] == 1)
+            ++expected.boundary;
+        else if (n[0] + n[1] > 2)
+            ++expected.non_manifold;
+        else if (n[0] != 1)
+            ++expected.misoriented;
+    }
+    ASSERT_EQ(expected.misoriented, 3u);
+    ASSERT_EQ(expected.non_manifold, 3u);
+    const detail::MeshEdgeReport report = detail::mesh_edge_report(soup);
+    EXPECT_EQ(report.edges, expected.edges);
+    EXPECT_EQ(report.boundary, expected.boundary);
+    EXPECT_EQ(report.non_manifold, expected.non_manifold);
+    EXPECT_EQ(report.misoriented, expected.misoriented);
+
+    const detail::WeldedEdges welded = detail::weld_edges(soup);
+    EXPECT_EQ(welded.positions.size(), closed.positions.size() + 1);  // and the NaN
+    for (size_t i = 1; i < welded.uses.size(); ++i)
+        ASSERT_LT(welded.uses[i - 1].first, welded.uses[i].first);
+}
+
+// Exact parity arithmetic bounds the vertices the triangles use, not the unused ones.
+TEST(Solid, OnlyUsedVerticesMustFitParityArithmetic) {
+    const Grid g = unit_grid(8, 8, 8);
+    Mesh m = box_mesh({1, 1, 1}, {5, 5, 5});
+    m.positions.push_back({1e30, 0, 0});  // far beyond 2^21 voxels, unused
+    EXPECT_EQ(detail::whole_mesh_inside_test(m, g, InsideTest::Auto), InsideTest::Parity);
+    m.positions[0][0] = 1e7;  // used: the mesh stays closed but leaves exact parity
+    EXPECT_EQ(detail::whole_mesh_inside_test(m, g, InsideTest::Auto), InsideTest::Winding);
+    EXPECT_THROW(detail::whole_mesh_inside_test(m, g, InsideTest::Parity), GridError);
 }
 
 // Parity needs a closed mesh: with about 1% of its triangles removed (8 round holes) it leaks

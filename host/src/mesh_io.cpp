@@ -1,11 +1,9 @@
 // Loading triangle meshes into one welded Mesh, whatever the format (each reader is in its own
 // read_*.cpp), and checking meshes before anything voxelizes them.
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <sstream>
@@ -13,6 +11,7 @@
 #include "file_names.hpp"
 #include "mesh_reading.hpp"
 #include "oclvox/oclvox.hpp"
+#include "position_numbering.hpp"
 #include "progress.hpp"
 
 namespace oclvox {
@@ -34,72 +33,23 @@ std::string position_text(const Position& p) {
 // Welding
 // ---------------------------------------------------------------------------------------------
 
-struct PositionKey {
-    std::array<uint64_t, 3> bits;
-    bool operator==(const PositionKey& other) const {
-        return bits[0] == other.bits[0] && bits[1] == other.bits[1] && bits[2] == other.bits[2];
-    }
-};
-
-PositionKey key_of(const Position& p) {
-    PositionKey key;
-    for (int k = 0; k < 3; ++k) {
-        const double value = p[k] + 0.0;  // -0.0 and 0.0 are the same place
-        std::memcpy(&key.bits[k], &value, sizeof value);
-    }
-    return key;
-}
-
 // Merges vertices at equal coordinates and drops those no triangle uses. STL stores three
 // corners per facet and a scene's meshes are merged side by side, so this is what gives them a
-// shared topology. Positions are unchanged, so the geometry is too.
+// shared topology. Positions are unchanged, so the geometry is too. Welded vertices are numbered
+// in the order the triangles meet them, corner by corner.
 Mesh welded(const Mesh& raw) {
-    const size_t n = raw.positions.size();
-    const size_t corners = raw.triangles.size() * 3;
-
-    // Phase 1: each vertex's first use, as the number of the first corner naming it.
-    constexpr uint64_t kUnused = std::numeric_limits<uint64_t>::max();
-    std::vector<uint64_t> first_use(n, kUnused);
-    for (size_t c = corners; c-- > 0;) first_use[raw.triangles[c / 3][c % 3]] = c;
-
-    // Phase 2: the used vertices sorted by position, then by first use, so equal positions form
-    // a run led by the vertex met first; every vertex gets its run's leader. (A sort rather than
-    // a hash map of positions: no node per vertex, and it runs on every core.)
-    struct Entry {
-        PositionKey key;
-        uint64_t first_use;
-        uint32_t vertex;
-    };
-    std::vector<Entry> entries;
-    entries.reserve(n);
-    for (size_t v = 0; v < n; ++v)
-        if (first_use[v] != kUnused)
-            entries.push_back({key_of(raw.positions[v]), first_use[v], uint32_t(v)});
-    tbb::parallel_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
-        for (int k = 0; k < 3; ++k)
-            if (a.key.bits[k] != b.key.bits[k]) return a.key.bits[k] < b.key.bits[k];
-        return a.first_use < b.first_use;
-    });
-    std::vector<uint32_t> leader(n);
-    for (size_t i = 0, run = 0; i < entries.size(); ++i) {
-        if (!(entries[i].key == entries[run].key)) run = i;
-        leader[entries[i].vertex] = entries[run].vertex;
-    }
-
-    // Phase 3: the leaders numbered in the order the triangles meet them, corner by corner.
     constexpr uint32_t kUnnumbered = std::numeric_limits<uint32_t>::max();
-    std::vector<uint32_t> new_index(n, kUnnumbered);
+    std::vector<uint32_t> new_index(raw.positions.size(), kUnnumbered);
+    detail::PositionNumbering numbering(raw.positions.size());
     Mesh mesh;
     mesh.triangles.resize(raw.triangles.size());
     for (size_t t = 0; t < raw.triangles.size(); ++t)
         for (int c = 0; c < 3; ++c) {
-            const uint32_t first = leader[raw.triangles[t][c]];
-            if (new_index[first] == kUnnumbered) {
-                new_index[first] = uint32_t(mesh.positions.size());
-                mesh.positions.push_back(raw.positions[first]);
-            }
-            mesh.triangles[t][c] = new_index[first];
+            const uint32_t v = raw.triangles[t][c];
+            if (new_index[v] == kUnnumbered) new_index[v] = numbering.number(raw.positions[v]);
+            mesh.triangles[t][c] = new_index[v];
         }
+    mesh.positions = numbering.take_positions();
     return mesh;
 }
 

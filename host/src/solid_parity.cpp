@@ -141,24 +141,28 @@ void merge_column(SparseVoxels& result, const Layout& l, uint64_t column, const 
 }  // namespace
 
 // Vertices snapped to fixed-point grid units, or false if a vertex lies too far outside the grid
-// for the exact integer arithmetic of solid_math.h.
+// for the exact integer arithmetic of solid_math.h. Each vertex is snapped once (a vertex serves
+// about six triangles); only the vertices triangles use must fit.
 bool parity_triangles(const Mesh& mesh, const Grid& grid, ParityTriangles& out) {
     const double limit = double(OVS_MAX_UNITS) / OVS_UNITS;
     const double inv = 1.0 / grid.voxel_size;
-    // Triangle t snapped into out[t]; false if a vertex is beyond the limit.
-    auto snap = [&](size_t t) {
-        for (int v = 0; v < 3; ++v)
-            for (int k = 0; k < 3; ++k) {
-                const double g = (mesh.positions[mesh.triangles[t][v]][k] - grid.origin[k]) * inv;
-                if (!(std::fabs(g) < limit)) return false;
-                out[t].v[3 * v + k] = std::llround(g * OVS_UNITS);
-            }
-        return true;
-    };
+    constexpr ovs_long kBeyond = -OVS_MAX_UNITS - 1;  // marks a vertex beyond the limit
+    FilledLaterVector<std::array<ovs_long, 3>> snapped(mesh.positions.size());
+    tbb::parallel_for(size_t(0), mesh.positions.size(), [&](size_t v) {
+        for (int k = 0; k < 3; ++k) {
+            const double g = (mesh.positions[v][k] - grid.origin[k]) * inv;
+            snapped[v][k] = std::fabs(g) < limit ? std::llround(g * OVS_UNITS) : kBeyond;
+        }
+    });
     out.resize(mesh.triangles.size());
     std::atomic<bool> fits{true};
     tbb::parallel_for(size_t(0), mesh.triangles.size(), [&](size_t t) {
-        if (!snap(t)) fits = false;
+        for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < 3; ++k) {
+                const ovs_long units = snapped[mesh.triangles[t][c]][k];
+                if (units == kBeyond) fits = false;
+                out[t].v[3 * c + k] = units;
+            }
     });
     return fits;
 }

@@ -14,6 +14,7 @@
 
 #include "bit_count.hpp"
 #include "device_batches.hpp"
+#include "position_numbering.hpp"
 #include "solid_internal.hpp"
 
 namespace oclvox::detail {
@@ -674,29 +675,13 @@ struct Tile {
 }  // namespace
 
 WeldedEdges weld_edges(const Mesh& mesh) {
-    // Phase 1: runs of equal positions (found by sorting), numbered in the order their first
-    // vertex comes.
-    WeldedEdges out;
+    // Phase 1: equal positions numbered alike, in the order their first vertex comes.
     const auto& p = mesh.positions;
-    std::vector<uint32_t> order(p.size());
-    for (size_t v = 0; v < order.size(); ++v) order[v] = uint32_t(v);
-    tbb::parallel_sort(order.begin(), order.end(),
-                       [&](uint32_t a, uint32_t b) { return p[a] < p[b]; });
-    constexpr uint32_t kUnnumbered = ~uint32_t(0);
-    std::vector<uint32_t> run_of(p.size()), id_of_run;
-    for (size_t i = 0; i < order.size(); ++i) {
-        if (i == 0 || p[order[i - 1]] < p[order[i]]) id_of_run.push_back(kUnnumbered);
-        run_of[order[i]] = uint32_t(id_of_run.size() - 1);
-    }
+    PositionNumbering numbering(p.size());
     std::vector<uint32_t> welded(p.size());
-    for (size_t v = 0; v < p.size(); ++v) {
-        uint32_t& id = id_of_run[run_of[v]];
-        if (id == kUnnumbered) {
-            id = uint32_t(out.positions.size());
-            out.positions.push_back(p[v]);
-        }
-        welded[v] = id;
-    }
+    for (size_t v = 0; v < p.size(); ++v) welded[v] = numbering.number(p[v]);
+    WeldedEdges out;
+    out.positions = numbering.take_positions();
 
     // Phase 2: every triangle's edges, bucketed by their lower end (a counting sort: linear, where
     // sorting all edges was most of the closed-mesh check), then each bucket (a few edges) sorted
@@ -717,17 +702,28 @@ WeldedEdges weld_edges(const Mesh& mesh) {
     for_each_edge([&](uint32_t a, uint32_t b) {
         upper[next[std::min(a, b)]++] = uint64_t(std::max(a, b)) << 1 | uint64_t(a < b ? 0 : 1);
     });
-    for (size_t v = 0; v + 1 < first.size(); ++v) {
+    // Each bucket sorted, with its count of distinct edges; then every edge's uses written to its
+    // place (buckets in parallel both times).
+    const size_t vertices = first.size() - 1;
+    std::vector<size_t> first_use(vertices + 1, 0);
+    tbb::parallel_for(size_t(0), vertices, [&](size_t v) {
         const auto begin = upper.begin() + ptrdiff_t(first[v]),
                    end = upper.begin() + ptrdiff_t(first[v + 1]);
         std::sort(begin, end);
-        for (auto e = begin; e != end; ++e) {
-            const uint32_t b = uint32_t(*e >> 1);
-            if (e == begin || b != uint32_t(*(e - 1) >> 1))
-                out.uses.push_back({{uint32_t(v), b}, {0, 0}});
-            ++out.uses.back().second[size_t(*e & 1)];
+        for (auto e = begin; e != end; ++e)
+            if (e == begin || *e >> 1 != *(e - 1) >> 1) ++first_use[v + 1];
+    });
+    for (size_t v = 0; v < vertices; ++v) first_use[v + 1] += first_use[v];
+    out.uses.resize(first_use.back());
+    tbb::parallel_for(size_t(0), vertices, [&](size_t v) {
+        size_t use = first_use[v];
+        for (size_t e = first[v]; e < first[v + 1]; ++e) {
+            const uint32_t b = uint32_t(upper[e] >> 1);
+            if (e == first[v] || b != uint32_t(upper[e - 1] >> 1))
+                out.uses[use++] = {{uint32_t(v), b}, {0, 0}};
+            ++out.uses[use - 1].second[size_t(upper[e] & 1)];
         }
-    }
+    });
     return out;
 }
 
