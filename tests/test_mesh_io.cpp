@@ -13,6 +13,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -922,6 +923,39 @@ void expect_same_triangles(const Mesh& loaded, const Mesh& expected, const std::
             differing += std::memcmp(a.data(), b.data(), sizeof a) != 0;
         }
     EXPECT_EQ(differing, 0u) << what << ": corners that differ from the written coordinates";
+}
+
+// A named pipe hands its bytes to one reader once: the load must open it once and read it all,
+// past the first read's buffer (the text is about 200 KB) and without knowing its size.
+TEST_F(MeshFiles, NamedPipeIsReadWhole) {
+    Mesh many;
+    for (int copy = 0; copy < 40; ++copy) {
+        const Mesh sphere = translated(lumpy_sphere(1.0 / 64), {40.0 * copy, 0, 0});
+        const auto base = uint32_t(many.positions.size());
+        many.positions.insert(many.positions.end(), sphere.positions.begin(),
+                              sphere.positions.end());
+        for (const auto& t : sphere.triangles)
+            many.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+    }
+    const std::string text = obj_text(many);
+    ASSERT_GT(text.size(), size_t(1) << 17);
+    const std::string pipe = (folder_ / "pipe.obj").string();
+    ASSERT_EQ(mkfifo(pipe.c_str(), 0600), 0);
+    std::signal(SIGPIPE, SIG_IGN);  // a reader that leaves early fails the writer, not the test
+    std::thread writer([&] { std::ofstream(pipe, std::ios::binary) << text; });
+    Mesh from_pipe;
+    std::string error;
+    try {
+        from_pipe = oclvox::load_mesh(pipe);
+    } catch (const InputError& e) {
+        error = e.what();
+    }
+    writer.join();
+    EXPECT_EQ(error, "");
+    const Mesh from_file = oclvox::load_mesh(write("same.obj", text));
+    EXPECT_EQ(from_pipe.positions, from_file.positions);
+    EXPECT_EQ(from_pipe.triangles, from_file.triangles);
+    EXPECT_EQ(from_file.triangles.size(), many.triangles.size());
 }
 
 TEST_F(MeshFiles, MeshFarFromTheOriginReadsBackExactlyInEveryFormat) {

@@ -7,7 +7,6 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <sstream>
 
 namespace oclvox::mesh_reading {
 
@@ -21,23 +20,45 @@ void fail(const std::string& path, const std::string& problem) {
 
 // Fails with a clear message for the problems every format shares (missing, a folder,
 // unreadable, empty) before a parser sees the file and words them its own way.
-void require_readable_nonempty(const std::string& path) {
+namespace {
+
+// A path that names no file, or a folder, fails by its status alone (nothing is opened).
+void require_file(const std::string& path) {
     std::error_code error;
     const auto status = std::filesystem::status(path, error);
     if (!std::filesystem::exists(status)) fail(path, "the file does not exist");
     if (std::filesystem::is_directory(status)) fail(path, "this is a folder, not a mesh file");
+}
+
+}  // namespace
+
+void require_readable_nonempty(const std::string& path) {
+    require_file(path);
     std::ifstream file(path, std::ios::binary);
     if (!file) fail(path, "the file cannot be opened for reading");
     if (file.peek() == std::ifstream::traits_type::eof()) fail(path, "the file is empty");
 }
 
 std::string read_whole_file(const std::string& path) {
-    require_readable_nonempty(path);
+    // The file is opened once: a named pipe gives its bytes to one reader only.
+    require_file(path);
     std::ifstream file(path, std::ios::binary);
-    std::ostringstream bytes;
-    bytes << file.rdbuf();
-    if (!file) fail(path, "reading the file failed");
-    return bytes.str();
+    if (!file) fail(path, "the file cannot be opened for reading");
+    // Read straight into a string of the file's size (plus a byte, so the read that fills it
+    // also meets the end): copying through a growing stream buffer cost more than parsing a
+    // large OBJ. The size is only a start, so a pipe or a growing file is still read whole.
+    std::error_code error;
+    const uint64_t expected = std::filesystem::file_size(path, error);
+    std::string bytes(error ? size_t(1) << 16 : size_t(expected) + 1, '\0');
+    size_t size = 0;
+    while (file.read(bytes.data() + size, std::streamsize(bytes.size() - size))) {
+        size = bytes.size();
+        bytes.resize(2 * size);
+    }
+    if (file.bad() || !file.eof()) fail(path, "reading the file failed");
+    bytes.resize(size + size_t(file.gcount()));
+    if (bytes.empty()) fail(path, "the file is empty");
+    return bytes;
 }
 
 void require_room(const std::string& path, uint64_t count, uint64_t min_bytes_each,
