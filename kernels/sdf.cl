@@ -108,6 +108,10 @@ __kernel void jump(__global const OvSdfTriangle* triangles, __global const uint*
         OvSdfTriangle t = triangles[best];
         best_d2 = ov_voxel_distance2(&t, i, j, k);
     }
+    // Neighbours mostly share a few nearest triangles: each distinct one is evaluated once (the
+    // choice below does not depend on how often a candidate is offered).
+    uint seen[26];
+    int seen_count = 0;
     for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy)
             for (int dx = -1; dx <= 1; ++dx) {
@@ -115,6 +119,10 @@ __kernel void jump(__global const OvSdfTriangle* triangles, __global const uint*
                 if (a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz) continue;
                 uint candidate = nearest_in[(size_t)a + (size_t)nx * ((size_t)b + (size_t)ny * c)];
                 if (candidate == OV_NONE || candidate == best) continue;
+                int repeated = 0;
+                for (int s = 0; s < seen_count; ++s) repeated |= seen[s] == candidate;
+                if (repeated) continue;
+                if (seen_count < 26) seen[seen_count++] = candidate;
                 OvSdfTriangle t = triangles[candidate];
                 float d2 = ov_voxel_distance2(&t, i, j, k);
                 if (d2 < best_d2 || (d2 == best_d2 && candidate < best)) {
