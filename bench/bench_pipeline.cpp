@@ -207,7 +207,7 @@ int main(int argc, char** argv) {
                 }
         }
 
-        // (b) Narrow band per width, plus the full grid (jump flooding) once at the smallest res.
+        // (b) Narrow band per width, plus the full grid once at the smallest res.
         if (wanted('b')) {
             std::printf(
                 "\n### (b) Signed distance field (parity sign, grid padded by 7 voxels)\n\n"

@@ -1,49 +1,13 @@
-// Narrow-band distance field and its jump-flooding extension, OpenCL C 1.2.
+// Narrow-band distance field and its full-grid extension, OpenCL C 1.2.
 //
 // Distances are squared, in voxel units, kept as the bits of non-negative floats in uint buffers.
 //
 // band_leaf_samples: the samples of a batch of 8x8x8 leaves, each leaf from the triangles the
 //                host binned to it (a gather, one work group per leaf): the band of sparse fields
 //                and of dense ones.
-// band_nearest:  one work item per (triangle, 4x4x4 block) of the voxels near that triangle,
-//                recording the lowest triangle index that attains each voxel's minimum (the seeds
-//                of the jump flood; only for full-grid fields).
-// jump:          one jump-flooding pass: each voxel takes the nearest of the triangles its 26
-//                neighbours at distance `step` (and itself) know about.
+// far_distances: for full-grid fields, every voxel beyond the band takes its least squared
+//                distance to all the triangles, from the tree over them (ov_tree_distance2).
 #include "sdf_math.h"
-
-#define OV_NONE 0xffffffffu
-
-// Largest t with first_item[t] <= item (first_item is non-decreasing, first_item[0] == 0).
-static uint find_triangle(__global const ulong* first_item, uint count, ulong item) {
-    uint lo = 0, hi = count - 1;
-    while (lo < hi) {
-        uint mid = lo + (hi - lo + 1) / 2;
-        if (first_item[mid] <= item)
-            lo = mid;
-        else
-            hi = mid - 1;
-    }
-    return lo;
-}
-
-// Decodes this work item into its triangle and the block's minimum voxel; 0 for padding items
-// and for blocks the plane cull rejects.
-static int decode_item(__global const OvSdfTriangle* triangles, __global const ulong* first_item,
-                       uint count, ulong item_base, ulong item_end, float band, OvSdfTriangle* t,
-                       uint* index, int block[3]) {
-    ulong item = item_base + get_global_id(0);
-    if (item >= item_end) return 0;
-    *index = find_triangle(first_item, count, item);
-    *t = triangles[*index];
-    ulong offset = item - first_item[*index];
-    int bx = t->hi[0] / 4 - t->lo[0] / 4 + 1;
-    int by = t->hi[1] / 4 - t->lo[1] / 4 + 1;
-    block[0] = (t->lo[0] / 4 + (int)(offset % (ulong)bx)) * 4;
-    block[1] = (t->lo[1] / 4 + (int)(offset / (ulong)bx % (ulong)by)) * 4;
-    block[2] = (t->lo[2] / 4 + (int)(offset / ((ulong)bx * (ulong)by))) * 4;
-    return ov_block_near(t, block[0], block[1], block[2], band);
-}
 
 // One work group of 64 per leaf of slots [slot_first + group_base, ...): item (y, z) computes the
 // leaf's row of 8 samples along x (ov_row_distance2) against every triangle of the leaf's list
@@ -76,60 +40,31 @@ __kernel __attribute__((reqd_work_group_size(64, 1, 1))) void band_leaf_samples(
     vstore8(as_uint8(best), 0, distance2 + (size_t)batch_slot * 512 + 8 * (y + 8 * z));
 }
 
-__kernel void band_nearest(__global const OvSdfTriangle* triangles,
-                           __global const ulong* first_item, uint count, ulong item_base,
-                           ulong item_end, float band, float band2, int nx, int ny,
-                           __global const uint* distance2, __global uint* nearest) {
-    OvSdfTriangle t;
-    uint index;
-    int block[3];
-    if (!decode_item(triangles, first_item, count, item_base, item_end, band, &t, &index, block))
-        return;
-    for (int k = max(block[2], t.lo[2]); k <= min(block[2] + 3, t.hi[2]); ++k)
-        for (int j = max(block[1], t.lo[1]); j <= min(block[1] + 3, t.hi[1]); ++j)
-            for (int i = max(block[0], t.lo[0]); i <= min(block[0] + 3, t.hi[0]); ++i) {
-                if (!ov_voxel_near(&t, i, j, k, band)) continue;
-                float d2 = ov_voxel_distance2(&t, i, j, k);
-                size_t v = (size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * k);
-                if (d2 < band2 && as_uint(d2) == distance2[v]) atomic_min(&nearest[v], index);
-            }
-}
-
-__kernel void jump(__global const OvSdfTriangle* triangles, __global const uint* nearest_in,
-                   ulong voxel_base, ulong voxel_end, int step, int nx, int ny, int nz,
-                   __global uint* nearest_out, __global uint* distance2_out) {
-    ulong v = voxel_base + get_global_id(0);
-    if (v >= voxel_end) return;
-    int i = (int)(v % (ulong)nx), j = (int)(v / (ulong)nx % (ulong)ny),
-        k = (int)(v / ((ulong)nx * (ulong)ny));
-    uint best = nearest_in[v];
-    float best_d2 = INFINITY;
-    if (best != OV_NONE) {
-        OvSdfTriangle t = triangles[best];
-        best_d2 = ov_voxel_distance2(&t, i, j, k);
+// One work item per row of 8 voxels along x, rows [row_base, row_end) of the grid's rows
+// (ceil(nx / 8) per line of x): the row's voxels that the band left at band2 take the tree's
+// distance (one walk for the row); the band's voxels keep theirs, the same minimum over the
+// triangles near them, and start the walk with it.
+__kernel void far_distances(__global const OvSdfNode* nodes, __global const uint* order,
+                            __global const OvSdfTriangle* triangles, ulong row_base, ulong row_end,
+                            int nx, int ny, float band2, __global uint* distance2) {
+    ulong row = row_base + get_global_id(0);
+    if (row >= row_end) return;
+    ulong rows_x = (ulong)((nx + 7) / 8);
+    int i0 = (int)(row % rows_x) * 8, j = (int)(row / rows_x % (ulong)ny),
+        k = (int)(row / (rows_x * (ulong)ny));
+    size_t first = (size_t)i0 + (size_t)nx * ((size_t)j + (size_t)ny * k);
+    int width = min(8, nx - i0);
+    float start[8];
+    int far = 0;
+    for (int l = 0; l < 8; ++l) {
+        float d2 = l < width ? as_float(distance2[first + l]) : 0.0f;
+        int beyond = l < width && !(d2 < band2);
+        start[l] = beyond ? INFINITY : d2;
+        far |= beyond;
     }
-    // Neighbours mostly share a few nearest triangles: each distinct one is evaluated once (the
-    // choice below does not depend on how often a candidate is offered).
-    uint seen[26];
-    int seen_count = 0;
-    for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-            for (int dx = -1; dx <= 1; ++dx) {
-                int a = i + dx * step, b = j + dy * step, c = k + dz * step;
-                if (a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz) continue;
-                uint candidate = nearest_in[(size_t)a + (size_t)nx * ((size_t)b + (size_t)ny * c)];
-                if (candidate == OV_NONE || candidate == best) continue;
-                int repeated = 0;
-                for (int s = 0; s < seen_count; ++s) repeated |= seen[s] == candidate;
-                if (repeated) continue;
-                if (seen_count < 26) seen[seen_count++] = candidate;
-                OvSdfTriangle t = triangles[candidate];
-                float d2 = ov_voxel_distance2(&t, i, j, k);
-                if (d2 < best_d2 || (d2 == best_d2 && candidate < best)) {
-                    best = candidate;
-                    best_d2 = d2;
-                }
-            }
-    nearest_out[v] = best;
-    if (best != OV_NONE) distance2_out[v] = as_uint(best_d2);
+    if (!far) return;
+    float result[8];
+    vstore8(ov_tree_row_distance2(nodes, order, triangles, i0, j, k, vload8(0, start)), 0, result);
+    for (int l = 0; l < width; ++l)
+        if (start[l] == INFINITY) distance2[first + l] = as_uint(result[l]);
 }

@@ -15,9 +15,11 @@
 #ifdef __OPENCL_VERSION__
 #pragma OPENCL FP_CONTRACT OFF
 #define OV_SDF_FN static inline
+#define OV_SDF_GLOBAL __global
 #else
 #include <cmath>
 #define OV_SDF_FN static inline
+#define OV_SDF_GLOBAL
 namespace oclvox::detail {
 #endif
 
@@ -128,6 +130,81 @@ OV_SDF_FN int ov_row_near(const OvSdfTriangle* t, int i0, int j, int k, float ba
                         (float)(k - t->anchor[2]) + 0.5f, band + 3.5f);
 }
 
+// A node of the tree over the prepared triangles that full-grid fields search beyond the band
+// (sdf_tree.cpp builds it). Nodes are stored depth first; `skip` is the node after this one's
+// subtree. A leaf (count > 0) holds triangles order[first .. first + count); an inner node's
+// first child follows it. lo, hi: a box in global voxel coordinates holding the node's triangles
+// with a margin for rounding, so that no triangle in it is nearer to a point than the box's gap
+// (ov_box_gap2) says.
+typedef struct {
+    float lo[3], hi[3];
+    unsigned int first, count, skip, unused;
+} OvSdfNode;
+
+// A lower bound on the squared distance from voxel (i,j,k)'s centre to anything in the box
+// [lo, hi], shrunk by a part in 10^4 to stay below every distance computed to the box's triangles
+// in float.
+OV_SDF_FN float ov_box_gap2(OV_SDF_GLOBAL const OvSdfNode* node, int i, int j, int k) {
+    float c[3] = {(float)i + 0.5f, (float)j + 0.5f, (float)k + 0.5f};
+    float gap2 = 0.0f;
+    for (int a = 0; a < 3; ++a) {
+        float g = fmax(fmax(node->lo[a] - c[a], c[a] - node->hi[a]), 0.0f);
+        gap2 += g * g;
+    }
+    return gap2 * 0.9999f;
+}
+
+// Deepest tree ov_tree_distance2 can walk: its stack holds one node per level. The tree is split
+// at medians, so 2^32 triangles make fewer than 33 levels.
+#define OV_SDF_TREE_DEPTH 64
+
+// The least squared distance from voxel (i,j,k)'s centre to the tree's triangles: a walk that
+// enters the nearer child first and passes over any subtree whose box is farther than the nearest
+// triangle found so far. Every triangle it passes over is at least that far, so the result is the
+// minimum over all the triangles, whatever the order of the walk.
+OV_SDF_FN float ov_tree_distance2(OV_SDF_GLOBAL const OvSdfNode* nodes,
+                                  OV_SDF_GLOBAL const unsigned int* order,
+                                  OV_SDF_GLOBAL const OvSdfTriangle* triangles, int i, int j,
+                                  int k) {
+    float best = INFINITY;
+    unsigned int stack[OV_SDF_TREE_DEPTH];
+    int top = 0;
+    unsigned int n = 0;
+    for (;;) {
+        OV_SDF_GLOBAL const OvSdfNode* node = nodes + n;
+        int descend = 0;
+        if (node->count == 0) {
+            // An inner node: its first child follows it, the second follows the first's subtree.
+            unsigned int closer = n + 1, farther = nodes[n + 1].skip;
+            float closer_gap = ov_box_gap2(nodes + closer, i, j, k);
+            float farther_gap = ov_box_gap2(nodes + farther, i, j, k);
+            if (farther_gap < closer_gap) {
+                unsigned int swap = closer;
+                closer = farther;
+                farther = swap;
+                float swap_gap = closer_gap;
+                closer_gap = farther_gap;
+                farther_gap = swap_gap;
+            }
+            if (closer_gap <= best) {
+                if (farther_gap <= best) stack[top++] = farther;
+                n = closer;
+                descend = 1;
+            }
+        } else {
+            for (unsigned int t = node->first; t < node->first + node->count; ++t) {
+                OvSdfTriangle triangle = triangles[order[t]];
+                best = fmin(best, ov_voxel_distance2(&triangle, i, j, k));
+            }
+        }
+        if (descend) continue;
+        // The next stacked subtree that may still hold a nearer triangle.
+        while (top > 0 && ov_box_gap2(nodes + stack[top - 1], i, j, k) > best) --top;
+        if (top == 0) return best;
+        n = stack[--top];
+    }
+}
+
 #ifdef __OPENCL_VERSION__
 // ov_voxel_distance2 of the 8 voxel centres (i0..i0+7, j, k) in the lanes of a float8: lane by
 // lane the same operations in the same order as ov_triangle_distance2, both of its cases computed
@@ -165,6 +242,73 @@ OV_SDF_FN float8 ov_row_distance2(const OvSdfTriangle* t, int i0, int j, int k) 
         inside &= ~(wx[v] * t->side[v][0] + wy[v] * t->side[v][1] + wz[v] * t->side[v][2] > 0.0f);
     float8 h = wx[0] * t->normal[0] + wy[0] * t->normal[1] + wz[0] * t->normal[2];
     return select(edges, h * h, inside);
+}
+
+// ov_box_gap2 for the row of 8 voxel centres (i0..i0+7, j, k): the gap from the segment through
+// them, so no lower than any one centre's.
+OV_SDF_FN float ov_row_box_gap2(__global const OvSdfNode* node, int i0, int j, int k) {
+    float x0 = (float)i0 + 0.5f, x7 = (float)i0 + 7.5f;
+    float c[3] = {0.0f, (float)j + 0.5f, (float)k + 0.5f};
+    float gap2 = 0.0f;
+    for (int a = 0; a < 3; ++a) {
+        float below = a == 0 ? x0 : c[a], above = a == 0 ? x7 : c[a];
+        float g = fmax(fmax(node->lo[a] - above, below - node->hi[a]), 0.0f);
+        gap2 += g * g;
+    }
+    return gap2 * 0.9999f;
+}
+
+OV_SDF_FN float ov_max8(float8 v) {
+    float4 m = fmax(v.lo, v.hi);
+    return fmax(fmax(m.x, m.y), fmax(m.z, m.w));
+}
+
+// ov_tree_distance2 of the row of 8 voxel centres (i0..i0+7, j, k) in the lanes of a float8, from
+// `best` (lanes already known, or 0 for lanes to leave out): one walk for the row, evaluating its
+// triangles with ov_row_distance2 (each lane the scalar function's bits). It passes over a
+// subtree only when the row's gap to it exceeds every lane's best, so each lane ends at its own
+// minimum over all the triangles, as ov_tree_distance2 finds it.
+OV_SDF_FN float8 ov_tree_row_distance2(__global const OvSdfNode* nodes,
+                                       __global const unsigned int* order,
+                                       __global const OvSdfTriangle* triangles, int i0, int j,
+                                       int k, float8 best) {
+    float bound = ov_max8(best);
+    unsigned int stack[OV_SDF_TREE_DEPTH];
+    int top = 0;
+    unsigned int n = 0;
+    if (ov_row_box_gap2(nodes, i0, j, k) > bound) return best;
+    for (;;) {
+        __global const OvSdfNode* node = nodes + n;
+        int descend = 0;
+        if (node->count == 0) {
+            unsigned int closer = n + 1, farther = nodes[n + 1].skip;
+            float closer_gap = ov_row_box_gap2(nodes + closer, i0, j, k);
+            float farther_gap = ov_row_box_gap2(nodes + farther, i0, j, k);
+            if (farther_gap < closer_gap) {
+                unsigned int swap = closer;
+                closer = farther;
+                farther = swap;
+                float swap_gap = closer_gap;
+                closer_gap = farther_gap;
+                farther_gap = swap_gap;
+            }
+            if (closer_gap <= bound) {
+                if (farther_gap <= bound) stack[top++] = farther;
+                n = closer;
+                descend = 1;
+            }
+        } else {
+            for (unsigned int t = node->first; t < node->first + node->count; ++t) {
+                OvSdfTriangle triangle = triangles[order[t]];
+                best = fmin(best, ov_row_distance2(&triangle, i0, j, k));
+            }
+            bound = ov_max8(best);
+        }
+        if (descend) continue;
+        while (top > 0 && ov_row_box_gap2(nodes + stack[top - 1], i0, j, k) > bound) --top;
+        if (top == 0) return best;
+        n = stack[--top];
+    }
 }
 #endif
 

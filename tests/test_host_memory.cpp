@@ -117,19 +117,25 @@ TEST(HostMemory, DistanceFieldOverBudgetIsRefusedBeforeAllocating) {
     expect_refused([&] { signed_distance(gpu, mesh, grid, options); }, names);
 }
 
-// 64^3 voxels: 2 MiB for a narrow band, 4 MiB for the reference's full grid (two buffers of
-// nearest triangles more), 2 MiB for the device's full grid (those live on the device).
-TEST(HostMemory, FullGridReferenceCountsItsFloodBuffers) {
+// 64^3 voxels at 8 bytes each: 2 MiB, for a narrow band and a full grid alike, on the device and
+// in the reference (the full grid's search keeps no per-voxel state beyond the distances).
+TEST(HostMemory, FullGridFieldNeedsWhatTheNarrowBandNeeds) {
     ScopedBudget unset(nullptr);
+    Device& gpu = device();  // opened before anything is measured
     const Mesh mesh = box_mesh({20, 20, 20}, {40, 40, 40});
     const Grid grid = unit_grid(64, 64, 64);
-    SdfOptions options;
-    options.host_budget_bytes = 3 * kMiB;
-    EXPECT_EQ(signed_distance_reference(mesh, grid, options).values.size(), grid.voxel_count());
-    options.full_grid = true;
-    expect_refused([&] { signed_distance_reference(mesh, grid, options); },
-                   {"64x64x64", "4 MiB", budget_of("3 MiB")});
-    EXPECT_EQ(signed_distance(device(), mesh, grid, options).values.size(), grid.voxel_count());
+    for (bool full : {false, true}) {
+        SdfOptions options;
+        options.full_grid = full;
+        options.host_budget_bytes = kMiB;
+        const std::vector<std::string> names = {"64x64x64", "2 MiB", budget_of("1 MiB")};
+        expect_refused([&] { signed_distance_reference(mesh, grid, options); }, names);
+        expect_refused([&] { signed_distance(gpu, mesh, grid, options); }, names);
+        options.host_budget_bytes = 3 * kMiB;
+        EXPECT_EQ(signed_distance_reference(mesh, grid, options).values.size(),
+                  grid.voxel_count());
+        EXPECT_EQ(signed_distance(gpu, mesh, grid, options).values.size(), grid.voxel_count());
+    }
 }
 
 // Grid 256^3 in 64^3 bricks (32 KiB each) around a box [1, 255]^3: parity may need every brick

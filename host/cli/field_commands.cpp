@@ -48,7 +48,7 @@ void add_distance_options(CLI::App& command, FieldArgs& args) {
         ->group("Distance");
     command
         .add_flag("--full", args.full,
-                  "distances in every voxel (jump flooding), not only in the narrow band")
+                  "exact distances in every voxel, not only in the narrow band")
         ->group("Distance");
 }
 

@@ -1,5 +1,5 @@
 // Progress of a run made of several phases of different kinds (a distance field's band pass,
-// jump-flooding passes and sign; a mesher's passes), reported through one ProgressCallback.
+// full-grid search and sign; a mesher's passes), reported through one ProgressCallback.
 #pragma once
 
 #include <chrono>

@@ -1,8 +1,9 @@
-// Distance fields: the host reference of the band and jump-flooding passes (the same shared math
-// and the same order-independent minima as kernels/sdf.cl, so the device must match it bit for
-// bit), the conversion to world units, the sign from the solid voxelization, and the runs of the
-// public functions (one field, or two combined by CSG) with their progress, on a device or on the
-// host.
+// Distance fields: the host reference of the band and far passes (the same shared math and the
+// same order-independent minima as kernels/sdf.cl, so the device must match it bit for bit), the
+// conversion to world units, the sign from the solid voxelization, and the runs of the public
+// functions (one field, or two combined by CSG) with their progress, on a device or on the host.
+#include <tbb/parallel_for.h>
+
 #include <chrono>
 #include <climits>
 #include <cmath>
@@ -25,60 +26,39 @@ size_t voxel_index(const Grid& grid, int i, int j, int k) {
     return size_t(i) + size_t(grid.dims[0]) * (size_t(j) + size_t(grid.dims[1]) * size_t(k));
 }
 
-// The band pass: per voxel the least squared distance below band2 and, for full-grid fields,
-// the lowest triangle index attaining it (what band_leaf_samples and band_nearest leave behind).
+// The band pass: per voxel the least squared distance below band2.
 void band_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float>& distance2,
-               std::vector<uint32_t>* nearest, ProgressPhases& progress, size_t phase) {
+               ProgressPhases& progress, size_t phase) {
     const uint64_t items = prepared.first_item.back();
     for (size_t index = 0; index < prepared.triangles.size(); ++index) {
         const OvSdfTriangle& t = prepared.triangles[index];
         for_each_near_block(t, prepared.band, [&](int bx, int by, int bz) {
             for_each_band_sample(t, bx, by, bz, prepared.band, prepared.band2,
                                  [&](int i, int j, int k, float d2) {
-                                     const size_t v = voxel_index(grid, i, j, k);
-                                     if (d2 < distance2[v]) {
-                                         distance2[v] = d2;
-                                         if (nearest) (*nearest)[v] = uint32_t(index);
-                                     } else if (nearest && d2 == distance2[v]) {
-                                         (*nearest)[v] = std::min((*nearest)[v], uint32_t(index));
-                                     }
+                                     float& sample = distance2[voxel_index(grid, i, j, k)];
+                                     sample = std::min(sample, d2);
                                  });
         });
         progress.report(phase, prepared.first_item[index + 1], items);
     }
 }
 
-// One jump-flooding pass, as the jump kernel: the nearest (lowest index on ties) of the triangles
-// known to the voxel itself and to its 26 neighbours `step` voxels away.
-void jump_pass(const SdfTriangles& prepared, const Grid& grid, int step,
-               const std::vector<uint32_t>& nearest_in, std::vector<uint32_t>& nearest_out,
-               std::vector<float>& distance2, ProgressPhases& progress, size_t phase) {
+// The far pass of full-grid fields, as the far_distances kernel: every voxel the band pass left
+// at band2 takes its least squared distance to all the triangles, from the tree. Layer by layer,
+// the rows of a layer in parallel.
+void far_pass(const SdfTriangles& prepared, const Grid& grid, std::vector<float>& distance2,
+              ProgressPhases& progress, size_t phase) {
+    const SdfTree tree = build_sdf_tree(prepared.triangles);
     const int nx = int(grid.dims[0]), ny = int(grid.dims[1]), nz = int(grid.dims[2]);
     for (int k = 0; k < nz; ++k) {
-        for (int j = 0; j < ny; ++j)
+        tbb::parallel_for(0, ny, [&](int j) {
             for (int i = 0; i < nx; ++i) {
-                const size_t v = voxel_index(grid, i, j, k);
-                uint32_t best = nearest_in[v];
-                float best_d2 = INFINITY;
-                if (best != kNoTriangle)
-                    best_d2 = ov_voxel_distance2(&prepared.triangles[best], i, j, k);
-                for (int dz = -1; dz <= 1; ++dz)
-                    for (int dy = -1; dy <= 1; ++dy)
-                        for (int dx = -1; dx <= 1; ++dx) {
-                            const int a = i + dx * step, b = j + dy * step, c = k + dz * step;
-                            if (a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz) continue;
-                            const uint32_t candidate = nearest_in[voxel_index(grid, a, b, c)];
-                            if (candidate == kNoTriangle || candidate == best) continue;
-                            const float d2 =
-                                ov_voxel_distance2(&prepared.triangles[candidate], i, j, k);
-                            if (d2 < best_d2 || (d2 == best_d2 && candidate < best)) {
-                                best = candidate;
-                                best_d2 = d2;
-                            }
-                        }
-                nearest_out[v] = best;
-                if (best != kNoTriangle) distance2[v] = best_d2;
+                float& sample = distance2[voxel_index(grid, i, j, k)];
+                if (!(sample < prepared.band2))
+                    sample = ov_tree_distance2(tree.nodes.data(), tree.order.data(),
+                                               prepared.triangles.data(), i, j, k);
             }
+        });
         progress.report(phase, uint64_t(k) + 1, uint64_t(nz));
     }
 }
@@ -99,8 +79,8 @@ void validate_sdf_options(const Grid& grid, const SdfOptions& options) {
                         std::to_string(grid.dims[2]) + " layers");
     if (options.full_grid && (options.first_layer != 0 || end != grid.dims[2]))
         throw GridError(
-            "a full-grid field cannot be computed in layers: jump flooding crosses "
-            "them (use a narrow band, or the whole grid)");
+            "a full-grid field cannot be computed in layers: its distances beyond the band "
+            "come from triangles that layers leave out (use a narrow band, or the whole grid)");
 }
 
 void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel) {
@@ -142,16 +122,6 @@ void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_la
     }
     prepared.triangles = std::move(kept);
     prepared.first_item = std::move(first_item);
-}
-
-std::vector<int> jump_steps(const Grid& grid) {
-    const int64_t longest = std::max({grid.dims[0], grid.dims[1], grid.dims[2]});
-    int step = 1;
-    while (int64_t(step) * 2 < longest) step *= 2;
-    std::vector<int> steps;
-    for (; step >= 1; step /= 2) steps.push_back(step);
-    steps.push_back(1);
-    return steps;
 }
 
 ScalarField distance_field(const Grid& grid, const SdfOptions& options,
@@ -203,13 +173,11 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_la
 SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
                          const SdfOptions& options, bool sign, bool sparse) {
     // Costs in band work items (a triangle and a 4x4x4 block), as measured through PoCL on spot
-    // and the Stanford bunny: the seeds pass about a third of the band pass (it only writes where
-    // the band pass found the minimum); a voxel of a jump pass one to four items (it weighs up to
-    // 27 candidates); the sign, whose cost follows the surface like the band's, about half the
-    // band with the winding number and far less with parity, which is not known before the solid
-    // voxelization picks it.
+    // and the Stanford bunny: a voxel of the far pass about ten items (a walk of the tree); the
+    // sign, whose cost follows the surface like the band's, about half the band with the winding
+    // number and far less with parity, which is not known before the solid voxelization picks it.
     // The leaves of a sparse field visit the band's items once more, without their samples.
-    constexpr double kLeavesCost = 0.2, kSeedsCost = 0.3, kJumpVoxelCost = 2.0, kSignCost = 0.5;
+    constexpr double kLeavesCost = 0.2, kFarVoxelCost = 10.0, kSignCost = 0.5;
     const double items = double(prepared.first_item.back());
     SdfPhases phases;
     if (sparse) {
@@ -221,12 +189,7 @@ SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared,
         return phases;
     }
     phases.band = progress.add(items);
-    if (options.full_grid) {
-        phases.seeds = progress.add(kSeedsCost * items);
-        phases.first_jump = progress.add(kJumpVoxelCost * double(grid.voxel_count()));
-        for (size_t pass = 1; pass < jump_steps(grid).size(); ++pass)
-            progress.add(kJumpVoxelCost * double(grid.voxel_count()));
-    }
+    if (options.full_grid) phases.far = progress.add(kFarVoxelCost * double(grid.voxel_count()));
     if (sign) phases.sign = progress.add(kSignCost * items);
     return phases;
 }
@@ -234,22 +197,12 @@ SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared,
 std::vector<float> distance2_reference(const SdfTriangles& prepared, const Grid& grid,
                                        const SdfOptions& options, ProgressPhases& progress,
                                        const SdfPhases& phases, VoxelizeStats& stats) {
-    // The band; then, for full-grid fields, the jump flood from it. The band pass finds the
-    // seeds as it goes.
+    // The band; then, for full-grid fields, every voxel beyond it from the tree.
     const auto t = Clock::now();
     std::vector<float> distance2(size_t(grid.voxel_count()), prepared.band2);
-    std::vector<uint32_t> nearest, scratch;
-    if (options.full_grid) nearest.assign(distance2.size(), kNoTriangle);
-    band_pass(prepared, grid, distance2, options.full_grid ? &nearest : nullptr, progress,
-              phases.band);
-    if (options.full_grid && !prepared.triangles.empty()) {
-        scratch.resize(nearest.size());
-        size_t phase = phases.first_jump;
-        for (int step : jump_steps(grid)) {
-            jump_pass(prepared, grid, step, nearest, scratch, distance2, progress, phase++);
-            nearest.swap(scratch);
-        }
-    }
+    band_pass(prepared, grid, distance2, progress, phases.band);
+    if (options.full_grid && !prepared.triangles.empty())
+        far_pass(prepared, grid, distance2, progress, phases.far);
     stats.seconds_kernels += seconds_since(t);
     return distance2;
 }
@@ -332,8 +285,7 @@ namespace {
 // host (the reference).
 struct OnDevice {
     Device& device;
-    // Host bytes per voxel: the squared distances and the field made from them (the flood's
-    // buffers of nearest triangles stay on the device).
+    // Host bytes per voxel: the squared distances and the field made from them.
     static uint64_t host_bytes_per_voxel(const SdfOptions&) { return 8; }
     std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
                                  const SdfOptions& options, ProgressPhases& progress,
@@ -344,10 +296,8 @@ struct OnDevice {
 };
 
 struct OnHost {
-    // The device's, plus two buffers of nearest triangles for a full-grid flood.
-    static uint64_t host_bytes_per_voxel(const SdfOptions& options) {
-        return options.full_grid ? 16 : 8;
-    }
+    // The device's.
+    static uint64_t host_bytes_per_voxel(const SdfOptions&) { return 8; }
     std::vector<float> distance2(const SdfTriangles& prepared, const Grid& grid,
                                  const SdfOptions& options, ProgressPhases& progress,
                                  const SdfPhases& phases, VoxelizeStats& stats) const {

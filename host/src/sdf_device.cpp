@@ -1,6 +1,6 @@
 // Distances on an OpenCL device: the band leaf by leaf as a sparse field's (sdf_sparse_device.cpp)
-// copied into a dense array of squared distances, and for full-grid fields the nearest-triangle
-// seeds over (triangle, block) work items and the jump-flooding passes. Same prepared triangles
+// copied into a dense array of squared distances, and for full-grid fields every voxel beyond the
+// band from the tree over the triangles (a work item a row of 8 voxels). Same prepared triangles
 // and shared math as the reference in sdf.cpp, so the result matches it bit for bit.
 #include <algorithm>
 #include <chrono>
@@ -16,8 +16,8 @@ std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared
                                     const SdfPhases& phases, VoxelizeStats& stats) {
     Device::Impl& cl = device_impl(device);
 
-    // Phase 1: a full-grid field's flood keeps the dense buffers on the device, so they must fit
-    // one allocation each. They are allocated once for the whole field, not per batch, so a device
+    // Phase 1: a full-grid field's far pass keeps the dense distances on the device, so they must
+    // fit one allocation. It is made once for the whole field, not per batch, so a device
     // allocation failure is a DeviceError: there is no smaller batch to retry with.
     const uint64_t voxels = grid.voxel_count();
     if (options.full_grid && voxels * sizeof(cl_uint) > cl.info.max_alloc)
@@ -50,60 +50,42 @@ std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared
         });
     if (!options.full_grid || prepared.triangles.empty()) return distance2;
 
-    // Runs `kernel` over n items in slices, its argument `base_arg` taking each slice's first
-    // item, reporting the slices as `phase` when anyone listens.
-    auto run = [&](cl::Kernel& kernel, cl_uint base_arg, uint64_t n, size_t phase) {
-        const size_t group = work_group_size(kernel, cl.device);
-        run_sliced(
-            cl.queue, n, group,
-            [&](uint64_t first, uint64_t count) {
-                kernel.setArg(base_arg, cl_ulong(first));
-                launch(cl.queue, kernel, count, group);
-            },
-            progress.reporter(phase));
-    };
-
     try {
         const cl::Program& program = cl.program(kKernel_sdf);
 
-        // Phase 3: triangles, item offsets and the band's distances up.
+        // Phase 3: the tree, its triangles and the band's distances up.
         t = Clock::now();
+        const SdfTree tree = build_sdf_tree(prepared.triangles);
+        stats.seconds_binning += seconds_since(t);
+        t = Clock::now();
+        const cl::Buffer nodes = upload(cl.context, cl.queue, tree.nodes);
+        const cl::Buffer order = upload(cl.context, cl.queue, tree.order);
         const cl::Buffer triangles = upload(cl.context, cl.queue, prepared.triangles);
-        const std::vector<cl_ulong> first_item(prepared.first_item.begin(),
-                                               prepared.first_item.end());
-        const cl::Buffer first = upload(cl.context, cl.queue, first_item);
         cl::Buffer distance(cl.context, CL_MEM_READ_WRITE, size_t(voxels) * sizeof(cl_uint));
         cl.queue.enqueueWriteBuffer(distance, CL_TRUE, 0, size_t(voxels) * sizeof(cl_uint),
                                     distance2.data());
         stats.seconds_upload += seconds_since(t);
 
-        // Phase 4: the seeds (the lowest triangle attaining each band voxel's minimum), then the
-        // jump flood ping-ponging the nearest triangles.
+        // Phase 4: every voxel beyond the band from the tree, a row of 8 along x per work item,
+        // in slices.
         t = Clock::now();
-        const uint64_t items = prepared.first_item.back();
-        cl::Buffer nearest(cl.context, CL_MEM_READ_WRITE, size_t(voxels) * sizeof(cl_uint));
-        cl::Buffer scratch(cl.context, CL_MEM_READ_WRITE, size_t(voxels) * sizeof(cl_uint));
-        cl.queue.enqueueFillBuffer(nearest, cl_uint(kNoTriangle), 0,
-                                   size_t(voxels) * sizeof(cl_uint));
-        cl::Kernel seeds(program, "band_nearest");
-        set_args(seeds, 0, triangles, first, cl_uint(prepared.triangles.size()), cl_ulong(0),
-                 cl_ulong(items), prepared.band, prepared.band2, cl_int(grid.dims[0]),
-                 cl_int(grid.dims[1]), distance, nearest);
-        run(seeds, 3, items, phases.seeds);
-
-        cl::Kernel jump(program, "jump");
-        size_t phase = phases.first_jump;
-        for (int step : jump_steps(grid)) {
-            set_args(jump, 0, triangles, nearest, cl_ulong(0), cl_ulong(voxels), cl_int(step),
-                     cl_int(grid.dims[0]), cl_int(grid.dims[1]), cl_int(grid.dims[2]), scratch,
-                     distance);
-            run(jump, 2, voxels, phase++);
-            std::swap(nearest, scratch);
-        }
+        cl::Kernel far(program, "far_distances");
+        const uint64_t rows =
+            uint64_t((grid.dims[0] + 7) / 8) * uint64_t(grid.dims[1]) * uint64_t(grid.dims[2]);
+        set_args(far, 0, nodes, order, triangles, cl_ulong(0), cl_ulong(rows), cl_int(grid.dims[0]),
+                 cl_int(grid.dims[1]), prepared.band2, distance);
+        const size_t group = work_group_size(far, cl.device);
+        run_sliced(
+            cl.queue, rows, group,
+            [&](uint64_t first, uint64_t count) {
+                far.setArg(3, cl_ulong(first));
+                launch(cl.queue, far, count, group);
+            },
+            progress.reporter(phases.far));
         cl.queue.finish();
         stats.seconds_kernels += seconds_since(t);
 
-        // Phase 5: the squared distances back (float bits, as the kernels stored them).
+        // Phase 5: the squared distances back (float bits, as the kernel stored them).
         t = Clock::now();
         cl.queue.enqueueReadBuffer(distance, CL_TRUE, 0, size_t(voxels) * sizeof(cl_uint),
                                    distance2.data());

@@ -1,5 +1,5 @@
 // What the distance-field reference (sdf.cpp) and the device path (sdf_device.cpp) share: the
-// prepared triangles with their work items, the jump-flooding schedule, the progress phases, the
+// prepared triangles with their work items, the tree full grids search, the progress phases, the
 // squared distances each side computes and the final conversion from them to a field.
 #pragma once
 
@@ -17,9 +17,6 @@
 #include "timing.hpp"
 
 namespace oclvox::detail {
-
-// "No triangle" in the nearest-triangle buffers.
-constexpr uint32_t kNoTriangle = 0xffffffffu;
 
 // The triangles that can come within the band of a grid voxel centre, and their work items: one
 // per (triangle, 4x4x4 block aligned to multiples of 4) overlapping the triangle's voxel range,
@@ -85,15 +82,20 @@ void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_la
 // from every voxel centre and computes each one's distance constants (sdf_prepare.cpp).
 SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double band_voxels);
 
-// Jump-flooding step lengths: powers of two from the largest below the longest grid axis down
-// to 1, then 1 again (JFA+1).
-std::vector<int> jump_steps(const Grid& grid);
+// The tree over the prepared triangles that full-grid fields search beyond the band
+// (sdf_tree.cpp; walked by ov_tree_distance2): its nodes, depth first, and the triangle indices
+// its leaves hold, leaf by leaf. Empty for no triangles.
+struct SdfTree {
+    std::vector<OvSdfNode> nodes;
+    std::vector<uint32_t> order;
+};
+SdfTree build_sdf_tree(const std::vector<OvSdfTriangle>& triangles);
 
 // The progress phases of one distance field, in the order they run: the band pass, for full-grid
-// fields the nearest-triangle seeds and each jump-flooding pass, for signed fields the sign (the
-// solid voxelization); for sparse fields the leaves, the sign, then the band.
+// fields the search beyond the band, for signed fields the sign (the solid voxelization); for
+// sparse fields the leaves, the sign, then the band.
 struct SdfPhases {
-    size_t leaves = 0, band = 0, seeds = 0, first_jump = 0, sign = 0;
+    size_t leaves = 0, band = 0, far = 0, sign = 0;
 };
 
 // Adds them to `progress`, weighted by their estimated cost (see sdf.cpp).
@@ -117,10 +119,10 @@ FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& option
                     bool sparse, ProgressPhases& progress, VoxelizeStats& stats);
 
 // The squared distances in voxels of every voxel centre to its nearest prepared triangle, below
-// band2 (else band2), for full-grid fields everywhere; float, as the kernels compute them.
-// Reports the band, seeds and jump phases. The device (sdf_device.cpp: the band leaf by leaf, as
-// a sparse field's) and the host reference (sdf.cpp: every triangle's band samples scattered)
-// return the same values bit for bit; stats get their timings.
+// band2 (else band2), for full-grid fields everywhere (beyond the band from the tree); float, as
+// the kernels compute them. Reports the band and far phases. The device (sdf_device.cpp: the band
+// leaf by leaf, as a sparse field's) and the host reference (sdf.cpp: every triangle's band samples
+// scattered) return the same values bit for bit; stats get their timings.
 std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared, const Grid& grid,
                                     const SdfOptions& options, ProgressPhases& progress,
                                     const SdfPhases& phases, VoxelizeStats& stats);

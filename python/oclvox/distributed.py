@@ -224,7 +224,8 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
     (narrow band: a Field, or with sparse=True a SparseField), bit for bit.
 
     options: sdf's (band, inside, grid options, brick_size, reference, sparse); full_grid is
-    refused, because jump flooding carries distances across the whole grid. The grid's z layers
+    refused, because a full grid's distances beyond the band come from triangles a slab leaves
+    out. The grid's z layers
     are cut into slabs of `shard_layers` layers (default: about four slabs per worker, a multiple
     of brick_size so that no brick of the sign's solid is computed twice, and with sparse=True of
     8, the leaves' size, which shard_layers must then be too); each slab is one task,
@@ -239,8 +240,8 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
     cancels (oclvox.Cancelled), and the slabs not yet finished are cancelled on the cluster.
     """
     if options.get("full_grid"):
-        raise ValueError("sdf_sharded computes narrow-band fields only: full_grid's jump "
-                         "flooding crosses every layer (use oclvox.sdf)")
+        raise ValueError("sdf_sharded computes narrow-band fields only: a full grid's distances "
+                         "beyond the band come from triangles a slab leaves out (use oclvox.sdf)")
     options.pop("full_grid", None)
     unknown = sorted(set(options) - _SDF_OPTIONS)
     if unknown:

@@ -18,7 +18,7 @@ struct SdfOptions {
     // Half-width of the band of exact distances, in voxels (> 0). Narrow-band fields hold
     // +-band * voxel_size outside it.
     double band_voxels = 3.0;
-    // Extend the distances from the band to every voxel (jump flooding, see signed_distance).
+    // Exact distances in every voxel, not only in the band (see signed_distance).
     bool full_grid = false;
     // How the sign decides "inside" (the Solid voxelization's test).
     InsideTest inside = InsideTest::Auto;
@@ -31,14 +31,15 @@ struct SdfOptions {
     // field (signed_distance_sparse; layers at multiples of 8, the leaves' size) keeps the whole
     // grid but holds only the leaves and inside voxels of those layers, the whole field's bit
     // for bit, and fields of disjoint ranges merge (SparseField::merge) into the whole field.
-    // Narrow-band fields only: jump flooding (full_grid) crosses layers.
+    // Narrow-band fields only: a full grid's distances beyond the band come from triangles that
+    // layers leave out.
     int64_t first_layer = 0, end_layer = 0;
     // Called as the work goes on (at most about every 0.05 s, and once more at the end with
     // done == total); return false to cancel (the run throws Cancelled). A run's phases (the band
-    // pass, each jump-flooding pass, the sign's solid voxelization; both fields of a CSG) count
-    // in different units, so done / total is the fraction of the run's estimated work: total is
-    // always 1,000,000 and done never goes back. On a device, kernels run in slices of about
-    // 0.1 s while a callback is set, so a cancel takes effect within about that long.
+    // pass, the full grid's search beyond it, the sign's solid voxelization; both fields of a CSG)
+    // count in different units, so done / total is the fraction of the run's estimated work: total
+    // is always 1,000,000 and done never goes back. On a device, kernels run in slices of about 0.1
+    // s while a callback is set, so a cancel takes effect within about that long.
     ProgressCallback progress;
     // Host memory for the dense field and its working copies (checked before they are
     // allocated), and for the solid voxelization that gives the sign. 0: $OCLVOX_HOST_MEMORY_MIB
@@ -64,21 +65,18 @@ int64_t field_padding(double band_voxels);
 // grid is), and rounded once to float in world units. Outside the band a narrow-band field holds
 // band_voxels * voxel_size.
 //
-// full_grid: jump flooding (Rong & Tan 2006, with one extra pass of step 1, "JFA+1") carries
-// the nearest triangle of each band voxel outwards, and every voxel takes the exact distance to
-// the best triangle its neighbours know about. Every value is therefore the exact distance to a
-// real triangle of the mesh: never below the true distance, exact in the band, and beyond it
-// wrong only where jump flooding's known failure (a triangle's region of nearest voxels cut in
-// two by the step pattern) picks a near-nearest triangle; the tests bound the measured error.
-// Only triangles within the band of the grid box seed the flood, so a mesh part farther outside
-// the grid than the band cannot be nearest to anything.
+// full_grid: every voxel beyond the band takes its distance to the nearest of all the prepared
+// triangles, found by a walk of a tree of boxes over them that passes over boxes farther than
+// the nearest triangle found so far (the same float distance as in the band, so the field is
+// exact everywhere). Only triangles within the band of the grid box are prepared, so a mesh part
+// farther outside the grid than the band cannot be nearest to anything.
 //
 // stats: triangles_in, triangles_used (those within the band of the grid), work_items (the
 // (triangle, 4x4x4 block) items of the band pass) and the seconds_* timings.
 //
 // The device result equals unsigned_distance_reference bit for bit. Throws GridError for bad
-// options or a grid whose dense field (8 bytes per voxel on the host, 16 for the reference's
-// full grid) does not fit the host memory budget or the device, before allocating it;
+// options or a grid whose dense field (8 bytes per voxel on the host) does not fit the host
+// memory budget or the device, before allocating it;
 // DeviceError on OpenCL failures.
 ScalarField unsigned_distance(Device& device, const Mesh& mesh, const Grid& grid,
                               const SdfOptions& options, VoxelizeStats* stats = nullptr);
