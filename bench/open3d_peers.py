@@ -30,37 +30,13 @@ and the median is reported:
 import argparse
 import json
 import os
-import re
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
 
-
-def run_timed(command):
-    """Whole-process wall seconds and the command's standard output."""
-    start = time.perf_counter()
-    done = subprocess.run(command, check=True, capture_output=True, text=True)
-    return time.perf_counter() - start, done.stdout
-
-
-def stat_seconds(stdout, name):
-    """A line of oclvox's --stats timing block, e.g. '  voxelize   1.234'."""
-    match = re.search(rf"^\s*{name}\s+([0-9.]+)", stdout, re.M)
-    return float(match.group(1)) if match else float("nan")
-
-
-def timed_call(f):
-    start = time.perf_counter()
-    result = f()
-    return time.perf_counter() - start, result
-
-
-def median(values):
-    return statistics.median(values) if values else float("nan")
+from peer_timing import median, run_timed, stat_seconds, timed_call
 
 
 def read_npy(path):

@@ -132,8 +132,7 @@ TEST(HostMemory, FullGridFieldNeedsWhatTheNarrowBandNeeds) {
         expect_refused([&] { signed_distance_reference(mesh, grid, options); }, names);
         expect_refused([&] { signed_distance(gpu, mesh, grid, options); }, names);
         options.host_budget_bytes = 3 * kMiB;
-        EXPECT_EQ(signed_distance_reference(mesh, grid, options).values.size(),
-                  grid.voxel_count());
+        EXPECT_EQ(signed_distance_reference(mesh, grid, options).values.size(), grid.voxel_count());
         EXPECT_EQ(signed_distance(gpu, mesh, grid, options).values.size(), grid.voxel_count());
     }
 }
