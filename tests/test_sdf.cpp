@@ -292,6 +292,31 @@ TEST(Sdf, FullGridDistancesAreExactEverywhere) {
     }
 }
 
+// A full grid is exact for a user-given grid that cuts the mesh, or misses it: triangles farther
+// outside the grid than the band are kept for the search beyond the band (a narrow band drops
+// them). Here a sphere lies wholly outside the grid, 9 voxels off its face, and a second one
+// crosses the face.
+TEST(Sdf, FullGridDistancesAreExactForMeshesOutsideTheGrid) {
+    Grid g;
+    g.dims = {20, 18, 16};
+    Mesh m = icosphere({30, 9, 8}, 1.0, 2);
+    const Mesh crossing = icosphere({-1, 4, 12}, 3.0, 1);
+    for (const auto& t : crossing.triangles)
+        m.triangles.push_back({t[0] + uint32_t(m.positions.size()),
+                               t[1] + uint32_t(m.positions.size()),
+                               t[2] + uint32_t(m.positions.size())});
+    m.positions.insert(m.positions.end(), crossing.positions.begin(), crossing.positions.end());
+    for (const Mesh& mesh : {icosphere({30, 9, 8}, 1.0, 2), m}) {
+        const ScalarField f = unsigned_distance(device(), mesh, g, band(2.0, true));
+        expect_identical(f, unsigned_distance_reference(mesh, g, band(2.0, true)));
+        const std::vector<double> exact = brute_force_distance(mesh, g);
+        double worst = 0;
+        for (size_t v = 0; v < exact.size(); ++v)
+            worst = std::max(worst, std::abs(f.values[v] - exact[v]) / g.voxel_size);
+        EXPECT_LT(worst, 1e-4);
+    }
+}
+
 TEST(Sdf, FarMeshLeavesTheWholeNarrowBandGridAtTheBand) {
     const Mesh m = icosphere({50, 50, 50}, 1.0, 1);
     Grid g;

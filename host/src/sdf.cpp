@@ -268,7 +268,8 @@ FieldJob plan_field(const Mesh& mesh, const Grid& grid, const SdfOptions& option
     const auto t = Clock::now();
     // Prepared on the whole grid, then cut to the layers (so every sample keeps its bits); a
     // sparse field keeps the whole grid's coordinates.
-    FieldJob job{mesh, prepare_sdf_triangles(mesh, grid, options.band_voxels), {}};
+    FieldJob job{
+        mesh, prepare_sdf_triangles(mesh, grid, options.band_voxels, options.full_grid), {}};
     keep_layers(job.prepared, options, !sparse);
     job.phases =
         add_sdf_phases(progress, job.prepared, field_grid(grid, options), options, sign, sparse);

@@ -31,7 +31,10 @@ struct SdfTriangles {
 // range overlaps.
 inline uint64_t item_count(const OvSdfTriangle& t) {
     uint64_t blocks = 1;
-    for (int k = 0; k < 3; ++k) blocks *= uint64_t(t.hi[k] / 4 - t.lo[k] / 4 + 1);
+    for (int k = 0; k < 3; ++k) {
+        if (t.lo[k] > t.hi[k]) return 0;  // no voxel within the band (kept for a full grid)
+        blocks *= uint64_t(t.hi[k] / 4 - t.lo[k] / 4 + 1);
+    }
     return blocks;
 }
 
@@ -79,8 +82,11 @@ Grid field_grid(const Grid& grid, const SdfOptions& options);
 void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_layers);
 
 // Validates mesh and grid, maps the triangles to voxel units, drops those farther than the band
-// from every voxel centre and computes each one's distance constants (sdf_prepare.cpp).
-SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double band_voxels);
+// from every voxel centre (unless `every_triangle`: a full grid's voxels beyond the band may be
+// nearest to any triangle; those are kept with an empty voxel range, lo > hi, and no work items)
+// and computes each one's distance constants (sdf_prepare.cpp).
+SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double band_voxels,
+                                   bool every_triangle = false);
 
 // The tree over the prepared triangles that full-grid fields search beyond the band
 // (sdf_tree.cpp; walked by ov_tree_distance2): its nodes, depth first, and the triangle indices

@@ -65,7 +65,8 @@ void set_constants(OvSdfTriangle& t) {
 
 }  // namespace
 
-SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double band_voxels) {
+SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double band_voxels,
+                                   bool every_triangle) {
     validate_mesh(mesh);
     validate_grid(grid);
     SdfTriangles out;
@@ -102,7 +103,7 @@ SdfTriangles prepare_sdf_triangles(const Mesh& mesh, const Grid& grid, double ba
             t.hi[k] = int(last);
             t.anchor[k] = int(std::floor(lo));
         }
-        if (empty) continue;
+        if (empty && !every_triangle) continue;
 
         // Phase 3: the single rounding to float, then the constants.
         for (int i = 0; i < 3; ++i)

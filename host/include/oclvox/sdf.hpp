@@ -68,11 +68,10 @@ int64_t field_padding(double band_voxels);
 // full_grid: every voxel beyond the band takes its distance to the nearest of all the prepared
 // triangles, found by a walk of a tree of boxes over them that passes over boxes farther than
 // the nearest triangle found so far (the same float distance as in the band, so the field is
-// exact everywhere). Only triangles within the band of the grid box are prepared, so a mesh part
-// farther outside the grid than the band cannot be nearest to anything.
+// exact everywhere, also where the nearest triangle lies outside a user-given grid).
 //
-// stats: triangles_in, triangles_used (those within the band of the grid), work_items (the
-// (triangle, 4x4x4 block) items of the band pass) and the seconds_* timings.
+// stats: triangles_in, triangles_used (those within the band of the grid; for a full grid all),
+// work_items (the (triangle, 4x4x4 block) items of the band pass) and the seconds_* timings.
 //
 // The device result equals unsigned_distance_reference bit for bit. Throws GridError for bad
 // options or a grid whose dense field (8 bytes per voxel on the host) does not fit the host
