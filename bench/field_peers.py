@@ -28,7 +28,7 @@ import tempfile
 
 import numpy as np
 
-from peer_timing import median, run_timed, stat_seconds, timed_call
+from peer_timing import cell, emit_table, median, run_timed, stat_seconds, timed_call
 
 
 def read_off(path):
@@ -120,9 +120,6 @@ def main():
                     t["skimage"].append(seconds)
             rows.append((res, dims, {k: median(v) for k, v in t.items()}))
 
-    def cell(x):
-        return "-" if x != x else f"{x:.3f}"
-
     table = [
         f"{os.path.basename(args.mesh)}, band {args.band:g}, {cores} cores, median of "
         f"{args.repeat} interleaved runs, seconds",
@@ -142,11 +139,7 @@ def main():
                      f"{res}: SN {cell(m['sn_proc'])} / MC {cell(m['mc_proc'])}"
                      for res, _, m in rows) + " s (reading the .vdb and writing the .ply "
                  "included).")
-    text = "\n".join(table)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text + "\n")
+    emit_table(table, args.out)
 
 
 if __name__ == "__main__":

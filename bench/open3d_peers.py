@@ -36,7 +36,7 @@ import tempfile
 
 import numpy as np
 
-from peer_timing import median, run_timed, stat_seconds, timed_call
+from peer_timing import cell, emit_table, median, run_timed, stat_seconds, timed_call
 
 
 def read_npy(path):
@@ -116,8 +116,20 @@ def contact(vertices, faces, grid, voxels):
     return counts
 
 
-def cell(x, digits=3):
-    return "-" if x != x else f"{x:.{digits}f}"
+def interleaved(command, stat, peer, repeat):
+    """Runs `command` (oclvox, writing the .npy at its "-o") and then times `peer(grid)` on the
+    grid it wrote, `repeat` times by turns. Returns the medians (the process, its --stats line
+    `stat`, the peer's call) and the last run's array, grid and peer result."""
+    npy = command[command.index("-o") + 1]
+    t = {k: [] for k in ("process", "stat", "peer")}
+    for _ in range(repeat):
+        seconds, out = run_timed(command)
+        t["process"].append(seconds)
+        t["stat"].append(stat_seconds(out, stat))
+        ours, grid = read_npy(npy)
+        seconds, theirs = timed_call(lambda: peer(grid))
+        t["peer"].append(seconds)
+    return {k: median(v) for k, v in t.items()}, ours, grid, theirs
 
 
 def main():
@@ -164,18 +176,15 @@ def main():
             for res in args.surface_res:
                 command = [args.oclvox, "voxelize", path, "-r", str(res), "-o", npy, "--quiet",
                            "--stats"]
-                t = {k: [] for k in ("call", "open3d")}
-                for _ in range(args.repeat):
-                    _, out = run_timed(command)
-                    t["call"].append(stat_seconds(out, "voxelize"))
-                    ours, grid = read_npy(npy)
+
+                def voxel_grid(grid):
                     origin = np.array(grid["origin"], dtype=np.float64)
                     voxel = float(grid["voxel_size"])
                     top = origin + np.array(grid["dims"]) * voxel
-                    seconds, theirs = timed_call(
-                        lambda: o3d.geometry.VoxelGrid.create_from_triangle_mesh_within_bounds(
-                            mesh, voxel, origin, top))
-                    t["open3d"].append(seconds)
+                    return o3d.geometry.VoxelGrid.create_from_triangle_mesh_within_bounds(
+                        mesh, voxel, origin, top)
+
+                m, ours, grid, theirs = interleaved(command, "voxelize", voxel_grid, args.repeat)
                 index = np.array([v.grid_index for v in theirs.get_voxels()], dtype=np.int64)
                 index = index[np.all((index >= 0) & (index < np.array(grid["dims"])), axis=1)]
                 theirs_dense = np.zeros(ours.shape, dtype=bool)
@@ -190,8 +199,7 @@ def main():
                 sample = only[np.random.default_rng(1).permutation(len(only))[:args.classify]]
                 met = contact(np.asarray(mesh.vertices), np.asarray(mesh.triangles), grid,
                               sample)
-                surface_rows.append((os.path.basename(path), res, {k: median(v) for k, v in
-                                                                  t.items()},
+                surface_rows.append((os.path.basename(path), res, m,
                                      int(ours.sum()), int(theirs_dense.sum()),
                                      int((ours & ~theirs_dense).sum()),
                                      int((theirs_dense & ~ours).sum()),
@@ -205,39 +213,26 @@ def main():
         for res in args.field_res:
             solid = [args.oclvox, "voxelize", args.field_mesh, "-r", str(res), "--mode", "solid",
                      "-o", npy, "--quiet", "--stats"]
-            t = {k: [] for k in ("call", "process", "open3d")}
-            for _ in range(args.repeat):
-                seconds, out = run_timed(solid)
-                t["process"].append(seconds)
-                t["call"].append(stat_seconds(out, "voxelize"))
-                ours, grid = read_npy(npy)
-                points = voxel_centres(grid)
-                seconds, theirs = timed_call(lambda: scene.compute_occupancy(points).numpy())
-                t["open3d"].append(seconds)
+            m, ours, grid, theirs = interleaved(
+                solid, "voxelize",
+                lambda grid: scene.compute_occupancy(voxel_centres(grid)).numpy(), args.repeat)
             ours = ours.astype(bool).ravel(order="F")
             theirs = theirs.astype(bool)
-            solid_rows.append((res, "x".join(map(str, grid["dims"])),
-                               {k: median(v) for k, v in t.items()}, int(ours.sum()),
+            solid_rows.append((res, "x".join(map(str, grid["dims"])), m, int(ours.sum()),
                                int(theirs.sum()), int((ours != theirs).sum())))
             print(solid_rows[-1], file=sys.stderr)
 
             sdf = [args.oclvox, "sdf", args.field_mesh, "-r", str(res), "--full", "-o", npy,
                    "--quiet", "--stats"]
-            t = {k: [] for k in ("field", "process", "open3d")}
-            for _ in range(args.repeat):
-                seconds, out = run_timed(sdf)
-                t["process"].append(seconds)
-                t["field"].append(stat_seconds(out, "field"))
-                ours, grid = read_npy(npy)
-                points = voxel_centres(grid)
-                seconds, theirs = timed_call(lambda: scene.compute_signed_distance(points).numpy())
-                t["open3d"].append(seconds)
+            m, ours, grid, theirs = interleaved(
+                sdf, "field",
+                lambda grid: scene.compute_signed_distance(voxel_centres(grid)).numpy(),
+                args.repeat)
             voxel = float(grid["voxel_size"])
             ours = ours.ravel(order="F") / voxel
             theirs = theirs / voxel
             near = np.abs(theirs) <= 3
-            field_rows.append((res, "x".join(map(str, grid["dims"])),
-                               {k: median(v) for k, v in t.items()},
+            field_rows.append((res, "x".join(map(str, grid["dims"])), m,
                                float(np.abs(np.abs(ours[near]) - np.abs(theirs[near])).max()),
                                float(np.abs(np.abs(ours) - np.abs(theirs)).max()),
                                int((np.sign(ours) != np.sign(theirs)).sum())))
@@ -254,7 +249,7 @@ def main():
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, res, m, n_ours, n_theirs, only_ours, only_theirs, half_open, met in surface_rows:
-        table.append(f"| {name} | {res} | {cell(m['call'])} | {cell(m['open3d'])} | "
+        table.append(f"| {name} | {res} | {cell(m['stat'])} | {cell(m['peer'])} | "
                      f"{n_ours} / {n_theirs} | {only_ours} | {only_theirs} | {half_open} | "
                      f"{met} |")
     name = os.path.basename(args.field_mesh)
@@ -265,8 +260,8 @@ def main():
         "|---:|---|---:|---:|---:|---:|---:|",
     ]
     for res, dims, m, n_ours, n_theirs, differ in solid_rows:
-        table.append(f"| {res} | {dims} | {cell(m['call'])} | {cell(m['process'])} | "
-                     f"{cell(m['open3d'])} | {n_ours} / {n_theirs} | {differ} |")
+        table.append(f"| {res} | {dims} | {cell(m['stat'])} | {cell(m['process'])} | "
+                     f"{cell(m['peer'])} | {n_ours} / {n_theirs} | {differ} |")
     table += [
         "",
         f"| {name} SDF, every voxel | grid | oclvox sdf --full field phase | oclvox whole process"
@@ -275,13 +270,9 @@ def main():
         "|---:|---|---:|---:|---:|---:|---:|",
     ]
     for res, dims, m, near, anywhere, signs in field_rows:
-        table.append(f"| {res} | {dims} | {cell(m['field'])} | {cell(m['process'])} | "
-                     f"{cell(m['open3d'])} | {near:.2g} / {anywhere:.2g} | {signs} |")
-    text = "\n".join(table)
-    print(text)
-    if args.out:
-        with open(args.out, "w") as f:
-            f.write(text + "\n")
+        table.append(f"| {res} | {dims} | {cell(m['stat'])} | {cell(m['process'])} | "
+                     f"{cell(m['peer'])} | {near:.2g} / {anywhere:.2g} | {signs} |")
+    emit_table(table, args.out)
 
 
 if __name__ == "__main__":

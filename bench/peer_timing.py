@@ -1,4 +1,5 @@
-"""Timing helpers the side-by-side benchmarks share (field_peers.py, open3d_peers.py)."""
+"""Timing and reporting helpers the side-by-side benchmarks share (field_peers.py,
+open3d_peers.py)."""
 import re
 import statistics
 import subprocess
@@ -27,3 +28,17 @@ def timed_call(f):
 
 def median(values):
     return statistics.median(values) if values else float("nan")
+
+
+def cell(x, digits=3):
+    """A table cell of seconds; '-' for NaN (a peer that did not run)."""
+    return "-" if x != x else f"{x:.{digits}f}"
+
+
+def emit_table(lines, out=None):
+    """Prints the Markdown lines, and also writes them to `out` when given."""
+    text = "\n".join(lines)
+    print(text)
+    if out:
+        with open(out, "w") as f:
+            f.write(text + "\n")

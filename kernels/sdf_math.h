@@ -154,6 +154,19 @@ OV_SDF_FN float ov_box_gap2(OV_SDF_GLOBAL const OvSdfNode* node, int i, int j, i
     return gap2 * 0.9999f;
 }
 
+// Orders an inner node's two children (and their gaps) so that the walk enters the closer first.
+OV_SDF_FN void ov_closer_first(unsigned int* closer, unsigned int* farther, float* closer_gap,
+                               float* farther_gap) {
+    if (*farther_gap < *closer_gap) {
+        unsigned int node = *closer;
+        *closer = *farther;
+        *farther = node;
+        float gap = *closer_gap;
+        *closer_gap = *farther_gap;
+        *farther_gap = gap;
+    }
+}
+
 // Deepest tree ov_tree_distance2 can walk: its stack holds one node per level. The tree is split
 // at medians, so 2^32 triangles make fewer than 33 levels.
 #define OV_SDF_TREE_DEPTH 64
@@ -178,14 +191,7 @@ OV_SDF_FN float ov_tree_distance2(OV_SDF_GLOBAL const OvSdfNode* nodes,
             unsigned int closer = n + 1, farther = nodes[n + 1].skip;
             float closer_gap = ov_box_gap2(nodes + closer, i, j, k);
             float farther_gap = ov_box_gap2(nodes + farther, i, j, k);
-            if (farther_gap < closer_gap) {
-                unsigned int swap = closer;
-                closer = farther;
-                farther = swap;
-                float swap_gap = closer_gap;
-                closer_gap = farther_gap;
-                farther_gap = swap_gap;
-            }
+            ov_closer_first(&closer, &farther, &closer_gap, &farther_gap);
             if (closer_gap <= best) {
                 if (farther_gap <= best) stack[top++] = farther;
                 n = closer;
@@ -284,14 +290,7 @@ OV_SDF_FN float8 ov_tree_row_distance2(__global const OvSdfNode* nodes,
             unsigned int closer = n + 1, farther = nodes[n + 1].skip;
             float closer_gap = ov_row_box_gap2(nodes + closer, i0, j, k);
             float farther_gap = ov_row_box_gap2(nodes + farther, i0, j, k);
-            if (farther_gap < closer_gap) {
-                unsigned int swap = closer;
-                closer = farther;
-                farther = swap;
-                float swap_gap = closer_gap;
-                closer_gap = farther_gap;
-                farther_gap = swap_gap;
-            }
+            ov_closer_first(&closer, &farther, &closer_gap, &farther_gap);
             if (closer_gap <= bound) {
                 if (farther_gap <= bound) stack[top++] = farther;
                 n = closer;

@@ -43,8 +43,7 @@ class PositionNumbering {
         }
     }
 
-    // The positions by number, each as it was first offered.
-    const std::vector<Position>& positions() const { return positions_; }
+    // The positions by number, each as it was first offered (the numbering is done with them).
     std::vector<Position> take_positions() { return std::move(positions_); }
 
   private:
