@@ -402,6 +402,38 @@ EOF_PY
 [[ "$verdict" == ok* ]] &&
     pass "csg: sparse narrow band equals the dense full grid in the band; .vdb holds it ($verdict)" ||
     fail "csg: sparse narrow band vs dense full grid" "$verdict"
+
+# A full grid to .npy is computed and written a slab of layers at a time (8 layers under a 1 MiB
+# host budget), without the whole field in memory; with --mesh it is computed whole. The same
+# file bit for bit, the same sidecar but for its name, and the same report of the border and of
+# the inside voxels. The same for csg, against one slab (the default budget).
+OCLVOX_HOST_MEMORY_MIB=1 "$OCLVOX" sdf "$MESH" -r 64 --full -q -o "$WORK/slabs.npy" \
+    --stats-json "$WORK/slabs.json"
+"$OCLVOX" sdf "$MESH" -r 64 --full -q -o "$WORK/whole.npy" --mesh "$WORK/whole.obj" \
+    --stats-json "$WORK/whole.json"
+OCLVOX_HOST_MEMORY_MIB=1 "$OCLVOX" csg "$MESH" union "$WORK/spot_moved.obj" -r 48 --full -q \
+    -o "$WORK/csg_slabs.npy" --stats-json "$WORK/csg_slabs.json"
+"$OCLVOX" csg "$MESH" union "$WORK/spot_moved.obj" -r 48 --full -q \
+    -o "$WORK/csg_whole.npy" --stats-json "$WORK/csg_whole.json"
+verdict=$(python3 - "$WORK" <<'EOF_PY' 2>&1
+import json, sys
+work = sys.argv[1]
+for slabs, whole in (("slabs", "whole"), ("csg_slabs", "csg_whole")):
+    a, b = (open(f"{work}/{n}.npy", "rb").read() for n in (slabs, whole))
+    assert len(a) > 20 * 20 * 20 * 4 and a == b, f"{slabs}.npy differs"
+    sa, sb = (json.load(open(f"{work}/{n}.npy.json")) for n in (slabs, whole))
+    sa.pop("file"), sb.pop("file")
+    assert sa == sb, (sa, sb)
+    ra, rb = (json.load(open(f"{work}/{n}.json")) for n in (slabs, whole))
+    for key in ("border_samples_inside", "voxels_set", "triangles"):
+        assert ra[key] == rb[key], (key, ra[key], rb[key])
+    assert ra["voxels_set"] > 0
+print("ok")
+EOF_PY
+)
+[ "$verdict" = ok ] && pass "sdf/csg --full to .npy in slabs: the whole field's files and report" ||
+    fail "sdf/csg --full in slabs" "$verdict"
+
 # .vdb level sets are read sparse: the sdf's .vdb meshes to the very file `sdf --mesh` wrote, and
 # two .vdb fields on the csg's grid combine to the very samples the csg of the meshes gave.
 run sdf "$MESH" -r 32 -q -o "$WORK/level_set.vdb" --mesh "$WORK/level_set_direct.obj"

@@ -429,7 +429,59 @@ TEST(SdfLayers, LayerFieldsStackIntoTheWholeField) {
     expect_identical(a, whole);
 }
 
-TEST(SdfLayers, BadLayerRangesAndFullGridLayersAreRefused) {
+// A full grid in layers: every slab searches all the triangles beyond the band, also the slabs
+// that no triangle's band reaches (the sphere sits in the grid's lower third), so the slabs stack
+// into the whole full-grid field bit for bit, signed and unsigned, on the device and the
+// reference, and every sample is the exact distance.
+TEST(SdfLayers, FullGridLayerFieldsStackIntoTheWholeFieldAlsoFarFromTheMesh) {
+    const Mesh sphere = icosphere(kCentre, 1.2, 2);
+    Grid g = offset_grid(16, 0.2, kCentre);
+    g.dims[2] = 40;  // the sphere's band reaches layers 1 to 16 or so
+    const std::vector<std::pair<int64_t, int64_t>> cuts{{0, 9}, {9, 23}, {23, 31}, {31, 0}};
+    const std::vector<double> exact = brute_force_distance(sphere, g);
+    for (const bool sign : {false, true})
+        for (const bool reference : {false, true}) {
+            SCOPED_TRACE(std::string(reference ? "reference" : "device") +
+                         (sign ? " signed" : " unsigned"));
+            SdfOptions o = band(2.0, true);
+            o.brick_size = 8;
+            VoxelizeStats stats;
+            auto run = [&](const SdfOptions& options) {
+                if (reference)
+                    return sign ? signed_distance_reference(sphere, g, options, &stats)
+                                : unsigned_distance_reference(sphere, g, options, &stats);
+                return sign ? signed_distance(device(), sphere, g, options, &stats)
+                            : unsigned_distance(device(), sphere, g, options, &stats);
+            };
+            const ScalarField whole = run(o);
+            const uint64_t inside = stats.voxels_set;
+            std::vector<float> stacked;
+            uint64_t stacked_inside = 0;
+            for (const auto& [first, end] : cuts) {
+                SdfOptions part = o;
+                part.first_layer = first;
+                part.end_layer = end;
+                const ScalarField f = run(part);
+                ASSERT_EQ(f.grid.dims[2], (end ? end : g.dims[2]) - first);
+                stacked.insert(stacked.end(), f.values.begin(), f.values.end());
+                stacked_inside += stats.voxels_set;
+            }
+            ASSERT_EQ(stacked.size(), whole.values.size());
+            EXPECT_EQ(0, std::memcmp(stacked.data(), whole.values.data(),
+                                     stacked.size() * sizeof(float)));
+            // The inside voxels each slab reports are those of its layers.
+            EXPECT_EQ(stacked_inside, inside);
+            EXPECT_EQ(inside, uint64_t(std::count_if(stacked.begin(), stacked.end(),
+                                                     [](float v) { return std::signbit(v); })));
+            if (sign) EXPECT_GT(inside, 100u);
+            double worst = 0;
+            for (size_t v = 0; v < stacked.size(); ++v)
+                worst = std::max(worst, std::abs(std::abs(double(stacked[v])) - exact[v]));
+            EXPECT_LT(worst, 1e-4 * g.voxel_size);
+        }
+}
+
+TEST(SdfLayers, BadLayerRangesAreRefused) {
     const Mesh m = icosphere(kCentre, 2.0, 0);
     const Grid g = offset_grid(8, 1.0, kCentre);
     for (const auto& [first, end] :
@@ -440,9 +492,6 @@ TEST(SdfLayers, BadLayerRangesAndFullGridLayersAreRefused) {
         EXPECT_THROW(unsigned_distance_reference(m, g, o), GridError) << first << " " << end;
         EXPECT_THROW(unsigned_distance(device(), m, g, o), GridError) << first << " " << end;
     }
-    SdfOptions o = band(2.0, true);
-    o.first_layer = 2;
-    EXPECT_THROW(signed_distance(device(), m, g, o), GridError);
 }
 
 // ---- CSG
@@ -757,6 +806,59 @@ TEST(FieldFiles, NpyRoundTripsAndIsFortranOrderedFloat32) {
               std::string::npos);
     std::remove(path.c_str());
     std::remove((path + ".json").c_str());
+}
+
+// A field written a layer at a time (as `sdf --full` writes one slab after another) gives the
+// whole field's files: the same .npy bytes and sidecar, its band found from the samples as they
+// pass (the whole field's writer finds it before), and a .vdb with the same voxels. Each layer is
+// asked for once, in order. A .vdb without its band is refused before any file is made.
+TEST(FieldFiles, LayerByLayerFilesEqualTheWholeFieldsFiles) {
+    Grid g;
+    g.voxel_size = 0.25;
+    g.origin = {-2.0, -1.5, -3.0};
+    g.dims = {13, 11, 21};  // 21 layers: two whole leaves of 8 and a part
+    const ScalarField f = sphere_field(g, {-0.4, 0.1, -0.7}, 1.1);
+    const size_t per_layer = size_t(g.dims[0] * g.dims[1]);
+    auto bytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    for (const char* extension : {".npy", ".vdb"}) {
+        SCOPED_TRACE(extension);
+        const double band = extension == std::string(".npy") ? 0.0 : 2.0;
+        const std::string whole = temp_path(std::string("whole") + extension);
+        const std::string layers = temp_path(std::string("layers") + extension);
+        write_field(whole, f, band);
+        int64_t next = 0;
+        write_field(layers, g, band, [&](int64_t k, float* out) {
+            EXPECT_EQ(k, next++);
+            std::copy_n(&f.values[size_t(k) * per_layer], per_layer, out);
+        });
+        EXPECT_EQ(next, g.dims[2]);
+        if (band == 0.0) {
+            EXPECT_EQ(bytes(whole), bytes(layers));
+            nlohmann::json a = nlohmann::json::parse(bytes(whole + ".json"));
+            nlohmann::json b = nlohmann::json::parse(bytes(layers + ".json"));
+            a.erase("file");
+            b.erase("file");
+            EXPECT_EQ(a, b);
+            float largest = 0;
+            for (float v : f.values) largest = std::max(largest, std::abs(v));
+            EXPECT_EQ(b.at("band_voxels").get<double>(), double(largest) / g.voxel_size);
+            std::remove((whole + ".json").c_str());
+            std::remove((layers + ".json").c_str());
+        } else {
+            const SparseField a = read_sparse_field(whole), b = read_sparse_field(layers);
+            EXPECT_EQ(a.leaf_count(), b.leaf_count());
+            EXPECT_GT(a.leaf_count(), 0u);
+            expect_identical(a.to_dense(), b.to_dense());
+        }
+        std::remove(whole.c_str());
+        std::remove(layers.c_str());
+    }
+    const std::string refused = temp_path("refused.vdb");
+    EXPECT_THROW(write_field(refused, g, 0.0, [](int64_t, float*) {}), OutputError);
+    EXPECT_FALSE(std::ifstream(refused).good());
 }
 
 TEST(FieldFiles, COrderNpyIsTransposedOnRead) {

@@ -74,6 +74,7 @@ int run(const FieldArgs& args) {
     // .vdb level sets and narrow bands of meshes sparse (and meshed sparse).
     oclvox::ScalarField combined;
     std::optional<oclvox::SparseField> sparse;
+    bool in_slabs = false;  // the field is written as it is computed
     std::optional<oclvox::Device> device;
     if (level_sets_in) {
         record.inputs.resize(2);
@@ -121,13 +122,32 @@ int run(const FieldArgs& args) {
         stop_if_interrupted();
         device = open_device(args.device, record.seconds.device_open);
         oclvox::VoxelizeStats stats;
-        timed(record.seconds.compute, [&] {
-            if (args.full)
-                combined = csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
-            else
-                sparse = csg_sparse(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
-            return 0;
-        });
+        // A full grid to .npy is written a slab of layers at a time as it is computed.
+        in_slabs = args.full && !mesh_out && output_extension(args.output, args.files) == ".npy";
+        if (in_slabs) {
+            timed(record.seconds.write, [&] {
+                record.border_inside = write_full_field_in_slabs(
+                    output.path(), *record.grid, device, args,
+                    [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
+                        return device ? oclvox::csg(*device, mesh_a, mesh_b, op, *record.grid,
+                                                    options, slab_stats)
+                                      : oclvox::csg_reference(mesh_a, mesh_b, op, *record.grid,
+                                                              options, slab_stats);
+                    },
+                    stats, record.seconds.compute);
+                output.finish();
+                return 0;
+            });
+            record.seconds.write -= record.seconds.compute;
+        } else {
+            timed(record.seconds.compute, [&] {
+                if (args.full)
+                    combined = csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
+                else
+                    sparse = csg_sparse(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
+                return 0;
+            });
+        }
         stop_if_interrupted();
         record.stats = stats;
     }
@@ -143,25 +163,27 @@ int run(const FieldArgs& args) {
     }
 
     // Phase 4: the file, then the report.
-    timed(record.seconds.write, [&] {
-        if (surface)
-            write_mesh_output(output.path(), *surface, args);
-        else if (sparse)
-            write_field_output(output.path(), *sparse, args);
-        else
-            write_field_output(output.path(), combined, fields_in || args.full ? 0.0 : args.band,
-                               args);
-        output.finish();
-        return 0;
-    });
+    if (!in_slabs)
+        timed(record.seconds.write, [&] {
+            if (surface)
+                write_mesh_output(output.path(), *surface, args);
+            else if (sparse)
+                write_field_output(output.path(), *sparse, args);
+            else
+                write_field_output(output.path(), combined,
+                                   fields_in || args.full ? 0.0 : args.band, args);
+            output.finish();
+            return 0;
+        });
     record.seconds.total = seconds_since(start);
 
     record.outputs = {args.output};
     if (device) record.device = device->info();
     record_field_settings(record, args);
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
-    record.border_inside =
-        sparse ? oclvox::border_samples_inside(*sparse) : oclvox::border_samples_inside(combined);
+    if (!in_slabs)
+        record.border_inside = sparse ? oclvox::border_samples_inside(*sparse)
+                                      : oclvox::border_samples_inside(combined);
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }

@@ -94,19 +94,38 @@ int run(const SdfArgs& args) {
     std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
     // Phase 3: the distances, a narrow band as a sparse field (memory follows the surface), a full
-    // grid dense; then the mesh of their zero level set if asked for, from the field as it is.
+    // grid written to .npy a slab of layers at a time as it is computed (memory holds a slab),
+    // else dense; then the mesh of their zero level set if asked for, from the field as it is.
     // Only the preview reads a dense field, made from the sparse one when the band is all there
     // is.
     oclvox::VoxelizeStats stats;
+    const bool in_slabs = args.full && output_extension(args.output, args.files) == ".npy" &&
+                          args.mesh_output.empty() && args.preview.empty();
+    if (in_slabs) {
+        timed(record.seconds.write, [&] {
+            record.border_inside = write_full_field_in_slabs(
+                output.path(), grid, device, args,
+                [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
+                    return device
+                               ? oclvox::signed_distance(*device, mesh, grid, options, slab_stats)
+                               : oclvox::signed_distance_reference(mesh, grid, options, slab_stats);
+                },
+                stats, record.seconds.compute);
+            output.finish();
+            return 0;
+        });
+        record.seconds.write -= record.seconds.compute;
+    }
     std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::ScalarField> dense;
-    timed(record.seconds.compute, [&] {
-        if (args.full)
-            dense = signed_distance(device, mesh, grid, args, &stats);
-        else
-            sparse = signed_distance_sparse(device, mesh, grid, args, &stats);
-        return 0;
-    });
+    if (!in_slabs)
+        timed(record.seconds.compute, [&] {
+            if (args.full)
+                dense = signed_distance(device, mesh, grid, args, &stats);
+            else
+                sparse = signed_distance_sparse(device, mesh, grid, args, &stats);
+            return 0;
+        });
     stop_if_interrupted();
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
@@ -118,19 +137,23 @@ int run(const SdfArgs& args) {
     }
 
     // Phase 4: the files, then the report.
-    timed(record.seconds.write, [&] {
-        if (sparse)
-            write_field_output(output.path(), *sparse, args);
-        else
-            write_field_output(output.path(), *dense, 0.0, args);
-        if (surface) write_mesh_output(args.mesh_output, *surface, args);
-        if (!args.preview.empty())
-            sparse ? write_preview(args.preview, *sparse, 0.0f)
-                   : write_preview(args.preview, *dense, 0.0f);
-        output.finish();
-        return 0;
-    });
+    if (!in_slabs)
+        timed(record.seconds.write, [&] {
+            if (sparse)
+                write_field_output(output.path(), *sparse, args);
+            else
+                write_field_output(output.path(), *dense, 0.0, args);
+            if (surface) write_mesh_output(args.mesh_output, *surface, args);
+            if (!args.preview.empty())
+                sparse ? write_preview(args.preview, *sparse, 0.0f)
+                       : write_preview(args.preview, *dense, 0.0f);
+            output.finish();
+            return 0;
+        });
     record.seconds.total = seconds_since(start);
+    if (!in_slabs)
+        record.border_inside =
+            sparse ? oclvox::border_samples_inside(*sparse) : oclvox::border_samples_inside(*dense);
 
     record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};
     record.outputs = {args.output};
@@ -141,8 +164,6 @@ int run(const SdfArgs& args) {
     record_field_settings(record, args);
     record.stats = stats;
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
-    record.border_inside =
-        sparse ? oclvox::border_samples_inside(*sparse) : oclvox::border_samples_inside(*dense);
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }

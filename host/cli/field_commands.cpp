@@ -4,6 +4,7 @@
 #include <variant>
 
 #include "file_names.hpp"
+#include "host_memory.hpp"
 #include "progress_bar.hpp"
 
 namespace oclvox_cli {
@@ -48,7 +49,8 @@ void add_distance_options(CLI::App& command, FieldArgs& args) {
         ->group("Distance");
     command
         .add_flag("--full", args.full,
-                  "exact distances in every voxel, not only in the narrow band")
+                  "exact distances in every voxel, not only in the narrow band (to .npy "
+                  "computed and written a slab of layers at a time)")
         ->group("Distance");
 }
 
@@ -135,6 +137,84 @@ oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclv
         return device ? oclvox::csg_sparse(*device, a, b, op, grid, options, stats)
                       : oclvox::csg_sparse_reference(a, b, op, grid, options, stats);
     });
+}
+
+namespace {
+
+// Layers per slab of a full grid written in slabs: their field and squared distances (8 bytes a
+// voxel on the host, 4 in one device buffer) within a quarter of the host memory budget, at most
+// 256 MiB (thinner slabs cost little: spot at 256 took 2.27 s whole, 2.32 s in 16 MiB slabs), and
+// the device's allocation limit; whole bricks of the sign's solid where they fit (a slab voxelizes
+// its bricks' whole columns, so a brick cut by slabs is voxelized twice), else a multiple of 8
+// layers.
+int64_t slab_layers(const oclvox::Grid& grid, const std::optional<oclvox::Device>& device,
+                    int brick_size) {
+    const uint64_t per_layer = uint64_t(grid.dims[0]) * uint64_t(grid.dims[1]);
+    uint64_t bytes = std::min<uint64_t>(oclvox::detail::host_budget(0) / 4, uint64_t(256) << 20);
+    if (device) bytes = std::min(bytes, 2 * device->info().max_alloc);
+    int64_t layers = int64_t(bytes / (8 * per_layer));
+    layers -= layers % (layers >= brick_size ? brick_size : 8);
+    return std::clamp<int64_t>(layers, 8, grid.dims[2]);
+}
+
+void add_slab_stats(oclvox::VoxelizeStats& sum, const oclvox::VoxelizeStats& slab) {
+    sum.seconds_binning += slab.seconds_binning;
+    sum.seconds_upload += slab.seconds_upload;
+    sum.seconds_kernels += slab.seconds_kernels;
+    sum.seconds_download += slab.seconds_download;
+    sum.triangles_in = slab.triangles_in;
+    sum.triangles_used = std::max(sum.triangles_used, slab.triangles_used);
+    sum.work_items += slab.work_items;
+    sum.allocation_retries += slab.allocation_retries;
+    sum.voxels_set += slab.voxels_set;
+    sum.inside_test = slab.inside_test;
+    sum.inside_test_reason = slab.inside_test_reason;
+}
+
+}  // namespace
+
+uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& grid,
+                                   const std::optional<oclvox::Device>& device,
+                                   const FieldArgs& args, const SlabField& compute,
+                                   oclvox::VoxelizeStats& stats, double& seconds_compute) {
+    const int64_t nz = grid.dims[2];
+    const oclvox::SdfOptions defaults = sdf_options(args);
+    const int64_t thickness = slab_layers(grid, device, defaults.brick_size);
+    const size_t per_layer = size_t(grid.dims[0]) * size_t(grid.dims[1]);
+    ProgressBar bar("distance field", "", args.reporting);
+    const oclvox::ProgressCallback progress = bar.callback();
+    oclvox::ScalarField slab;
+    int64_t slab_first = 0;
+    uint64_t border_inside = 0;
+    // Each slab is computed when the writer asks for its first layer; its progress is its share
+    // of the layers.
+    auto layer = [&](int64_t k, float* out) {
+        if (k == slab_first + slab.grid.dims[2] || slab.values.empty()) {
+            const Clock::time_point start = Clock::now();
+            slab_first = k;
+            oclvox::SdfOptions options = defaults;
+            options.first_layer = k;
+            options.end_layer = std::min(k + thickness, nz);
+            const uint64_t depth = uint64_t(options.end_layer - k);
+            options.progress = [&](uint64_t done, uint64_t total) {
+                constexpr uint64_t kSteps = 1000000;
+                const double share = double(done) / double(std::max<uint64_t>(total, 1));
+                return progress(
+                    uint64_t((double(k) + share * double(depth)) / double(nz) * double(kSteps)),
+                    kSteps);
+            };
+            slab = oclvox::ScalarField{};  // before the next one is allocated
+            oclvox::VoxelizeStats slab_stats;
+            slab = compute(options, &slab_stats);
+            add_slab_stats(stats, slab_stats);
+            seconds_compute += seconds_since(start);
+        }
+        const float* samples = &slab.values[size_t(k - slab_first) * per_layer];
+        std::copy_n(samples, per_layer, out);
+        border_inside += oclvox::border_samples_inside(grid, k, samples);
+    };
+    oclvox::write_field(path, grid, 0.0, layer);
+    return border_inside;
 }
 
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,

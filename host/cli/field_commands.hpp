@@ -2,6 +2,7 @@
 // calls on a device or the CPU reference, and .npy field inputs.
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -61,6 +62,20 @@ oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mes
 oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
                                const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                                const FieldArgs& args, oclvox::VoxelizeStats* stats);
+
+// A full-grid field (--full) written to a .npy file as it is computed, a slab of layers at a
+// time (SdfOptions::first_layer / end_layer), so that memory holds one slab, never the whole
+// field: compute(options, stats) is the field of options' layers (signed_distance or csg with
+// those options), which equals the whole field there bit for bit, so the file is the one the
+// whole field gives. One progress bar runs over the slabs; Ctrl-C stops between them and leaves
+// no file. The slabs' stats are summed into `stats` and their compute time into
+// `seconds_compute`. Returns border_samples_inside of the whole field.
+using SlabField = std::function<oclvox::ScalarField(const oclvox::SdfOptions& options,
+                                                    oclvox::VoxelizeStats* stats)>;
+uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& grid,
+                                   const std::optional<oclvox::Device>& device,
+                                   const FieldArgs& args, const SlabField& compute,
+                                   oclvox::VoxelizeStats& stats, double& seconds_compute);
 
 // The iso-surface by --mesher, with a progress bar, stopping on Ctrl-C.
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,

@@ -23,6 +23,7 @@
 #include "host_memory.hpp"
 #include "little_endian.hpp"
 #include "npy_format.hpp"
+#include "slabs.hpp"
 #include "oclvox/sdf.hpp"
 
 namespace oclvox {
@@ -44,30 +45,40 @@ double inferred_band(const ScalarField& field) {
     return double(largest) / field.grid.voxel_size;
 }
 
-// Writes the samples a layer at a time: layer(k, out) puts the nx * ny samples of layer k into out,
-// x fastest. Only one layer is held, whatever the field.
+// Writes the samples a layer at a time, as layer(k, out) gives them. Only one layer is held,
+// whatever the field. band_voxels <= 0: the largest |value| written, in voxels (the sidecar is
+// made after the samples).
 void write_npy_field(const std::string& path, const Grid& grid, double band_voxels,
-                     detail::ProgressPhases& progress,
-                     const std::function<void(int64_t k, float* out)>& layer) {
+                     detail::ProgressPhases& progress, const FieldLayer& layer) {
+    detail::check_dense_size(path, grid.voxel_count() * sizeof(float), "a float32 .npy");
     const size_t samples = progress.add(1);
+    float largest = 0;
     auto write_samples = [&](std::ostream& out) {
         const size_t per_layer = size_t(grid.dims[0]) * size_t(grid.dims[1]);
         std::vector<float> values(per_layer);
         std::vector<char> bytes(per_layer * 4);
         for (int64_t k = 0; k < grid.dims[2]; ++k) {
             layer(k, values.data());
-            for (size_t v = 0; v < per_layer; ++v) detail::store_le(&bytes[v * 4], values[v]);
+            for (size_t v = 0; v < per_layer; ++v) {
+                largest = std::max(largest, std::abs(values[v]));
+                detail::store_le(&bytes[v * 4], values[v]);
+            }
             out.write(bytes.data(), std::streamsize(bytes.size()));
             progress.report(samples, uint64_t(k) + 1, uint64_t(grid.dims[2]));
         }
         progress.finish();
     };
-    nlohmann::json sidecar = detail::npy_sidecar(path, grid);
-    sidecar["dtype"] = "float32, distance in world units";
-    sidecar["sample_position"] = "voxel centres: origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size";
-    sidecar["sign_convention"] = "negative inside, positive outside";
-    sidecar["band_voxels"] = band_voxels;
-    sidecar["background"] = band_voxels * grid.voxel_size;
+    auto sidecar = [&] {
+        const double band = band_voxels > 0 ? band_voxels : double(largest) / grid.voxel_size;
+        nlohmann::json json = detail::npy_sidecar(path, grid);
+        json["dtype"] = "float32, distance in world units";
+        json["sample_position"] =
+            "voxel centres: origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size";
+        json["sign_convention"] = "negative inside, positive outside";
+        json["band_voxels"] = band;
+        json["background"] = band * grid.voxel_size;
+        return json;
+    };
     detail::write_npy_with_sidecar(path, "<f4", grid, write_samples, sidecar);
 }
 
@@ -425,15 +436,27 @@ void write_field(const std::string& path, const ScalarField& field, double band_
                  const ProgressCallback& progress) {
     check_field(field, path);
     if (!(band_voxels > 0)) band_voxels = inferred_band(field);
+    const size_t per_layer = size_t(field.grid.dims[0]) * size_t(field.grid.dims[1]);
+    write_field(
+        path, field.grid, band_voxels,
+        [&](int64_t k, float* out) {
+            std::copy_n(&field.values[size_t(k) * per_layer], per_layer, out);
+        },
+        progress);
+}
+
+void write_field(const std::string& path, const Grid& grid, double band_voxels,
+                 const FieldLayer& layer, const ProgressCallback& progress) {
+    validate_grid(grid);
     const std::string extension = detail::lowercase_extension(path);
     detail::ProgressPhases phases(progress, "writing " + path);
-    if (extension == ".npy") {
-        const size_t per_layer = size_t(field.grid.dims[0]) * size_t(field.grid.dims[1]);
-        return write_npy_field(path, field.grid, band_voxels, phases, [&](int64_t k, float* out) {
-            std::copy_n(&field.values[size_t(k) * per_layer], per_layer, out);
-        });
+    if (extension == ".npy") return write_npy_field(path, grid, band_voxels, phases, layer);
+    if (extension == ".vdb") {
+        if (!(band_voxels > 0))
+            throw OutputError("cannot write level set " + path +
+                              " a layer at a time without its band: give band_voxels > 0");
+        return detail::write_field_vdb(path, grid, band_voxels, layer, phases);
     }
-    if (extension == ".vdb") return detail::write_field_vdb(path, field, band_voxels, phases);
     unknown_field_extension(path, extension);
 }
 

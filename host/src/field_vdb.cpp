@@ -69,26 +69,30 @@ void write_level_set(const std::string& path, const Grid& g, double band_voxels,
 
 }  // namespace
 
-void write_field_vdb(const std::string& path, const ScalarField& field, double band_voxels,
-                     ProgressPhases& progress) {
-    // Every leaf of the grid, gathered from the dense samples a row at a time.
-    const Grid& g = field.grid;
+void write_field_vdb(const std::string& path, const Grid& g, double band_voxels,
+                     const FieldLayer& layer, ProgressPhases& progress) {
+    // Every leaf of the grid, gathered from a slab of a leaf's height of layers, row by row.
     const auto& d = g.dims;
     const uint64_t leaves = uint64_t((d[0] + kLeaf - 1) / kLeaf) *
                             uint64_t((d[1] + kLeaf - 1) / kLeaf) *
                             uint64_t((d[2] + kLeaf - 1) / kLeaf);
+    const size_t per_layer = size_t(d[0]) * size_t(d[1]);
     write_level_set(path, g, band_voxels, progress, leaves, [&](const LeafVisit& visit) {
+        std::vector<float> slab(per_layer * kLeaf);
         float samples[SparseField::kLeafSamples];
-        for (int64_t z = 0; z < d[2]; z += kLeaf)
+        for (int64_t z = 0; z < d[2]; z += kLeaf) {
+            const int64_t depth = std::min<int64_t>(kLeaf, d[2] - z);
+            for (int64_t k = 0; k < depth; ++k) layer(z + k, &slab[size_t(k) * per_layer]);
             for (int64_t y = 0; y < d[1]; y += kLeaf)
                 for (int64_t x = 0; x < d[0]; x += kLeaf) {
                     const int64_t row = std::min<int64_t>(kLeaf, d[0] - x);
-                    for (int64_t k = z; k < std::min(z + kLeaf, d[2]); ++k)
+                    for (int64_t k = 0; k < depth; ++k)
                         for (int64_t j = y; j < std::min(y + kLeaf, d[1]); ++j)
-                            std::copy_n(&field.values[size_t(x + d[0] * (j + d[1] * k))], row,
-                                        &samples[kLeaf * ((j - y) + kLeaf * (k - z))]);
+                            std::copy_n(&slab[size_t(k) * per_layer + size_t(x + d[0] * j)], row,
+                                        &samples[kLeaf * ((j - y) + kLeaf * k)]);
                     visit({x, y, z}, samples);
                 }
+        }
     });
 }
 

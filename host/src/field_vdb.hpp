@@ -10,8 +10,9 @@
 namespace oclvox::detail {
 
 // A level-set FloatGrid named "sdf" (see write_field in oclvox/sdf.hpp). Throws OutputError.
-void write_field_vdb(const std::string& path, const ScalarField& field, double band_voxels,
-                     ProgressPhases& progress);
+// The field's layers come from layer(k, out) in order, 8 (a leaf's height) held at a time.
+void write_field_vdb(const std::string& path, const Grid& grid, double band_voxels,
+                     const FieldLayer& layer, ProgressPhases& progress);
 // The same from a sparse field's leaves, its band field.band_voxels().
 void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress);
 // See read_sparse_field (oclvox/sdf.hpp). Throws InputError.

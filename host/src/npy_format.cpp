@@ -38,13 +38,13 @@ nlohmann::json npy_sidecar(const std::string& npy_path, const Grid& grid) {
 
 void write_npy_with_sidecar(const std::string& path, const std::string& descr, const Grid& grid,
                             const std::function<void(std::ostream&)>& write_data,
-                            const nlohmann::json& sidecar) {
+                            const std::function<nlohmann::json()>& make_sidecar) {
     write_file_atomically(path, [&](std::ostream& out) {
         write_npy_header(out, descr, grid.dims);
         write_data(out);
     });
     try {
-        const std::string text = sidecar.dump(2) + "\n";
+        const std::string text = make_sidecar().dump(2) + "\n";
         write_file_atomically(path + ".json", [&](std::ostream& out) { out << text; });
     } catch (...) {
         std::remove(path.c_str());

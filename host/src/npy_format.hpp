@@ -23,10 +23,12 @@ void write_npy_header(std::ostream& out, const std::string& descr,
 nlohmann::json npy_sidecar(const std::string& npy_path, const Grid& grid);
 
 // Writes the array (header, then `write_data` streams the samples) and then its sidecar, each
-// atomically. An array without its placement is misleading, so if the sidecar cannot be written
-// the array is removed too and nothing is left under either name. Throws OutputError.
+// atomically. The sidecar is made (`make_sidecar`) after the samples are written, so it can say
+// what only they tell (a streamed field's band). An array without its placement is misleading, so
+// if the sidecar cannot be written the array is removed too and nothing is left under either
+// name. Throws OutputError.
 void write_npy_with_sidecar(const std::string& path, const std::string& descr, const Grid& grid,
                             const std::function<void(std::ostream&)>& write_data,
-                            const nlohmann::json& sidecar);
+                            const std::function<nlohmann::json()>& make_sidecar);
 
 }  // namespace oclvox::detail

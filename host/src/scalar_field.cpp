@@ -24,14 +24,21 @@ uint64_t border_samples_inside(const ScalarField& field, float iso) {
                         " values but its grid has " + std::to_string(field.grid.voxel_count()) +
                         " samples");
     uint64_t inside = 0;
+    const size_t per_layer = size_t(n[0]) * size_t(n[1]);
     for (int64_t k = 0; k < n[2]; ++k)
-        for (int64_t j = 0; j < n[1]; ++j) {
-            const bool face = k == 0 || k == n[2] - 1 || j == 0 || j == n[1] - 1;
-            // Inside a face row every sample is on the border; elsewhere only the two ends.
-            const int64_t step = face ? 1 : std::max<int64_t>(1, n[0] - 1);
-            for (int64_t i = 0; i < n[0]; i += step)
-                inside += field.values[size_t(i + n[0] * (j + n[1] * k))] < iso;
-        }
+        inside += border_samples_inside(field.grid, k, &field.values[size_t(k) * per_layer], iso);
+    return inside;
+}
+
+uint64_t border_samples_inside(const Grid& grid, int64_t k, const float* samples, float iso) {
+    const auto& n = grid.dims;
+    uint64_t inside = 0;
+    for (int64_t j = 0; j < n[1]; ++j) {
+        const bool face = k == 0 || k == n[2] - 1 || j == 0 || j == n[1] - 1;
+        // Inside a face row every sample is on the border; elsewhere only the two ends.
+        const int64_t step = face ? 1 : std::max<int64_t>(1, n[0] - 1);
+        for (int64_t i = 0; i < n[0]; i += step) inside += samples[size_t(i + n[0] * j)] < iso;
+    }
     return inside;
 }
 

@@ -77,10 +77,6 @@ void validate_sdf_options(const Grid& grid, const SdfOptions& options) {
         throw GridError("layers " + std::to_string(options.first_layer) + " to " +
                         std::to_string(end) + " are not a range within the grid's " +
                         std::to_string(grid.dims[2]) + " layers");
-    if (options.full_grid && (options.first_layer != 0 || end != grid.dims[2]))
-        throw GridError(
-            "a full-grid field cannot be computed in layers: its distances beyond the band "
-            "come from triangles that layers leave out (use a narrow band, or the whole grid)");
 }
 
 void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_bytes_per_voxel) {
@@ -115,7 +111,9 @@ void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_la
     for (OvSdfTriangle t : prepared.triangles) {
         t.lo[2] = std::max(t.lo[2], first) - shift;
         t.hi[2] = std::min(t.hi[2], last) - shift;
-        if (t.lo[2] > t.hi[2]) continue;
+        // A full grid's far pass searches every triangle, so those without a voxel of the
+        // layers stay, with an empty range.
+        if (t.lo[2] > t.hi[2] && !options.full_grid) continue;
         t.anchor[2] -= shift;
         kept.push_back(t);
         first_item.push_back(first_item.back() + item_count(t));
@@ -138,7 +136,7 @@ ScalarField distance_field(const Grid& grid, const SdfOptions& options,
     return field;
 }
 
-void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer) {
+uint64_t apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer) {
     // Straight from the bricks' 4x4x4 block masks: no dense copy of the solid, and the work
     // follows the inside voxels, not the grid.
     const auto nbricks = inside.brick_dims();
@@ -147,6 +145,7 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_la
     const int64_t end_layer = first_layer + field.grid.dims[2];
     float* values = field.values.data();
     const size_t words = inside.blocks_per_brick();
+    uint64_t negated = 0;
     for (const uint64_t index : inside.brick_indices()) {
         const uint64_t* blocks = inside.brick_blocks(index);
         const int64_t bx = int64_t(index % uint64_t(nbricks[0]));
@@ -164,10 +163,12 @@ void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_la
                     float& v =
                         values[(ox + bit % 4) + nx * ((oy + bit / 4 % 4) + ny * (z - first_layer))];
                     v = -v;
+                    ++negated;
                 }
             }
         }
     }
+    return negated;
 }
 
 SdfPhases add_sdf_phases(ProgressPhases& progress, const SdfTriangles& prepared, const Grid& grid,
@@ -319,10 +320,11 @@ ScalarField compute_field(const Backend& backend, const FieldJob& job, const Gri
         layers, options, job.prepared,
         backend.distance2(job.prepared, layers, options, progress, job.phases, stats));
     if (!sign) return field;
-    apply_sign(field,
-               sign_voxels(backend.solid_device(), job.mesh, grid, options, progress,
-                           job.phases.sign, stats),
-               options.first_layer);
+    // The inside voxels of the field's layers (the solid covers its bricks' whole columns).
+    stats.voxels_set = apply_sign(field,
+                                  sign_voxels(backend.solid_device(), job.mesh, grid, options,
+                                              progress, job.phases.sign, stats),
+                                  options.first_layer);
     return field;
 }
 

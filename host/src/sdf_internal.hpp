@@ -64,7 +64,7 @@ void for_each_band_sample(const OvSdfTriangle& t, int bx, int by, int bz, float 
 }
 
 // Throws GridError for an invalid grid, a band that is not a finite positive number of voxels,
-// or layers outside the grid (or with full_grid).
+// or layers outside the grid.
 void validate_sdf_options(const Grid& grid, const SdfOptions& options);
 
 // validate_sdf_options, and a GridError for a dense field too large to hold: over 2^32 voxels,
@@ -76,7 +76,7 @@ void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_byt
 Grid field_grid(const Grid& grid, const SdfOptions& options);
 
 // Cuts prepared triangles (on the whole grid) to options' layers: their voxel ranges are clipped
-// to the layers, those left without a voxel dropped, and (for a dense field, whose grid starts at
+// to the layers, those left without a voxel dropped (kept with an empty range for a full grid), and (for a dense field, whose grid starts at
 // first_layer: `onto_layers`) every z coordinate moved down by first_layer. Anchors are integers,
 // so the anchor-relative float vertices, and every distance computed from them, stay the same bits.
 void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_layers);
@@ -142,8 +142,8 @@ ScalarField distance_field(const Grid& grid, const SdfOptions& options,
                            const SdfTriangles& prepared, const std::vector<float>& distance2);
 
 // Negates the samples whose voxels are set in `inside` (a voxelization of the whole grid; the
-// field covers its layers from first_layer on).
-void apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer);
+// field covers its layers from first_layer on). Returns how many it negated.
+uint64_t apply_sign(ScalarField& field, const SparseVoxels& inside, int64_t first_layer);
 
 // The Solid voxelization (with options.inside) that signs a field of options' layers of `grid`,
 // on `device` or, when it is null, by voxelize_reference; reported as `phase`. stats add its

@@ -7,17 +7,17 @@
 
 namespace oclvox::detail {
 
-void check_dense_size(const std::string& path, uint64_t voxels, const std::string& what) {
+void check_dense_size(const std::string& path, uint64_t bytes, const std::string& what) {
     const auto gib = [](uint64_t bytes) { return std::to_string((bytes + (1u << 29)) >> 30); };
-    if (voxels > kMaxDenseVoxels)
+    if (bytes > kMaxDenseBytes)
         throw OutputError("cannot write " + path + ": " + what + " file of this grid would need " +
-                          gib(voxels) + " GiB; write .vdb (sparse) or lower the resolution");
+                          gib(bytes) + " GiB; write .vdb (sparse) or lower the resolution");
     std::error_code error;
     const std::filesystem::path folder = std::filesystem::absolute(path).parent_path();
     const auto space = std::filesystem::space(folder, error);
-    if (!error && space.available < voxels)
+    if (!error && space.available < bytes)
         throw OutputError("cannot write " + path + ": " + what + " file of this grid needs " +
-                          gib(voxels) + " GiB but its folder has only " + gib(space.available) +
+                          gib(bytes) + " GiB but its folder has only " + gib(space.available) +
                           " GiB free; write .vdb (sparse) or lower the resolution");
 }
 

@@ -21,12 +21,12 @@ inline int64_t slab_thickness(uint64_t layer_bytes, int64_t layers, uint64_t sla
     return std::clamp<int64_t>(thickness, 1, std::max<int64_t>(layers, 1));
 }
 
-// Dense formats cost a byte or more per voxel on disk; past this many voxels (64 GiB) a sparse
+// Dense formats cost a byte or more per voxel on disk; past this many bytes (64 GiB) a sparse
 // format is the only sensible one, so the writer refuses before creating anything.
-constexpr uint64_t kMaxDenseVoxels = uint64_t(1) << 36;
+constexpr uint64_t kMaxDenseBytes = uint64_t(1) << 36;
 
-// Throws OutputError naming `path` if a dense file of `voxels` bytes is over kMaxDenseVoxels or
-// larger than the free space of its folder.
-void check_dense_size(const std::string& path, uint64_t voxels, const std::string& what);
+// Throws OutputError naming `path` if a dense file of `bytes` is over kMaxDenseBytes or larger
+// than the free space of its folder.
+void check_dense_size(const std::string& path, uint64_t bytes, const std::string& what);
 
 }  // namespace oclvox::detail

@@ -42,7 +42,7 @@ void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         "voxel (i,j,k) is the closed box [origin + (i,j,k)*voxel_size, "
         "origin + (i+1,j+1,k+1)*voxel_size]";
     sidecar["voxels_set"] = voxels.count();
-    write_npy_with_sidecar(path, "|u1", grid, write_layers, sidecar);
+    write_npy_with_sidecar(path, "|u1", grid, write_layers, [&] { return sidecar; });
 }
 
 }  // namespace oclvox::detail

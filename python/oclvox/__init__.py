@@ -197,7 +197,8 @@ def sdf(vertices, faces=None, resolution=256, *, band=3.0, full_grid=False, insi
     exception it raises is passed on).
     layers=(first, end): only the voxel layers first <= k < end of the whole grid (end 0: to the
     top), bit for bit the whole field's samples there; stacked along z, consecutive ranges give
-    the whole field (narrow band only). The sign's solid still does its whole columns' work.
+    the whole field (also full grids, whose slabs still search every triangle beyond the band).
+    The sign's solid still does its whole columns' work.
     sparse=True: a narrow band of the whole grid kept as a SparseField (the 8x8x8 leaves the band
     reaches and the inside voxels as bits), for grids whose dense field would not fit; its
     .save() writes .vdb from the leaves or .npy a layer at a time, .to_field() gives the Field

@@ -3,8 +3,8 @@
 - ``voxelize_sharded(mesh, resolution, client=...)`` splits the grid's bricks that can hold voxels
   into shards, runs one task per shard on the workers and merges the sparse results into one
   VoxelGrid, bit for bit the one ``oclvox.voxelize`` returns.
-- ``sdf_sharded(mesh, resolution, client=...)`` does the same for a narrow-band signed distance
-  field, by slabs of z layers.
+- ``sdf_sharded(mesh, resolution, client=...)`` does the same for a signed distance field (a
+  narrow band, sparse or dense, or a full grid), by slabs of z layers.
 - ``voxelize_many(paths, out_dir, resolution, client=...)`` voxelizes one mesh per task into one
   file per mesh, skips outputs already written, retries a failed task once and reports failures at
   the end.
@@ -207,7 +207,7 @@ def voxelize_sharded(mesh, resolution=256, *, client, shard_bricks=None, device=
 # ---- a distance field in layers ------------------------------------------------------------------
 
 _SDF_OPTIONS = frozenset(inspect.signature(oclvox.sdf).parameters) - {
-    "vertices", "faces", "resolution", "device", "layers", "full_grid"}
+    "vertices", "faces", "resolution", "device", "layers"}
 
 
 def _sdf_layers(mesh, resolution, layers, device, options):
@@ -223,9 +223,9 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
     """The signed distance field of one mesh on a Dask cluster; returns what oclvox.sdf returns
     (narrow band: a Field, or with sparse=True a SparseField), bit for bit.
 
-    options: sdf's (band, inside, grid options, brick_size, reference, sparse); full_grid is
-    refused, because a full grid's distances beyond the band come from triangles a slab leaves
-    out. The grid's z layers
+    options: sdf's (band, full_grid, inside, grid options, brick_size, reference, sparse; a full
+    grid is dense, not sparse: every slab still searches all the triangles beyond the band, so its
+    distances are the whole field's). The grid's z layers
     are cut into slabs of `shard_layers` layers (default: about four slabs per worker, a multiple
     of brick_size so that no brick of the sign's solid is computed twice, and with sparse=True of
     8, the leaves' size, which shard_layers must then be too); each slab is one task,
@@ -239,10 +239,8 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
     progress: called as progress(layers_done, layers_total) as slabs arrive; returning False
     cancels (oclvox.Cancelled), and the slabs not yet finished are cancelled on the cluster.
     """
-    if options.get("full_grid"):
-        raise ValueError("sdf_sharded computes narrow-band fields only: a full grid's distances "
-                         "beyond the band come from triangles a slab leaves out (use oclvox.sdf)")
-    options.pop("full_grid", None)
+    if options.get("full_grid") and options.get("sparse"):
+        raise ValueError("full_grid=True gives a dense field: sparse=True holds narrow bands only")
     unknown = sorted(set(options) - _SDF_OPTIONS)
     if unknown:
         raise TypeError(f"unknown sdf option(s): {', '.join(unknown)}")
@@ -289,7 +287,7 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
         report(first)
 
     _collect(client, futures, place)
-    return oclvox.Field(values, origin, voxel_size, band)
+    return oclvox.Field(values, origin, voxel_size, 0.0 if options.get("full_grid") else band)
 
 
 def _merge_slabs(client, futures, cuts, report):

@@ -81,14 +81,17 @@ def test_mesh_pickles_exactly(spot):
     assert np.array_equal(back.faces, mesh.faces)
 
 
-def test_sdf_layers_stack_into_the_whole_field(spot):
-    whole = oclvox.sdf(spot, 40, band=2.0, brick_size=8)
+@pytest.mark.parametrize("full_grid", [False, True])
+def test_sdf_layers_stack_into_the_whole_field(spot, full_grid):
+    whole = oclvox.sdf(spot, 40, band=2.0, brick_size=8, full_grid=full_grid)
     nz = whole.dims[2]
     cuts = [0, 5, 17, 30, nz]
-    parts = [oclvox.sdf(spot, 40, band=2.0, brick_size=8, layers=(a, b))
+    parts = [oclvox.sdf(spot, 40, band=2.0, brick_size=8, layers=(a, b), full_grid=full_grid)
              for a, b in zip(cuts, cuts[1:])]
     stacked = np.concatenate([p.to_numpy() for p in parts], axis=2)
     assert np.array_equal(stacked.view(np.uint32), whole.to_numpy().view(np.uint32))
     assert parts[1].origin[2] == whole.origin[2] + 5 * whole.voxel_size
+    # A full grid's slabs hold distances far beyond the band, a narrow band's none.
+    assert (np.abs(stacked).max() > 5 * 2.0 * whole.voxel_size) == full_grid
     with pytest.raises(oclvox.GridError):
-        oclvox.sdf(spot, 40, full_grid=True, layers=(0, 5))
+        oclvox.sdf(spot, 40, full_grid=full_grid, layers=(5, 5))

@@ -202,6 +202,7 @@ def test_sharded_without_candidate_bricks_is_the_empty_whole_grid(client):
 @pytest.mark.parametrize("mesh,options", [
     ("spot", dict(band=2.0)),
     ("open", dict(band=1.5, inside="winding", pad=1)),
+    ("spot", dict(band=1.0, full_grid=True)),
 ])
 def test_sdf_sharded_equals_single_process(client, open_spot, mesh, options):
     mesh = SPOT if mesh == "spot" else open_spot
@@ -215,6 +216,8 @@ def test_sdf_sharded_equals_single_process(client, open_spot, mesh, options):
     assert np.array_equal(sharded.to_numpy().view(np.uint32), single.to_numpy().view(np.uint32))
     inside = single.to_numpy() < 0
     assert inside.any() and (~inside).any()
+    if options.get("full_grid"):  # distances far beyond the band
+        assert np.abs(single.to_numpy()).max() > 5 * options["band"] * single.voxel_size
 
 
 @pytest.mark.parametrize("mesh,options", [
@@ -238,9 +241,9 @@ def test_sparse_sdf_sharded_equals_single_process(client, open_spot, mesh, optio
     assert (dense < 0).any() and (dense > 0).any()
 
 
-def test_sdf_sharded_refuses_full_grid_and_unaligned_sparse_slabs(client):
-    with pytest.raises(ValueError, match="narrow-band"):
-        sdf_sharded(SPOT, 24, client=client, full_grid=True)
+def test_sdf_sharded_refuses_sparse_full_grids_and_unaligned_sparse_slabs(client):
+    with pytest.raises(ValueError, match="dense"):
+        sdf_sharded(SPOT, 24, client=client, full_grid=True, sparse=True)
     with pytest.raises(ValueError, match="multiple of 8"):
         sdf_sharded(SPOT, 24, client=client, sparse=True, shard_layers=12)
 

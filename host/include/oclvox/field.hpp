@@ -120,6 +120,13 @@ ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes 
 uint64_t border_samples_inside(const ScalarField& field, float iso = 0.0f);
 uint64_t border_samples_inside(const SparseField& field, float iso = 0.0f);
 
+// One layer of a field given a layer at a time: fills `samples` with the grid.dims[0] *
+// grid.dims[1] samples of layer k, x fastest.
+using FieldLayer = std::function<void(int64_t k, float* samples)>;
+// Those of border_samples_inside(field) that lie in layer k (`samples`, as FieldLayer gives it)
+// of a field on `grid`: summed over every layer, the field's count.
+uint64_t border_samples_inside(const Grid& grid, int64_t k, const float* samples, float iso = 0.0f);
+
 // Naive Surface Nets: one vertex per cell whose corners change sign, at the mean of the linearly
 // interpolated crossings on its sign-changing edges; one quad (two triangles) per sign-changing
 // grid edge, joining the vertices of the four cells around it. Closed and manifold wherever no

@@ -31,8 +31,8 @@ struct SdfOptions {
     // field (signed_distance_sparse; layers at multiples of 8, the leaves' size) keeps the whole
     // grid but holds only the leaves and inside voxels of those layers, the whole field's bit
     // for bit, and fields of disjoint ranges merge (SparseField::merge) into the whole field.
-    // Narrow-band fields only: a full grid's distances beyond the band come from triangles that
-    // layers leave out.
+    // Full grids too (dense only): their search beyond the band still covers every triangle, so a
+    // full grid too large to hold can be computed and written a slab of layers at a time.
     int64_t first_layer = 0, end_layer = 0;
     // Called as the work goes on (at most about every 0.05 s, and once more at the end with
     // done == total); return false to cancel (the run throws Cancelled). A run's phases (the band
@@ -86,7 +86,7 @@ ScalarField unsigned_distance_reference(const Mesh& mesh, const Grid& grid,
 // options.inside) puts inside the mesh: negative inside, positive outside (OpenVDB's
 // convention). The device version uses Device::voxelize, the reference voxelize_reference, so
 // the two agree bit for bit. stats add the solid run's timings, inside_test and its reason, and
-// voxels_set = the number of inside voxels.
+// voxels_set = the number of inside voxels (of the field's layers).
 ScalarField signed_distance(Device& device, const Mesh& mesh, const Grid& grid,
                             const SdfOptions& options, VoxelizeStats* stats = nullptr);
 ScalarField signed_distance_reference(const Mesh& mesh, const Grid& grid, const SdfOptions& options,
@@ -170,6 +170,13 @@ SparseField csg_sparse_reference(const Mesh& a, const Mesh& b, CsgOp op, const G
 // name, false throwing Cancelled and leaving no file.
 void write_field(const std::string& path, const ScalarField& field, double band_voxels = 0,
                  const ProgressCallback& progress = {});
+// The same files from a field given a layer at a time, for fields too large to hold (a full grid
+// computed a slab of layers at a time, SdfOptions::first_layer): layer(k, out) puts the samples
+// of layer k (grid.dims[0] * grid.dims[1], x fastest) into out, and is called for k = 0, 1, ...
+// in order. band_voxels <= 0 (.npy only) takes the largest |value| written. The files equal
+// those of write_field for the whole field; .npy holds one layer, .vdb a leaf's 8.
+void write_field(const std::string& path, const Grid& grid, double band_voxels,
+                 const FieldLayer& layer, const ProgressCallback& progress = {});
 // The same files from a sparse field, its band the field's background / voxel_size: .vdb straight
 // from the leaves, .npy streamed a layer at a time (one layer in memory, never the dense field).
 // Both files equal those write_field writes for field.to_dense().
