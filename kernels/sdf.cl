@@ -40,31 +40,37 @@ __kernel __attribute__((reqd_work_group_size(64, 1, 1))) void band_leaf_samples(
     vstore8(as_uint8(best), 0, distance2 + (size_t)batch_slot * 512 + 8 * (y + 8 * z));
 }
 
-// One work item per row of 8 voxels along x, rows [row_base, row_end) of the grid's rows
-// (ceil(nx / 8) per line of x): the row's voxels that the band left at band2 take the tree's
-// distance (one walk for the row); the band's voxels keep theirs, the same minimum over the
-// triangles near them, and start the walk with it.
+// One work item per OV_SDF_FAR_ROWS rows of 8 voxels along x (rows (i0, j0..j0+7, k)), items
+// [item_base, item_end) of the grid's (ceil(nx / 8) per line of x, ceil(ny / 8) per layer): the
+// rows' voxels that the band left at band2 take the tree's distance (one walk per row, each from
+// the leaf that last brought the row before it nearer); the band's voxels keep theirs, the same
+// minimum over the triangles near them, and start the walk with it.
 __kernel void far_distances(__global const OvSdfNode* nodes, __global const uint* order,
-                            __global const OvSdfTriangle* triangles, ulong row_base, ulong row_end,
-                            int nx, int ny, float band2, __global uint* distance2) {
-    ulong row = row_base + get_global_id(0);
-    if (row >= row_end) return;
-    ulong rows_x = (ulong)((nx + 7) / 8);
-    int i0 = (int)(row % rows_x) * 8, j = (int)(row / rows_x % (ulong)ny),
-        k = (int)(row / (rows_x * (ulong)ny));
-    size_t first = (size_t)i0 + (size_t)nx * ((size_t)j + (size_t)ny * k);
+                            __global const OvSdfTriangle* triangles, ulong item_base,
+                            ulong item_end, int nx, int ny, float band2, __global uint* distance2) {
+    ulong item = item_base + get_global_id(0);
+    if (item >= item_end) return;
+    ulong items_x = (ulong)((nx + 7) / 8),
+          items_y = (ulong)((ny + OV_SDF_FAR_ROWS - 1) / OV_SDF_FAR_ROWS);
+    int i0 = (int)(item % items_x) * 8, j0 = (int)(item / items_x % items_y) * OV_SDF_FAR_ROWS,
+        k = (int)(item / (items_x * items_y));
     int width = min(8, nx - i0);
-    float start[8];
-    int far = 0;
-    for (int l = 0; l < 8; ++l) {
-        float d2 = l < width ? as_float(distance2[first + l]) : 0.0f;
-        int beyond = l < width && !(d2 < band2);
-        start[l] = beyond ? INFINITY : d2;
-        far |= beyond;
+    uint hint = OV_SDF_NO_HINT;
+    for (int j = j0; j < min(j0 + OV_SDF_FAR_ROWS, ny); ++j) {
+        size_t first = (size_t)i0 + (size_t)nx * ((size_t)j + (size_t)ny * k);
+        float start[8];
+        int far = 0;
+        for (int l = 0; l < 8; ++l) {
+            float d2 = l < width ? as_float(distance2[first + l]) : 0.0f;
+            int beyond = l < width && !(d2 < band2);
+            start[l] = beyond ? INFINITY : d2;
+            far |= beyond;
+        }
+        if (!far) continue;
+        float result[8];
+        vstore8(ov_tree_row_distance2(nodes, order, triangles, i0, j, k, vload8(0, start), &hint),
+                0, result);
+        for (int l = 0; l < width; ++l)
+            if (start[l] == INFINITY) distance2[first + l] = as_uint(result[l]);
     }
-    if (!far) return;
-    float result[8];
-    vstore8(ov_tree_row_distance2(nodes, order, triangles, i0, j, k, vload8(0, start)), 0, result);
-    for (int l = 0; l < width; ++l)
-        if (start[l] == INFINITY) distance2[first + l] = as_uint(result[l]);
 }

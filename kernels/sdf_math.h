@@ -171,6 +171,12 @@ OV_SDF_FN void ov_closer_first(unsigned int* closer, unsigned int* farther, floa
 // at medians, so 2^32 triangles make fewer than 33 levels.
 #define OV_SDF_TREE_DEPTH 64
 
+// Rows of 8 voxels along x that one work item of the far_distances kernel walks, one after
+// another along y, each from the leaf that last brought the row before it nearer (bunny00's full
+// grid at 128 through PoCL on 2 cores: 2.52 s with no such leaf, 1.95 s with 4 rows an item, 1.79
+// s with 8, 1.72 s with 16; 8 keeps GPUs supplied with items at small grids).
+#define OV_SDF_FAR_ROWS 8
+
 // The least squared distance from voxel (i,j,k)'s centre to the tree's triangles: a walk that
 // enters the nearer child first and passes over any subtree whose box is farther than the nearest
 // triangle found so far. Every triangle it passes over is at least that far, so the result is the
@@ -250,61 +256,77 @@ OV_SDF_FN float8 ov_row_distance2(const OvSdfTriangle* t, int i0, int j, int k) 
     return select(edges, h * h, inside);
 }
 
-// ov_box_gap2 for the row of 8 voxel centres (i0..i0+7, j, k): the gap from the segment through
-// them, so no lower than any one centre's.
-OV_SDF_FN float ov_row_box_gap2(__global const OvSdfNode* node, int i0, int j, int k) {
-    float x0 = (float)i0 + 0.5f, x7 = (float)i0 + 7.5f;
-    float c[3] = {0.0f, (float)j + 0.5f, (float)k + 0.5f};
-    float gap2 = 0.0f;
-    for (int a = 0; a < 3; ++a) {
-        float below = a == 0 ? x0 : c[a], above = a == 0 ? x7 : c[a];
-        float g = fmax(fmax(node->lo[a] - above, below - node->hi[a]), 0.0f);
-        gap2 += g * g;
-    }
-    return gap2 * 0.9999f;
+// How much nearer than `best` the row of 8 voxel centres (i0..i0+7, j, k) may find a triangle in
+// node's box: the least over the lanes of ov_box_gap2 (in float8, rounded in another order, which
+// the 0.9999 shrink covers) minus the lane's best. At or above 0 no lane can get nearer there;
+// below 0 the more negative, the more promising the box.
+OV_SDF_FN float ov_row_box_margin(__global const OvSdfNode* node, int i0, int j, int k,
+                                  float8 best) {
+    float8 x = convert_float8((int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7)) + 0.5f;
+    float y = (float)j + 0.5f, z = (float)k + 0.5f;
+    float8 gx = fmax(fmax(node->lo[0] - x, x - node->hi[0]), 0.0f);
+    float gy = fmax(fmax(node->lo[1] - y, y - node->hi[1]), 0.0f);
+    float gz = fmax(fmax(node->lo[2] - z, z - node->hi[2]), 0.0f);
+    float8 margin = (gx * gx + (gy * gy + gz * gz)) * 0.9999f - best;
+    float4 m = fmin(margin.lo, margin.hi);
+    return fmin(fmin(m.x, m.y), fmin(m.z, m.w));
 }
 
-OV_SDF_FN float ov_max8(float8 v) {
-    float4 m = fmax(v.lo, v.hi);
-    return fmax(fmax(m.x, m.y), fmax(m.z, m.w));
+// The row's distances to the triangles of leaf node n, folded into best (lanes take the least);
+// whether any lane got nearer.
+OV_SDF_FN int ov_row_leaf_distance2(__global const OvSdfNode* node,
+                                    __global const unsigned int* order,
+                                    __global const OvSdfTriangle* triangles, int i0, int j, int k,
+                                    float8* best) {
+    float8 before = *best;
+    for (unsigned int t = node->first; t < node->first + node->count; ++t) {
+        OvSdfTriangle triangle = triangles[order[t]];
+        *best = fmin(*best, ov_row_distance2(&triangle, i0, j, k));
+    }
+    return any(*best < before);
 }
+
+// No leaf to start from (ov_tree_row_distance2's hint).
+#define OV_SDF_NO_HINT 0xffffffffu
 
 // ov_tree_distance2 of the row of 8 voxel centres (i0..i0+7, j, k) in the lanes of a float8, from
 // `best` (lanes already known, or 0 for lanes to leave out): one walk for the row, evaluating its
 // triangles with ov_row_distance2 (each lane the scalar function's bits). It passes over a
-// subtree only when the row's gap to it exceeds every lane's best, so each lane ends at its own
-// minimum over all the triangles, as ov_tree_distance2 finds it.
+// subtree only when every lane's gap to it is at least the lane's best (a triangle there could not
+// lower that lane's minimum), so each lane ends at its own minimum over all the triangles, as
+// ov_tree_distance2 finds it.
+// *hint: a leaf node whose triangles are taken first (the last leaf that brought a neighbouring
+// row nearer: usually near this row too, so the walk passes over far subtrees from its start), or
+// OV_SDF_NO_HINT; on return, the last leaf that brought this row nearer. A leaf taken twice changes
+// nothing, and every bound is some triangle's distance, so the result does not depend on it.
 OV_SDF_FN float8 ov_tree_row_distance2(__global const OvSdfNode* nodes,
                                        __global const unsigned int* order,
                                        __global const OvSdfTriangle* triangles, int i0, int j,
-                                       int k, float8 best) {
-    float bound = ov_max8(best);
+                                       int k, float8 best, unsigned int* hint) {
+    if (*hint != OV_SDF_NO_HINT)
+        ov_row_leaf_distance2(nodes + *hint, order, triangles, i0, j, k, &best);
     unsigned int stack[OV_SDF_TREE_DEPTH];
     int top = 0;
     unsigned int n = 0;
-    if (ov_row_box_gap2(nodes, i0, j, k) > bound) return best;
+    if (ov_row_box_margin(nodes, i0, j, k, best) >= 0.0f) return best;
     for (;;) {
         __global const OvSdfNode* node = nodes + n;
         int descend = 0;
         if (node->count == 0) {
             unsigned int closer = n + 1, farther = nodes[n + 1].skip;
-            float closer_gap = ov_row_box_gap2(nodes + closer, i0, j, k);
-            float farther_gap = ov_row_box_gap2(nodes + farther, i0, j, k);
-            ov_closer_first(&closer, &farther, &closer_gap, &farther_gap);
-            if (closer_gap <= bound) {
-                if (farther_gap <= bound) stack[top++] = farther;
+            float closer_margin = ov_row_box_margin(nodes + closer, i0, j, k, best);
+            float farther_margin = ov_row_box_margin(nodes + farther, i0, j, k, best);
+            ov_closer_first(&closer, &farther, &closer_margin, &farther_margin);
+            if (closer_margin < 0.0f) {
+                if (farther_margin < 0.0f) stack[top++] = farther;
                 n = closer;
                 descend = 1;
             }
-        } else {
-            for (unsigned int t = node->first; t < node->first + node->count; ++t) {
-                OvSdfTriangle triangle = triangles[order[t]];
-                best = fmin(best, ov_row_distance2(&triangle, i0, j, k));
-            }
-            bound = ov_max8(best);
+        } else if (ov_row_leaf_distance2(node, order, triangles, i0, j, k, &best)) {
+            *hint = n;
         }
         if (descend) continue;
-        while (top > 0 && ov_row_box_gap2(nodes + stack[top - 1], i0, j, k) > bound) --top;
+        while (top > 0 && ov_row_box_margin(nodes + stack[top - 1], i0, j, k, best) >= 0.0f) --top;
         if (top == 0) return best;
         n = stack[--top];
     }

@@ -66,17 +66,18 @@ std::vector<float> distance2_device(Device& device, const SdfTriangles& prepared
                                     distance2.data());
         stats.seconds_upload += seconds_since(t);
 
-        // Phase 4: every voxel beyond the band from the tree, a row of 8 along x per work item,
-        // in slices.
+        // Phase 4: every voxel beyond the band from the tree, OV_SDF_FAR_ROWS rows of 8 along x
+        // per work item, in slices.
         t = Clock::now();
         cl::Kernel far(program, "far_distances");
-        const uint64_t rows =
-            uint64_t((grid.dims[0] + 7) / 8) * uint64_t(grid.dims[1]) * uint64_t(grid.dims[2]);
-        set_args(far, 0, nodes, order, triangles, cl_ulong(0), cl_ulong(rows), cl_int(grid.dims[0]),
-                 cl_int(grid.dims[1]), prepared.band2, distance);
+        const uint64_t items = uint64_t((grid.dims[0] + 7) / 8) *
+                               uint64_t((grid.dims[1] + OV_SDF_FAR_ROWS - 1) / OV_SDF_FAR_ROWS) *
+                               uint64_t(grid.dims[2]);
+        set_args(far, 0, nodes, order, triangles, cl_ulong(0), cl_ulong(items),
+                 cl_int(grid.dims[0]), cl_int(grid.dims[1]), prepared.band2, distance);
         const size_t group = work_group_size(far, cl.device);
         run_sliced(
-            cl.queue, rows, group,
+            cl.queue, items, group,
             [&](uint64_t first, uint64_t count) {
                 far.setArg(3, cl_ulong(first));
                 launch(cl.queue, far, count, group);
