@@ -3,6 +3,7 @@
 // origin too; polygons become triangles that cover exactly the polygon; scenes are placed by
 // their node transforms; and missing, malformed or hostile files fail fast, without big
 // allocations or leaks, with an InputError that names the file.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <malloc.h>
 #include <sys/resource.h>
@@ -1279,6 +1280,42 @@ TEST_F(MeshFiles, GltfNodesAreAllPlacedByTheirWorldMatrices) {
         gltf_json("data:application/octet-stream;base64," + base64(gltf_buffer()));
     EXPECT_EQ(sorted_triangles(oclvox::load_mesh(write("scene.gltf", gltf))), expected);
     EXPECT_EQ(sorted_triangles(oclvox::load_mesh(write("scene.glb", glb_bytes()))), expected);
+}
+
+// Assimp reads the scene from the bytes oclvox read, once: a .glb or a .gltf from a named pipe
+// is read whole, and the .gltf's buffer file is still found beside it.
+TEST_F(MeshFiles, GltfFromANamedPipeIsReadWhole) {
+    auto expected = expected_scene_triangles();
+    std::sort(expected.begin(), expected.end());
+    write("scene.bin", gltf_buffer());
+    std::signal(SIGPIPE, SIG_IGN);  // a reader that leaves early fails the writer, not the test
+    for (const auto& [name, bytes] : std::vector<std::pair<std::string, std::string>>{
+             {"pipe.glb", glb_bytes()}, {"pipe.gltf", gltf_json("scene.bin")}}) {
+        SCOPED_TRACE(name);
+        const std::string pipe = (folder_ / name).string();
+        ASSERT_EQ(mkfifo(pipe.c_str(), 0600), 0);
+        std::atomic<bool> loaded{false};
+        std::thread writer([&] {
+            std::ofstream(pipe, std::ios::binary) << bytes;
+            // A reader that opens the pipe again would wait for a writer for ever: after 10 s,
+            // writers that write nothing let every such open see the end, and the load fail.
+            for (int wait = 0; !loaded; ++wait) {
+                std::this_thread::sleep_for(std::chrono::milliseconds(100));
+                if (wait >= 100) close(open(pipe.c_str(), O_WRONLY | O_NONBLOCK));
+            }
+        });
+        std::vector<std::array<Vec3, 3>> triangles;
+        std::string error;
+        try {
+            triangles = sorted_triangles(oclvox::load_mesh(pipe));
+        } catch (const InputError& e) {
+            error = e.what();
+        }
+        loaded = true;
+        writer.join();
+        EXPECT_EQ(error, "");
+        EXPECT_EQ(triangles, expected);
+    }
 }
 
 TEST_F(MeshFiles, BrokenGltfFailsWithAnInputError) {

@@ -32,13 +32,6 @@ void require_file(const std::string& path) {
 
 }  // namespace
 
-void require_readable_nonempty(const std::string& path) {
-    require_file(path);
-    std::ifstream file(path, std::ios::binary);
-    if (!file) fail(path, "the file cannot be opened for reading");
-    if (file.peek() == std::ifstream::traits_type::eof()) fail(path, "the file is empty");
-}
-
 std::string read_whole_file(const std::string& path) {
     // The file is opened once: a named pipe gives its bytes to one reader only.
     require_file(path);

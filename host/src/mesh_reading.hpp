@@ -70,9 +70,9 @@ Mesh triangulated(const std::string& path, Polygons polygons);
 
 [[noreturn]] void fail(const std::string& path, const std::string& problem);
 
-// The whole file, after clear failures for a missing, unreadable or empty one.
+// The whole file, after clear failures for a missing, unreadable or empty one. Opened once, so a
+// named pipe is read whole.
 std::string read_whole_file(const std::string& path);
-void require_readable_nonempty(const std::string& path);
 
 // Fails unless `count` items of at least `min_bytes_each` bytes fit in `bytes_left` bytes. Called
 // with every count a header declares, before anything is allocated for it, so a few bytes that

@@ -7,6 +7,8 @@
 // .glb) or leaks. So it runs in a child process under a memory limit, and hands the
 // polygons back through a pipe: whatever it does to itself, the caller gets an InputError naming
 // the file, and its own memory is untouched.
+#include <assimp/DefaultIOSystem.h>
+#include <assimp/MemoryIOWrapper.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <fcntl.h>
@@ -127,11 +129,32 @@ void append_node(const aiScene& scene, const aiNode& node, const Matrix& parent_
         append_node(scene, *node.mChildren[c], world, out);
 }
 
-Polygons import_scene(const std::string& path) {
+// Assimp's file access with the mesh file itself served from `bytes` (read once by the caller, so
+// that a named pipe gives all its bytes to one reader) and every file it names (a .gltf's
+// buffers) from disk, found as assimp finds them beside the mesh file's path.
+class InputInMemory : public Assimp::DefaultIOSystem {
+  public:
+    InputInMemory(const std::string& path, const std::string& bytes) : path_(path), bytes_(bytes) {}
+    bool Exists(const char* file) const override {
+        return file == path_ || Assimp::DefaultIOSystem::Exists(file);
+    }
+    Assimp::IOStream* Open(const char* file, const char* mode) override {
+        if (file != path_) return Assimp::DefaultIOSystem::Open(file, mode);
+        return new Assimp::MemoryIOStream(reinterpret_cast<const uint8_t*>(bytes_.data()),
+                                          bytes_.size());
+    }
+
+  private:
+    const std::string& path_;
+    const std::string& bytes_;
+};
+
+Polygons import_scene(const std::string& path, const std::string& bytes) {
     // Phase 1: import. Validation rejects out-of-range indices; polygons are left to the shared
     // triangulation, and identical vertices are joined later, for all formats at once.
     AssimpErrorLog errors;
     Assimp::Importer importer;
+    importer.SetIOHandler(new InputInMemory(path, bytes));  // the importer owns it
     const aiScene* scene = importer.ReadFile(path, aiProcess_ValidateDataStructure);
     if (!scene)
         fail(path, errors.first_error().empty() ? importer.GetErrorString() : errors.first_error());
@@ -149,13 +172,13 @@ Polygons import_scene(const std::string& path) {
 // The child's address-space budget: room for the importer's work, plus far more than
 // the mesh data the input files can hold (assimp keeps a few copies of it), capped by the host
 // budget.
-uint64_t import_memory_limit(const std::string& path) {
+uint64_t import_memory_limit(const std::string& path, const std::string& bytes) {
     std::error_code error;
-    uint64_t input = std::filesystem::file_size(path, error);
+    uint64_t input = bytes.size();
     // A .gltf names its binary buffers; they are input too. (Its JSON is parsed here only to
     // size the limit: anything unexpected is left for assimp to report.)
     if (detail::lowercase_extension(path) == ".gltf") {
-        const nlohmann::json j = nlohmann::json::parse(read_whole_file(path), nullptr, false);
+        const nlohmann::json j = nlohmann::json::parse(bytes, nullptr, false);
         const std::filesystem::path folder = std::filesystem::path(path).parent_path();
         if (j.is_object() && j.contains("buffers") && j["buffers"].is_array())
             for (const nlohmann::json& buffer : j["buffers"])
@@ -215,7 +238,8 @@ void write_vector(int fd, const std::vector<T>& v) {
 }
 
 // The child: imports and writes either 'P' and the polygons, or 'E' and a message; never returns.
-[[noreturn]] void run_import_child(const std::string& path, uint64_t memory_limit, int fd) {
+[[noreturn]] void run_import_child(const std::string& path, const std::string& bytes,
+                                   uint64_t memory_limit, int fd) {
     // Die with the parent; take Ctrl-C and SIGTERM as a plain process would (the CLI blocks them
     // in every thread for its watcher, and the mask is inherited).
     prctl(PR_SET_PDEATHSIG, SIGKILL);
@@ -241,7 +265,7 @@ void write_vector(int fd, const std::vector<T>& v) {
     // The message sent back is the whole InputError message.
     std::string message;
     try {
-        const Polygons polygons = import_scene(path);
+        const Polygons polygons = import_scene(path, bytes);
         write_all(fd, "P", 1);
         write_vector(fd, polygons.positions);
         write_vector(fd, polygons.corners);
@@ -300,8 +324,9 @@ std::string how_it_ended(int status) {
 }  // namespace
 
 Polygons read_scene_assimp(const std::string& path) {
-    require_readable_nonempty(path);
-    const uint64_t memory_limit = import_memory_limit(path);
+    // The file is read here, once (the child inherits the bytes).
+    const std::string file = read_whole_file(path);
+    const uint64_t memory_limit = import_memory_limit(path, file);
 
     // Phase 1: the import, in a child process.
     int fds[2];
@@ -314,7 +339,7 @@ Polygons read_scene_assimp(const std::string& path) {
     }
     if (child == 0) {
         close(fds[0]);
-        run_import_child(path, memory_limit, fds[1]);
+        run_import_child(path, file, memory_limit, fds[1]);
     }
     close(fds[1]);
 
