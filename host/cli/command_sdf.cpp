@@ -52,17 +52,16 @@ void add_options(CLI::App& command, SdfArgs& args) {
 }
 
 // --workers / --scheduler: the same checks of the output, then the Python back end computes the
-// narrow band in slabs of layers, kept sparse, and writes it.
+// field in slabs of layers (a narrow band kept sparse, a full grid dense) and writes it.
 [[noreturn]] void run_sharded(const SdfArgs& args) {
     if (args.input == "-" || args.output == "-" || !args.preview.empty() ||
-        !args.mesh_output.empty() || args.full)
+        !args.mesh_output.empty())
         throw UsageError(
-            "stdin, stdout, --preview, --mesh and --full are not available with "
-            "--workers/--scheduler");
+            "stdin, stdout, --preview and --mesh are not available with --workers/--scheduler");
     check_output(args.output, {args.input}, kFieldExtensions, args.files);
     const oclvox::GridFit fit = field_fit(args);
     run_on_cluster({{"sdf", args.input, "-o", args.output},
-                    {{"band", args.band}, {"inside", args.inside}},
+                    {{"band", args.band}, {"inside", args.inside}, {"full_grid", args.full}},
                     &args.cluster,
                     &fit,
                     &args.device,

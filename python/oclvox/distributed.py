@@ -466,8 +466,8 @@ def _parse_args(argv):
     sharded.add_argument("-o", "--output", required=True)
     sharded.add_argument("--shard-bricks", type=int,
                          help="bricks per task (default: about four tasks per worker)")
-    field = commands.add_parser("sdf", help="one mesh's narrow-band distance field, in slabs, "
-                                            "kept sparse")
+    field = commands.add_parser("sdf", help="one mesh's distance field, in slabs: a narrow band "
+                                            "kept sparse, or (full_grid) every voxel, dense")
     field.add_argument("input")
     field.add_argument("-o", "--output", required=True, help=".vdb or .npy")
     batch = commands.add_parser("batch", help="one output per mesh of a folder or list file")
@@ -504,10 +504,12 @@ def main(argv=None):
                         progress=_progress_line("bricks", args.quiet), **options)
                     made = f"{result.count} voxels set"
                 else:
+                    # A narrow band kept sparse; a full grid (full_grid) is dense.
+                    sparse = not options.get("full_grid", False)
                     result = sdf_sharded(args.input, args.resolution, client=client,
-                                         device=args.device, sparse=True,
+                                         device=args.device, sparse=sparse,
                                          progress=_progress_line("layers", args.quiet), **options)
-                    made = f"{result.leaf_count} leaves"
+                    made = f"{result.leaf_count} leaves" if sparse else "every voxel"
                 result.save(args.output)
                 if not args.quiet:
                     print(f"{args.output}: {made} in {'x'.join(map(str, result.dims))}, "

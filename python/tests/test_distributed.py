@@ -358,6 +358,16 @@ def test_cli_cluster_paths_write_the_plain_paths_files(mesh_folder, tmp_path):
     assert sidecars[1].pop("file") == "sharded_sdf.npy"
     assert sidecars[0] == sidecars[1]
 
+    # A full grid: dense slabs on the cluster, the plain run's slabs written as computed.
+    run_cli("sdf", SPOT, *field, "--full", "-o", tmp_path / "plain_full.npy")
+    run_cli("sdf", SPOT, *field, "--full", "--workers", 2, "-o", tmp_path / "sharded_full.npy")
+    assert filecmp.cmp(tmp_path / "plain_full.npy", tmp_path / "sharded_full.npy", shallow=False)
+    sidecars = [json.loads((tmp_path / f"{name}_full.npy.json").read_text())
+                for name in ("plain", "sharded")]
+    assert sidecars[0].pop("file") == "plain_full.npy"
+    assert sidecars[1].pop("file") == "sharded_full.npy"
+    assert sidecars[0] == sidecars[1] and sidecars[0]["band_voxels"] > 10
+
 
 @pytest.mark.skipif(not CLI, reason="OCLVOX_CLI (the oclvox tool) not given")
 def test_cli_cluster_paths_fail_clearly(mesh_folder, tmp_path):
@@ -375,7 +385,7 @@ def test_cli_cluster_paths_fail_clearly(mesh_folder, tmp_path):
         run = run_cli("voxelize", SPOT, "-o", tmp_path / "x.vdb", "--workers", 2, *refused,
                       check=False)
         assert run.returncode == 2 and "not available with --workers" in run.stderr, refused
-    for refused in (["--full"], ["--mesh", tmp_path / "m.obj"], ["--json"]):
+    for refused in (["--mesh", tmp_path / "m.obj"], ["--json"]):
         run = run_cli("sdf", SPOT, "-o", tmp_path / "x.vdb", "--workers", 2, *refused,
                       check=False)
         assert run.returncode == 2 and "not available with --workers" in run.stderr, refused
