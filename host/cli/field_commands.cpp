@@ -154,7 +154,7 @@ int64_t slab_layers(const oclvox::Grid& grid, const std::optional<oclvox::Device
     if (device) bytes = std::min(bytes, 2 * device->info().max_alloc);
     int64_t layers = int64_t(bytes / (8 * per_layer));
     layers -= layers % (layers >= brick_size ? brick_size : 8);
-    return std::clamp<int64_t>(layers, 8, grid.dims[2]);
+    return std::min<int64_t>(std::max<int64_t>(layers, 8), grid.dims[2]);  // nz may be below 8
 }
 
 void add_slab_stats(oclvox::VoxelizeStats& sum, const oclvox::VoxelizeStats& slab) {
