@@ -603,6 +603,8 @@ o="$WORK/err_field.obj"
 expect_failure "csg with an unknown op" "$o" 'xor|op' csg "$MESH" xor "$WORK/spot_moved.obj" -o "$o"
 expect_failure "sdf --band 0" "$WORK/err.npy" 'band' sdf "$MESH" -r 24 --band 0 -o "$WORK/err.npy"
 expect_failure "sdf --band -2" "$WORK/err.npy" 'band' sdf "$MESH" -r 24 --band=-2 -o "$WORK/err.npy"
+OCLVOX_HOST_MEMORY_MIB=1 expect_failure "sdf --full to .vdb over the host budget" "$WORK/err.vdb" \
+    'budget.*\.npy.*slab of layers' sdf "$MESH" -r 64 --full -o "$WORK/err.vdb"
 expect_failure "mesh of a missing file" "$o" 'no-such-field' mesh "$WORK/no-such-field.npy" -o "$o"
 expect_failure "mesh of a field with grid options" "$o" 'grid options' \
     mesh "$WORK/sdf.npy" -r 24 -o "$o"

@@ -92,13 +92,21 @@ oclvox::SdfOptions sdf_options(const FieldArgs& args) {
 
 namespace {
 
-// run(options) with the field options of args and a progress bar named `what`.
+// run(options) with the field options of args and a progress bar named `what`. A full grid too
+// large to hold whole says how it can be had.
 template <class Run>
 auto with_progress(const FieldArgs& args, const char* what, Run&& run) {
     oclvox::SdfOptions options = sdf_options(args);
     ProgressBar bar(what, "", args.reporting);
     options.progress = bar.callback();
-    return run(options);
+    try {
+        return run(options);
+    } catch (const oclvox::GridError& e) {
+        if (!args.full) throw;
+        throw oclvox::GridError(std::string(e.what()) +
+                                " (a full grid written to .npy, without --mesh or --preview, "
+                                "is computed and written a slab of layers at a time)");
+    }
 }
 
 }  // namespace
