@@ -1002,8 +1002,10 @@ sigint_test() {  # name, output, arguments...
         fail "SIGINT cancels $name" "rc=$RC err=$ERR"
     fi
 }
-sigint_test voxelize "$WORK/cancel.binvox" \
-    voxelize "$MESH" -r 2048 --device-memory 1 -o "$WORK/cancel.binvox"
+# (Runs long enough that the signal comes while they work: the voxelization about 10 s uncancelled
+# on 2 cores, where 2048^3 to .binvox had come to finish within the second.)
+sigint_test voxelize "$WORK/cancel.vdb" \
+    voxelize "$MESH" -r 8192 --device-memory 1 -o "$WORK/cancel.vdb"
 sigint_test sdf "$WORK/cancel_sdf.npy" sdf "$MESH" -r 256 --full -o "$WORK/cancel_sdf.npy"
 sigint_test csg "$WORK/cancel_csg.npy" csg "$MESH" union "$MESH" -r 256 --full \
     -o "$WORK/cancel_csg.npy"
