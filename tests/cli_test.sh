@@ -403,21 +403,35 @@ EOF_PY
     pass "csg: sparse narrow band equals the dense full grid in the band; .vdb holds it ($verdict)" ||
     fail "csg: sparse narrow band vs dense full grid" "$verdict"
 
-# A full grid to .npy is computed and written a slab of layers at a time (8 layers under a 1 MiB
-# host budget), without the whole field in memory; with --mesh it is computed whole. The same
-# file bit for bit, the same sidecar but for its name, and the same report of the border and of
-# the inside voxels. The same for csg, against one slab (the default budget).
+# A full grid to .npy or .vdb is computed and written a slab of layers at a time (8 layers under a
+# 1 MiB host budget), without the whole field in memory; with --mesh it is computed whole. The
+# same .npy bit for bit, the same sidecar but for its name, the same report of the border and of
+# the inside voxels, and (read by OpenVDB) the same .vdb voxels and background. The same for csg,
+# against one slab (the default budget).
 OCLVOX_HOST_MEMORY_MIB=1 "$OCLVOX" sdf "$MESH" -r 64 --full -q -o "$WORK/slabs.npy" \
     --stats-json "$WORK/slabs.json"
 "$OCLVOX" sdf "$MESH" -r 64 --full -q -o "$WORK/whole.npy" --mesh "$WORK/whole.obj" \
     --stats-json "$WORK/whole.json"
+OCLVOX_HOST_MEMORY_MIB=1 "$OCLVOX" sdf "$MESH" -r 64 --full -q -o "$WORK/slabs.vdb"
+"$OCLVOX" sdf "$MESH" -r 64 --full -q -o "$WORK/whole.vdb" --mesh "$WORK/whole_vdb.obj"
 OCLVOX_HOST_MEMORY_MIB=1 "$OCLVOX" csg "$MESH" union "$WORK/spot_moved.obj" -r 48 --full -q \
     -o "$WORK/csg_slabs.npy" --stats-json "$WORK/csg_slabs.json"
 "$OCLVOX" csg "$MESH" union "$WORK/spot_moved.obj" -r 48 --full -q \
     -o "$WORK/csg_whole.npy" --stats-json "$WORK/csg_whole.json"
-verdict=$(python3 - "$WORK" <<'EOF_PY' 2>&1
+verdict=$("$vdb_python" - "$WORK" <<'EOF_PY' 2>&1
 import json, sys
 work = sys.argv[1]
+try:
+    import numpy as np, pyopenvdb as vdb
+    a, b = (vdb.read(f"{work}/{n}.vdb", "sdf") for n in ("slabs", "whole"))
+    assert a.activeVoxelCount() == b.activeVoxelCount() > 30 * 30 * 30, "active voxels"
+    assert a.background == b.background > 0, "background"
+    dense = [np.zeros((80, 80, 80), np.float32) for _ in "ab"]
+    a.copyToArray(dense[0], ijk=(-2, -2, -2))
+    b.copyToArray(dense[1], ijk=(-2, -2, -2))
+    assert np.array_equal(dense[0].view(np.uint32), dense[1].view(np.uint32)), "vdb values"
+except ImportError:
+    pass
 for slabs, whole in (("slabs", "whole"), ("csg_slabs", "csg_whole")):
     a, b = (open(f"{work}/{n}.npy", "rb").read() for n in (slabs, whole))
     assert len(a) > 20 * 20 * 20 * 4 and a == b, f"{slabs}.npy differs"
@@ -431,7 +445,7 @@ for slabs, whole in (("slabs", "whole"), ("csg_slabs", "csg_whole")):
 print("ok")
 EOF_PY
 )
-[ "$verdict" = ok ] && pass "sdf/csg --full to .npy in slabs: the whole field's files and report" ||
+[ "$verdict" = ok ] && pass "sdf/csg --full to .npy/.vdb in slabs: the whole field's files and report" ||
     fail "sdf/csg --full in slabs" "$verdict"
 
 # .vdb level sets are read sparse: the sdf's .vdb meshes to the very file `sdf --mesh` wrote, and
@@ -603,8 +617,9 @@ o="$WORK/err_field.obj"
 expect_failure "csg with an unknown op" "$o" 'xor|op' csg "$MESH" xor "$WORK/spot_moved.obj" -o "$o"
 expect_failure "sdf --band 0" "$WORK/err.npy" 'band' sdf "$MESH" -r 24 --band 0 -o "$WORK/err.npy"
 expect_failure "sdf --band -2" "$WORK/err.npy" 'band' sdf "$MESH" -r 24 --band=-2 -o "$WORK/err.npy"
-OCLVOX_HOST_MEMORY_MIB=1 expect_failure "sdf --full to .vdb over the host budget" "$WORK/err.vdb" \
-    'budget.*\.npy.*slab of layers' sdf "$MESH" -r 64 --full -o "$WORK/err.vdb"
+OCLVOX_HOST_MEMORY_MIB=1 expect_failure "sdf --full --mesh over the host budget" "$WORK/err.npy" \
+    'budget.*\.npy or \.vdb.*slab of layers' sdf "$MESH" -r 64 --full -o "$WORK/err.npy" \
+    --mesh "$WORK/err.obj"
 expect_failure "mesh of a missing file" "$o" 'no-such-field' mesh "$WORK/no-such-field.npy" -o "$o"
 expect_failure "mesh of a field with grid options" "$o" 'grid options' \
     mesh "$WORK/sdf.npy" -r 24 -o "$o"

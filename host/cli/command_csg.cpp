@@ -122,8 +122,8 @@ int run(const FieldArgs& args) {
         stop_if_interrupted();
         device = open_device(args.device, record.seconds.device_open);
         oclvox::VoxelizeStats stats;
-        // A full grid to .npy is written a slab of layers at a time as it is computed.
-        in_slabs = args.full && !mesh_out && output_extension(args.output, args.files) == ".npy";
+        // A full grid to a field file is written a slab of layers at a time as it is computed.
+        in_slabs = args.full && !mesh_out;
         if (in_slabs) {
             timed(record.seconds.write, [&] {
                 record.border_inside = write_full_field_in_slabs(

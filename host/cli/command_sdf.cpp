@@ -93,13 +93,12 @@ int run(const SdfArgs& args) {
     std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
     // Phase 3: the distances, a narrow band as a sparse field (memory follows the surface), a full
-    // grid written to .npy a slab of layers at a time as it is computed (memory holds a slab),
-    // else dense; then the mesh of their zero level set if asked for, from the field as it is.
-    // Only the preview reads a dense field, made from the sparse one when the band is all there
-    // is.
+    // grid written a slab of layers at a time as it is computed (memory holds a slab), or dense
+    // when it is meshed or previewed; then the mesh of their zero level set if asked for, from the
+    // field as it is. Only the preview reads a dense field, made from the sparse one when the band
+    // is all there is.
     oclvox::VoxelizeStats stats;
-    const bool in_slabs = args.full && output_extension(args.output, args.files) == ".npy" &&
-                          args.mesh_output.empty() && args.preview.empty();
+    const bool in_slabs = args.full && args.mesh_output.empty() && args.preview.empty();
     if (in_slabs) {
         timed(record.seconds.write, [&] {
             record.border_inside = write_full_field_in_slabs(

@@ -49,7 +49,7 @@ void add_distance_options(CLI::App& command, FieldArgs& args) {
         ->group("Distance");
     command
         .add_flag("--full", args.full,
-                  "exact distances in every voxel, not only in the narrow band (to .npy "
+                  "exact distances in every voxel, not only in the narrow band (to a file "
                   "computed and written a slab of layers at a time)")
         ->group("Distance");
 }
@@ -104,8 +104,8 @@ auto with_progress(const FieldArgs& args, const char* what, Run&& run) {
     } catch (const oclvox::GridError& e) {
         if (!args.full) throw;
         throw oclvox::GridError(std::string(e.what()) +
-                                " (a full grid written to .npy, without --mesh or --preview, "
-                                "is computed and written a slab of layers at a time)");
+                                " (a full grid written to .npy or .vdb, without --mesh or "
+                                "--preview, is computed and written a slab of layers at a time)");
     }
 }
 

@@ -63,13 +63,13 @@ oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclv
                                const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                                const FieldArgs& args, oclvox::VoxelizeStats* stats);
 
-// A full-grid field (--full) written to a .npy file as it is computed, a slab of layers at a
-// time (SdfOptions::first_layer / end_layer), so that memory holds one slab, never the whole
-// field: compute(options, stats) is the field of options' layers (signed_distance or csg with
-// those options), which equals the whole field there bit for bit, so the file is the one the
-// whole field gives. One progress bar runs over the slabs; Ctrl-C stops between them and leaves
-// no file. The slabs' stats are summed into `stats` and their compute time into
-// `seconds_compute`. Returns border_samples_inside of the whole field.
+// A full-grid field (--full) written to a .npy or .vdb file as it is computed, a slab of layers
+// at a time (SdfOptions::first_layer / end_layer), so that memory holds one slab (and for .vdb
+// OpenVDB's tree of every sample), never the whole field: compute(options, stats) is the field of
+// options' layers (signed_distance or csg with those options), which equals the whole field there
+// bit for bit, so the file is the one the whole field gives. One progress bar runs over the slabs;
+// Ctrl-C stops between them and leaves no file. The slabs' stats are summed into `stats` and their
+// compute time into `seconds_compute`. Returns border_samples_inside of the whole field.
 using SlabField = std::function<oclvox::ScalarField(const oclvox::SdfOptions& options,
                                                     oclvox::VoxelizeStats* stats)>;
 uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& grid,

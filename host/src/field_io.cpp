@@ -23,8 +23,8 @@
 #include "host_memory.hpp"
 #include "little_endian.hpp"
 #include "npy_format.hpp"
-#include "slabs.hpp"
 #include "oclvox/sdf.hpp"
+#include "slabs.hpp"
 
 namespace oclvox {
 
@@ -451,12 +451,7 @@ void write_field(const std::string& path, const Grid& grid, double band_voxels,
     const std::string extension = detail::lowercase_extension(path);
     detail::ProgressPhases phases(progress, "writing " + path);
     if (extension == ".npy") return write_npy_field(path, grid, band_voxels, phases, layer);
-    if (extension == ".vdb") {
-        if (!(band_voxels > 0))
-            throw OutputError("cannot write level set " + path +
-                              " a layer at a time without its band: give band_voxels > 0");
-        return detail::write_field_vdb(path, grid, band_voxels, layer, phases);
-    }
+    if (extension == ".vdb") return detail::write_field_vdb(path, grid, band_voxels, layer, phases);
     unknown_field_extension(path, extension);
 }
 

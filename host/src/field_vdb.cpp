@@ -21,17 +21,18 @@ constexpr int kLeaf = SparseField::kLeaf;
 using LeafVisit = std::function<void(const std::array<int64_t, 3>& origin, const float* samples)>;
 
 // The level set of the leaves for_each_leaf(visit) visits (every leaf that may hold a sample
-// within the band; `leaves` of them, for progress).
+// within the band; `leaves` of them, for progress). band_voxels <= 0: the largest |value|, found
+// as the leaves pass (every sample is kept until it is known).
 void write_level_set(const std::string& path, const Grid& g, double band_voxels,
                      ProgressPhases& progress, uint64_t leaves,
                      const std::function<void(const LeafVisit&)>& for_each_leaf) {
     openvdb::initialize();
-    const float background = float(band_voxels * g.voxel_size);
+    const bool band_known = band_voxels > 0;
+    float background = band_known ? float(band_voxels * g.voxel_size) : INFINITY;
 
-    // Phase 1: grid, transform and metadata.
-    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
+    // Phase 1: grid, transform and metadata (the background set once it is known).
+    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(band_known ? background : 0.0f);
     place_vdb_grid(*grid, g, "sdf", openvdb::GRID_LEVEL_SET);
-    grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(band_voxels));
 
     // Phase 2: the narrow band as active voxels, leaf by leaf. The rest stays background, and the
     // signed flood fill then gives the inactive regions inside the surface the background's
@@ -41,6 +42,7 @@ void write_level_set(const std::string& path, const Grid& g, double band_voxels,
     const size_t band = progress.add(2), file = progress.add(1);
     openvdb::FloatTree& tree = grid->tree();
     uint64_t visited = 0;
+    float largest = 0;
     for_each_leaf([&](const std::array<int64_t, 3>& origin, const float* samples) {
         const int64_t nx = std::min<int64_t>(kLeaf, g.dims[0] - origin[0]);
         const int64_t ny = std::min<int64_t>(kLeaf, g.dims[1] - origin[1]);
@@ -50,6 +52,7 @@ void write_level_set(const std::string& path, const Grid& g, double band_voxels,
             for (int64_t y = 0; y < ny; ++y)
                 for (int64_t x = 0; x < nx; ++x) {
                     const float value = samples[x + kLeaf * (y + kLeaf * z)];
+                    largest = std::max(largest, std::abs(value));
                     if (!(std::abs(value) < background)) continue;
                     if (!leaf)
                         leaf = tree.touchLeaf(
@@ -60,6 +63,21 @@ void write_level_set(const std::string& path, const Grid& g, double band_voxels,
                 }
         progress.report(band, ++visited, leaves);
     });
+    if (!band_known) {
+        // Now the band is known: what a known band would have left out becomes background,
+        // inactive, and leaves left without an active voxel go, as they would not have been made.
+        background = largest;
+        band_voxels = double(largest) / g.voxel_size;
+        for (auto leaf = tree.beginLeaf(); leaf; ++leaf)
+            for (auto voxel = leaf->beginValueOn(); voxel; ++voxel)
+                if (!(std::abs(*voxel) < background)) {
+                    voxel.setValue(background);
+                    voxel.setValueOff();
+                }
+        tree.root().setBackground(background, true);
+        openvdb::tools::pruneInactive(tree);
+    }
+    grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(band_voxels));
     openvdb::tools::signedFloodFill(tree);
 
     // Phase 3: the file.

@@ -10,7 +10,8 @@
 namespace oclvox::detail {
 
 // A level-set FloatGrid named "sdf" (see write_field in oclvox/sdf.hpp). Throws OutputError.
-// The field's layers come from layer(k, out) in order, 8 (a leaf's height) held at a time.
+// The field's layers come from layer(k, out) in order, 8 (a leaf's height) held at a time;
+// band_voxels <= 0 takes the largest |value| (every sample is kept in the tree until it is known).
 void write_field_vdb(const std::string& path, const Grid& grid, double band_voxels,
                      const FieldLayer& layer, ProgressPhases& progress);
 // The same from a sparse field's leaves, its band field.band_voxels().

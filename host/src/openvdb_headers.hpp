@@ -7,6 +7,7 @@
 #pragma GCC visibility push(default)
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/ValueAccessor.h>
 #pragma GCC visibility pop

@@ -76,9 +76,10 @@ void validate_sdf(const Grid& grid, const SdfOptions& options, uint64_t host_byt
 Grid field_grid(const Grid& grid, const SdfOptions& options);
 
 // Cuts prepared triangles (on the whole grid) to options' layers: their voxel ranges are clipped
-// to the layers, those left without a voxel dropped (kept with an empty range for a full grid), and (for a dense field, whose grid starts at
-// first_layer: `onto_layers`) every z coordinate moved down by first_layer. Anchors are integers,
-// so the anchor-relative float vertices, and every distance computed from them, stay the same bits.
+// to the layers, those left without a voxel dropped (kept with an empty range for a full grid), and
+// (for a dense field, whose grid starts at first_layer: `onto_layers`) every z coordinate moved
+// down by first_layer. Anchors are integers, so the anchor-relative float vertices, and every
+// distance computed from them, stay the same bits.
 void keep_layers(SdfTriangles& prepared, const SdfOptions& options, bool onto_layers);
 
 // Validates mesh and grid, maps the triangles to voxel units, drops those farther than the band

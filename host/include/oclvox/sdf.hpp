@@ -173,8 +173,9 @@ void write_field(const std::string& path, const ScalarField& field, double band_
 // The same files from a field given a layer at a time, for fields too large to hold (a full grid
 // computed a slab of layers at a time, SdfOptions::first_layer): layer(k, out) puts the samples
 // of layer k (grid.dims[0] * grid.dims[1], x fastest) into out, and is called for k = 0, 1, ...
-// in order. band_voxels <= 0 (.npy only) takes the largest |value| written. The files equal
-// those of write_field for the whole field; .npy holds one layer, .vdb a leaf's 8.
+// in order. band_voxels <= 0 takes the largest |value| written. The files equal those of
+// write_field for the whole field; .npy holds one layer, .vdb a leaf's 8 (and its tree, which with
+// band_voxels <= 0 holds every sample until the band is known).
 void write_field(const std::string& path, const Grid& grid, double band_voxels,
                  const FieldLayer& layer, const ProgressCallback& progress = {});
 // The same files from a sparse field, its band the field's background / voxel_size: .vdb straight
