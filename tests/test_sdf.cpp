@@ -808,6 +808,21 @@ TEST(FieldFiles, NpyRoundTripsAndIsFortranOrderedFloat32) {
     std::remove((path + ".json").c_str());
 }
 
+std::string file_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// Two .npy fields: the same bytes, and sidecars that differ only in the file they name.
+void expect_same_npy(const std::string& path_a, const std::string& path_b) {
+    EXPECT_EQ(file_bytes(path_a), file_bytes(path_b));
+    nlohmann::json a = nlohmann::json::parse(file_bytes(path_a + ".json"));
+    nlohmann::json b = nlohmann::json::parse(file_bytes(path_b + ".json"));
+    a.erase("file");
+    b.erase("file");
+    EXPECT_EQ(a, b);
+}
+
 // Two .vdb level sets read back through OpenVDB: the same active voxels and values (inactive
 // signs included) over the grid and a voxel around it, background, transform and band metadata.
 void expect_same_level_set(const std::string& path_a, const std::string& path_b, const Grid& g) {
@@ -850,10 +865,6 @@ TEST(FieldFiles, LayerByLayerFilesEqualTheWholeFieldsFiles) {
     g.dims = {13, 11, 21};  // 21 layers: two whole leaves of 8 and a part
     const ScalarField f = sphere_field(g, {-0.4, 0.1, -0.7}, 1.1);
     const size_t per_layer = size_t(g.dims[0] * g.dims[1]);
-    auto bytes = [](const std::string& path) {
-        std::ifstream in(path, std::ios::binary);
-        return std::string(std::istreambuf_iterator<char>(in), {});
-    };
     for (const std::string extension : {".npy", ".vdb"})
         for (const double band : {0.0, 2.0}) {
             SCOPED_TRACE(extension + " band " + std::to_string(band));
@@ -871,13 +882,11 @@ TEST(FieldFiles, LayerByLayerFilesEqualTheWholeFieldsFiles) {
             for (float v : f.values) largest = std::max(largest, std::abs(v));
             const double expected_band = band > 0 ? band : double(largest) / g.voxel_size;
             if (extension == ".npy") {
-                EXPECT_EQ(bytes(whole), bytes(layers));
-                nlohmann::json a = nlohmann::json::parse(bytes(whole + ".json"));
-                nlohmann::json b = nlohmann::json::parse(bytes(layers + ".json"));
-                a.erase("file");
-                b.erase("file");
-                EXPECT_EQ(a, b);
-                EXPECT_EQ(b.at("band_voxels").get<double>(), expected_band);
+                expect_same_npy(whole, layers);
+                EXPECT_EQ(nlohmann::json::parse(file_bytes(layers + ".json"))
+                              .at("band_voxels")
+                              .get<double>(),
+                          expected_band);
                 std::remove((whole + ".json").c_str());
                 std::remove((layers + ".json").c_str());
             } else {
@@ -1192,17 +1201,7 @@ TEST(SparseSdf, FilesEqualTheDenseFieldsFiles) {
     const std::string sparse_npy = temp_path("sparse.npy"), dense_npy = temp_path("dense.npy");
     write_field(sparse_npy, sparse);
     write_field(dense_npy, dense, o.band_voxels);
-    auto bytes = [](const std::string& path) {
-        std::ifstream in(path, std::ios::binary);
-        return std::string(std::istreambuf_iterator<char>(in), {});
-    };
-    EXPECT_EQ(bytes(sparse_npy), bytes(dense_npy));
-    // The sidecars differ only in the file they name.
-    nlohmann::json sparse_sidecar = nlohmann::json::parse(bytes(sparse_npy + ".json"));
-    nlohmann::json dense_sidecar = nlohmann::json::parse(bytes(dense_npy + ".json"));
-    sparse_sidecar.erase("file");
-    dense_sidecar.erase("file");
-    EXPECT_EQ(sparse_sidecar, dense_sidecar);
+    expect_same_npy(sparse_npy, dense_npy);
 
     const std::string sparse_vdb = temp_path("sparse.vdb"), dense_vdb = temp_path("dense.vdb");
     write_field(sparse_vdb, sparse);
