@@ -32,6 +32,8 @@ CPU_CASES = [
      ["voxelize", "-r", "512", "--mode", "solid", "--inside", "winding"], "vdb", 15, None, None),
     ("sdf-bunny00-512-vdb", "bunny00.off", ["sdf", "-r", "512", "--band", "3"], "vdb", None, None, None),
     ("sdf-bunny00-2048-vdb", "bunny00.off", ["sdf", "-r", "2048", "--band", "3"], "vdb", None, 4096, None),
+    # Exact distances in all 108 M voxels, computed and written a slab of layers at a time.
+    ("sdf-full-bunny00-512-npy", "bunny00.off", ["sdf", "-r", "512", "--full"], "npy", None, None, None),
 ]
 GPU_CASES = [
     ("surface-bunny-1024-binvox", "stanford-bunny.obj", ["voxelize", "-r", "1024"], "binvox", 0.3, None, 0.5),
@@ -44,6 +46,7 @@ GPU_CASES = [
      ["voxelize", "-r", "512", "--mode", "solid", "--inside", "winding"], "vdb", 1.0, None, None),
     ("sdf-bunny00-512-vdb", "bunny00.off", ["sdf", "-r", "512", "--band", "3"], "vdb", None, None, None),
     ("sdf-bunny00-2048-vdb", "bunny00.off", ["sdf", "-r", "2048", "--band", "3"], "vdb", None, 4096, None),
+    ("sdf-full-bunny00-512-npy", "bunny00.off", ["sdf", "-r", "512", "--full"], "npy", None, None, None),
 ]
 
 
