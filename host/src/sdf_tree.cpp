@@ -1,7 +1,7 @@
 // The tree over a distance field's prepared triangles that full-grid fields search beyond the
 // band (ov_tree_distance2 in kernels/sdf_math.h): boxes split at the median centroid of their
-// longest axis down to a few triangles, stored depth first with skip links, so the device walks
-// it without a stack.
+// longest axis down to a few triangles, stored depth first: a node's first child follows it, and
+// the first child's skip link is the second.
 #include <algorithm>
 #include <cmath>
 
