@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -233,6 +234,72 @@ TEST_F(FieldIo, COrderOccupancyIsTransposedAndChecked) {
     write_bytes(
         file, npy_header("{'descr': '|u1', 'fortran_order': False, 'shape': (2, 3, 4), }") + data);
     expect_input_error(file, file, "neither 0 nor 1");
+}
+
+// Layers read one at a time are the samples the file holds, hand-written in both orders and both
+// float widths: value(i, j, k) = i + 10 j + 100 k at x-fastest index i + 2 (j + 3 k) in Fortran
+// order, at C index k + 4 (j + 3 i) in C order.
+TEST_F(FieldIo, LayersReadOneAtATimeAreTheFilesSamplesInEitherOrder) {
+    auto value = [](int i, int j, int k) { return float(i + 10 * j + 100 * k); };
+    for (const bool fortran : {true, false})
+        for (const bool doubles : {false, true}) {
+            SCOPED_TRACE(std::string(fortran ? "Fortran" : "C") + (doubles ? " f8" : " f4"));
+            std::string data(24 * (doubles ? 8 : 4), '\0');
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 3; ++j)
+                    for (int i = 0; i < 2; ++i) {
+                        const size_t at =
+                            fortran ? size_t(i + 2 * (j + 3 * k)) : size_t(k + 4 * (j + 3 * i));
+                        if (doubles) {
+                            const double v = value(i, j, k);
+                            std::memcpy(&data[at * 8], &v, 8);
+                        } else {
+                            const float v = value(i, j, k);
+                            std::memcpy(&data[at * 4], &v, 4);
+                        }
+                    }
+            const std::string file = path("layers.npy");
+            write_bytes(file, npy_header(std::string("{'descr': '<f") + (doubles ? "8" : "4") +
+                                         "', 'fortran_order': " + (fortran ? "True" : "False") +
+                                         ", 'shape': (2, 3, 4), }") +
+                                  data);
+            write_bytes(file + ".json", kSidecar);
+            EXPECT_TRUE(npy_holds_field(file));
+            FieldLayerReader reader(file);
+            EXPECT_EQ(reader.grid().dims, (std::array<int64_t, 3>{2, 3, 4}));
+            EXPECT_EQ(reader.grid().origin, (std::array<double, 3>{1, 2, 3}));
+            for (int k = 0; k < 4; ++k) {
+                float layer[6];
+                reader.read_layer(layer);
+                for (int j = 0; j < 3; ++j)
+                    for (int i = 0; i < 2; ++i) EXPECT_EQ(layer[i + 2 * j], value(i, j, k));
+            }
+            float extra[6];
+            EXPECT_THROW(reader.read_layer(extra), InputError);
+        }
+
+    // A file cut short after it was opened is named when a layer it no longer holds is read (64 KiB
+    // of samples, beyond what the stream buffered on opening); an occupancy is not a field.
+    const std::string file = path("cut.npy");
+    const std::string header =
+        npy_header("{'descr': '<f4', 'fortran_order': True, 'shape': (64, 64, 4), }");
+    write_bytes(file, header + std::string(64 * 64 * 4 * 4, '\0'));
+    write_bytes(file + ".json", kSidecar);
+    FieldLayerReader reader(file);
+    fs::resize_file(file, header.size() + 64 * 64 * 4 + 100);  // the first layer and a little
+    std::vector<float> layer(64 * 64);
+    reader.read_layer(layer.data());
+    try {
+        reader.read_layer(layer.data());
+        ADD_FAILURE() << "a cut file was read";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find(file), std::string::npos) << e.what();
+    }
+    write_bytes(file, npy_header("{'descr': '|u1', 'fortran_order': True, 'shape': (2, 3, 4), }") +
+                          std::string(24, '\0'));
+    EXPECT_FALSE(npy_holds_field(file));
+    EXPECT_THROW(FieldLayerReader{file}, InputError);
+    EXPECT_THROW(FieldLayerReader{path("missing.npy")}, InputError);
 }
 
 TEST_F(FieldIo, OutputPathIsCheckedBeforeWork) {

@@ -523,6 +523,65 @@ TEST(SparseMeshing, DenseFieldsMeshThroughTheirMeshingViewsAsTheyDo) {
     EXPECT_THROW(detail::meshing_view(sphere_field(), NAN, "test"), InputError);
 }
 
+// The builder holds two leaf layers and decides a leaf layer only once the one above is in: tall
+// fields whose sign changes lie on both sides of leaf-layer boundaries (z = 16, 24, 32), with
+// the last leaf layer partial, given a layer at a time, mesh as the dense reference does, and the
+// view's samples below iso are the field's (what a preview draws).
+TEST(SparseMeshing, FieldsGivenALayerAtATimeMeshAsTheDenseFieldDoes) {
+    const ScalarField slabs = sample_field(13, 11, 45, [](const Vec3& p) {
+        return std::abs(p[2] - 24.0 + 0.03 * p[0]) - 7.9 + 0.02 * p[1];  // z near 16.1 and 31.9
+    });
+    const ScalarField ball = sample_field(21, 18, 37, [](const Vec3& p) {
+        return sphere_distance(p, {9.7, 8.2, 23.6}, 8.4);
+    });
+    const ScalarField noise = noise_field(27, 4);
+    for (const ScalarField* field_pointer : {&slabs, &ball, &noise})
+        for (const float iso : {0.0f, 0.2f}) {
+            const ScalarField& field = *field_pointer;
+            SCOPED_TRACE(std::to_string(field.grid.dims[2]) + " layers, iso " +
+                         std::to_string(iso));
+            MeshingViewBuilder builder(field.grid, iso);
+            const size_t per_layer = size_t(field.grid.dims[0] * field.grid.dims[1]);
+            for (int64_t k = 0; k < field.grid.dims[2]; ++k) {
+                // A copy, so the builder cannot lean on the layers staying where they were.
+                std::vector<float> layer(&field.values[size_t(k) * per_layer],
+                                         &field.values[size_t(k + 1) * per_layer]);
+                builder.add_layer(layer.data());
+            }
+            const SparseField view = builder.finish();
+            if (&field == &slabs)  // none in the leaf layers z < 8 and z >= 40
+                for (const uint64_t leaf : view.leaf_indices())
+                    EXPECT_TRUE(leaf >= 2 * 2 && leaf < 5 * 2 * 2) << leaf;
+            expect_identical(
+                surface_nets(view, iso),
+                detail::mesh_field_reference(field, iso, detail::MeshingMethod::SurfaceNets, 32));
+            expect_identical(
+                marching_cubes(view, iso),
+                detail::mesh_field_reference(field, iso, detail::MeshingMethod::MarchingCubes, 32));
+            const ScalarField dense = view.to_dense();
+            for (size_t s = 0; s < field.values.size(); ++s)
+                ASSERT_EQ(dense.values[s] < iso, field.values[s] < iso) << "sample " << s;
+        }
+    // Layers out of turn and bad samples are named.
+    MeshingViewBuilder early(ball.grid, 0.0f);
+    early.add_layer(ball.values.data());
+    EXPECT_THROW(early.finish(), GridError);
+    MeshingViewBuilder late(slabs.grid, 0.0f);
+    for (int64_t k = 0; k < slabs.grid.dims[2]; ++k)
+        late.add_layer(&slabs.values[size_t(k * 13 * 11)]);
+    EXPECT_THROW(late.add_layer(slabs.values.data()), GridError);
+    std::vector<float> bad(ball.values.begin(), ball.values.end());
+    bad[size_t(4 + 21 * (5 + 18 * 19))] = NAN;
+    MeshingViewBuilder nan(ball.grid, 0.0f);
+    try {
+        for (int64_t k = 0; k < ball.grid.dims[2]; ++k) nan.add_layer(&bad[size_t(k * 21 * 18)]);
+        ADD_FAILURE() << "a NaN sample was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("(4, 5, 19)"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(MeshingViewBuilder(ball.grid, INFINITY), InputError);
+}
+
 TEST(SparseMeshing, ProgressReachesItsTotalAndCancels) {
     SdfOptions o;
     o.band_voxels = 2.0;

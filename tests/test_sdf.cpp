@@ -1291,6 +1291,85 @@ TEST(LevelSetFiles, ForeignLevelSetSamplesAreOpenVdbsValuesAtTheSamePlaces) {
     std::remove(path.c_str());
 }
 
+// A level set on another lattice (another voxel size, voxel centres off A's) is rebuilt on A's
+// lattice with A's band: its grid lies on that lattice exactly, its background is A's (so the two
+// combine), and its samples are the exact distances A's lattice has for the same sphere to within
+// a small fraction of a voxel. One already on the lattice with that band is read unchanged, and
+// another band on the same lattice is rebuilt to it.
+TEST(LevelSetFiles, LevelSetsOnAnotherLatticeAreRebuiltOnItCloseToTheExactDistances) {
+    const Vec3d centre{1.3, -0.7, 2.1};
+    const Mesh sphere = test::icosphere(centre, 1.45, 5);
+    Grid a;
+    a.voxel_size = 0.1;
+    a.origin = {-0.43, -2.52, 0.31};
+    a.dims = {40, 42, 41};
+    Grid b;
+    b.voxel_size = 0.137;
+    b.origin = {-0.61, -2.73, 0.17};
+    b.dims = {32, 31, 33};
+    const SparseField exact = signed_distance_sparse_reference(sphere, a, band(3.0));
+    const std::string path = temp_path("other_lattice.vdb");
+    write_field(path, signed_distance_sparse_reference(sphere, b, band(3.0)));
+
+    const SparseField rebuilt = read_sparse_field(path, a, exact.band_voxels());
+    const Grid& g = rebuilt.grid();
+    EXPECT_EQ(g.voxel_size, a.voxel_size);
+    EXPECT_EQ(rebuilt.background(), exact.background());
+    int64_t offset[3];
+    for (int k = 0; k < 3; ++k) {
+        const double voxels = (g.origin[k] - a.origin[k]) / a.voxel_size;
+        offset[k] = std::llround(voxels);
+        EXPECT_NEAR(voxels, double(offset[k]), 1e-9);
+    }
+    // OpenVDB's rebuild polygonizes the surface with one point per cell at the mean of its edge
+    // crossings, which moves a convex surface inwards by about h^2 / (2 R) (h the file's voxel,
+    // R the radius: 0.065 of A's voxels here); half a voxel off the lattice would be 0.5.
+    double worst = 0, sum = 0;
+    size_t compared = 0;
+    for (int64_t k = 0; k < a.dims[2]; ++k)
+        for (int64_t j = 0; j < a.dims[1]; ++j)
+            for (int64_t i = 0; i < a.dims[0]; ++i) {
+                const float want = exact.at(i, j, k);
+                const int64_t at[3] = {i - offset[0], j - offset[1], k - offset[2]};
+                if (!(std::abs(want) < 1.5 * a.voxel_size) || at[0] < 0 || at[1] < 0 || at[2] < 0 ||
+                    at[0] >= g.dims[0] || at[1] >= g.dims[1] || at[2] >= g.dims[2])
+                    continue;
+                const double d = double(rebuilt.at(at[0], at[1], at[2])) - want;
+                worst = std::max(worst, std::abs(d));
+                sum += d;
+                ++compared;
+            }
+    ASSERT_GT(compared, 5000u);
+    EXPECT_LT(worst, 0.25 * a.voxel_size) << worst / a.voxel_size << " voxels";
+    EXPECT_LT(std::abs(sum / double(compared)), 0.1 * a.voxel_size)
+        << sum / double(compared) / a.voxel_size << " voxels";
+    EXPECT_NO_THROW(csg(exact, rebuilt, CsgOp::Union));
+
+    const SparseField as_written = read_sparse_field(path);
+    const SparseField unchanged = read_sparse_field(path, b, as_written.band_voxels());
+    EXPECT_TRUE(same_grid(unchanged.grid(), as_written.grid()));
+    expect_identical(unchanged.to_dense(), as_written.to_dense());
+    const SparseField wider = read_sparse_field(path, b, 5.0);
+    EXPECT_EQ(wider.background(), float(5.0 * b.voxel_size));
+    const ScalarField wide = wider.to_dense();
+    EXPECT_TRUE(std::any_of(wide.values.begin(), wide.values.end(), [&](float v) {
+        return std::abs(v) > 3.5 * b.voxel_size && std::abs(v) < 4.5 * b.voxel_size;
+    }));
+    EXPECT_THROW(read_sparse_field(path, a, 0.0), GridError);
+    // A surface its grid cuts cannot be signed again after the rebuild: refused, naming the file.
+    Grid cut = b;
+    cut.dims[0] = 16;
+    write_field(path, signed_distance_sparse_reference(sphere, cut, band(3.0)));
+    try {
+        read_sparse_field(path, a, 3.0);
+        ADD_FAILURE() << "a cut surface was rebuilt";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("cut by its grid"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+    std::remove(path.c_str());
+}
+
 TEST(LevelSetFiles, FilesThatAreNotNarrowBandLevelSetsAreInputErrorsNamingTheFile) {
     openvdb::initialize();
     auto expect_refused = [](const std::string& path, const std::string& why) {

@@ -3,6 +3,7 @@
 #include "commands.hpp"
 #include "field_commands.hpp"
 #include "interrupt.hpp"
+#include "progress_bar.hpp"
 #include "stdio_files.hpp"
 
 namespace oclvox_cli {
@@ -21,7 +22,9 @@ void add_options(CLI::App& command, FieldArgs& args) {
         ->type_name("OP")
         ->check(CLI::IsMember({"union", "intersection", "difference"}))
         ->required();
-    command.add_option("b", args.input_b, "second mesh file, or a field of A's kind on A's grid")
+    command
+        .add_option("b", args.input_b,
+                    "second mesh file, or a field of A's kind (.npy: on A's grid)")
         ->type_name("B")
         ->required();
     command
@@ -62,32 +65,70 @@ int run(const FieldArgs& args) {
     const bool level_sets_in = fields_in && is_sparse_field_path(args.input);
     if (fields_in && level_sets_in != is_sparse_field_path(args.input_b))
         throw UsageError("csg takes two .npy fields or two .vdb level sets, not one of each");
-    if (level_sets_in && !args.device.selector.empty())
+    // Two .npy fields (not occupancies, as their headers say) are combined a layer at a time.
+    const bool npy_fields_in = fields_in && !level_sets_in && oclvox::npy_holds_field(args.input) &&
+                               oclvox::npy_holds_field(args.input_b);
+    if ((level_sets_in || npy_fields_in) && !args.device.selector.empty())
         throw UsageError(
-            "two .vdb level sets are combined and meshed on the host's cores; "
-            "--device applies to meshes and .npy fields");
+            "two field files (.npy fields or .vdb level sets) are combined and meshed on the "
+            "host's cores; --device applies to meshes and occupancy .npy files");
     if (fields_in && any_given(args.grid_options))
         throw UsageError("grid options do not apply to field inputs (their grids are used)");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: both operands as fields on one grid, combined: .npy fields and full grids dense,
-    // .vdb level sets and narrow bands of meshes sparse (and meshed sparse).
+    // Phase 2: both operands as fields on one grid, combined: .vdb level sets and narrow bands of
+    // meshes sparse (and meshed sparse), .npy fields a layer at a time and full grids of meshes a
+    // slab of layers at a time (written as they come, or meshed through their meshing view),
+    // occupancy .npy files dense.
     oclvox::ScalarField combined;
     std::optional<oclvox::SparseField> sparse;
-    bool in_slabs = false;  // the field is written as it is computed
+    bool streamed = false;  // a field made a layer at a time: written as it comes
     std::optional<oclvox::Device> device;
     if (level_sets_in) {
         record.inputs.resize(2);
         std::optional<oclvox::SparseField> a, b;
         timed(record.seconds.load, [&] {
             a = read_sparse_field_input(args.input, record.inputs[0]);
-            b = read_sparse_field_input(args.input_b, record.inputs[1]);
+            b = read_sparse_field_input(args.input_b, record.inputs[1], &*a);
             return 0;
         });
-        // On grids of one lattice the result covers both: its grid is the one to report.
+        // B on A's lattice (rebuilt there if it was not): the result covers both grids, so its
+        // grid is the one to report.
         sparse = timed(record.seconds.compute, [&] { return oclvox::csg(*a, *b, op); });
         record.grid = sparse->grid();
         stop_if_interrupted();
+    } else if (npy_fields_in) {
+        record.inputs = {{args.input, "field", 0}, {args.input_b, "field", 0}};
+        oclvox::FieldLayerReader a(args.input), b(args.input_b);
+        if (!oclvox::same_grid(a.grid(), b.grid()))
+            throw oclvox::GridError(
+                "csg of two .npy fields needs them on one grid (the same "
+                "dims, origin and voxel size), got " +
+                oclvox::to_string(a.grid()) + " and " + oclvox::to_string(b.grid()));
+        record.grid = a.grid();
+        oclvox::Grid layer_grid = a.grid();
+        layer_grid.dims[2] = 1;
+        const size_t per_layer = size_t(layer_grid.dims[0]) * size_t(layer_grid.dims[1]);
+        oclvox::ScalarField layer_a{layer_grid, std::vector<float>(per_layer)},
+            layer_b{layer_grid, std::vector<float>(per_layer)};
+        ProgressBar bar("combining", "", args.reporting);
+        const oclvox::ProgressCallback progress = bar.callback();
+        streamed = true;
+        timed(record.seconds.write, [&] {
+            StreamedField field = stream_field(
+                mesh_out ? std::string() : output.path(), mesh_out, a.grid(),
+                [&](int64_t k, float* out) {
+                    a.read_layer(layer_a.values.data());
+                    b.read_layer(layer_b.values.data());
+                    const oclvox::ScalarField layer = oclvox::csg(layer_a, layer_b, op);
+                    std::copy(layer.values.begin(), layer.values.end(), out);
+                    progress(uint64_t(k + 1), uint64_t(a.grid().dims[2]));
+                    stop_if_interrupted();
+                });
+            record.border_inside = field.border_inside;
+            sparse = std::move(field.meshing_view);
+            return 0;
+        });
     } else if (fields_in) {
         record.inputs.resize(2);
         std::optional<oclvox::ScalarField> a, b;
@@ -122,12 +163,13 @@ int run(const FieldArgs& args) {
         stop_if_interrupted();
         device = open_device(args.device, record.seconds.device_open);
         oclvox::VoxelizeStats stats;
-        // A full grid to a field file is written a slab of layers at a time as it is computed.
-        in_slabs = args.full && !mesh_out;
-        if (in_slabs) {
+        // A full grid is computed a slab of layers at a time: written to a field file as it
+        // comes, or gathered into its meshing view for a mesh.
+        if (args.full) {
+            streamed = true;
             timed(record.seconds.write, [&] {
-                record.border_inside = write_full_field_in_slabs(
-                    output.path(), *record.grid, device, args,
+                StreamedField field = full_field_in_slabs(
+                    mesh_out ? std::string() : output.path(), mesh_out, *record.grid, device, args,
                     [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
                         return device ? oclvox::csg(*device, mesh_a, mesh_b, op, *record.grid,
                                                     options, slab_stats)
@@ -135,17 +177,14 @@ int run(const FieldArgs& args) {
                                                               options, slab_stats);
                     },
                     stats, record.seconds.compute);
-                output.finish();
+                record.border_inside = field.border_inside;
+                sparse = std::move(field.meshing_view);
                 return 0;
             });
             record.seconds.write -= record.seconds.compute;
         } else {
-            timed(record.seconds.compute, [&] {
-                if (args.full)
-                    combined = csg(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
-                else
-                    sparse = csg_sparse(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
-                return 0;
+            sparse = timed(record.seconds.compute, [&] {
+                return csg_sparse(device, mesh_a, mesh_b, op, *record.grid, args, &stats);
             });
         }
         stop_if_interrupted();
@@ -162,26 +201,24 @@ int run(const FieldArgs& args) {
         stop_if_interrupted();
     }
 
-    // Phase 4: the file, then the report.
-    if (!in_slabs)
-        timed(record.seconds.write, [&] {
-            if (surface)
-                write_mesh_output(output.path(), *surface, args);
-            else if (sparse)
-                write_field_output(output.path(), *sparse, args);
-            else
-                write_field_output(output.path(), combined,
-                                   fields_in || args.full ? 0.0 : args.band, args);
-            output.finish();
-            return 0;
-        });
+    // Phase 4: the file (a streamed field is written already), then the report.
+    timed(record.seconds.write, [&] {
+        if (surface)
+            write_mesh_output(output.path(), *surface, args);
+        else if (sparse && !streamed)
+            write_field_output(output.path(), *sparse, args);
+        else if (!streamed)
+            write_field_output(output.path(), combined, 0.0, args);
+        output.finish();
+        return 0;
+    });
     record.seconds.total = seconds_since(start);
 
     record.outputs = {args.output};
     if (device) record.device = device->info();
     record_field_settings(record, args);
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
-    if (!in_slabs)
+    if (!streamed)
         record.border_inside = sparse ? oclvox::border_samples_inside(*sparse)
                                       : oclvox::border_samples_inside(combined);
     report_run(record, args.reporting, output.is_stdout());
@@ -197,8 +234,10 @@ Command add_csg_command(CLI::App& app) {
         std::string(kExitCodesText) +
         "Both signed distance fields are computed on one grid fitted to both meshes and\n"
         "padded by band + 1 voxels, so the result's surface closes inside it. Two .npy fields\n"
-        "need one grid; two .vdb level sets one voxel lattice (the same voxel size, origins\n"
-        "whole voxels apart), and the result covers the box of both.\n"
+        "need one grid and are combined a layer at a time. Two .vdb level sets combine on A's\n"
+        "voxel lattice, covering the box of both; B on another lattice (voxel size, or voxel\n"
+        "centres not whole voxels apart) is first rebuilt on A's by OpenVDB's levelSetRebuild,\n"
+        "whose distances are to a polygonization of B's surface (within a fraction of a voxel).\n"
         "Example: oclvox csg a.obj difference b.obj -r 128 -o a_minus_b.obj");
     auto args = std::make_shared<FieldArgs>();
     add_options(*command, *args);

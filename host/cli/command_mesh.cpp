@@ -12,13 +12,14 @@ namespace {
 void add_options(CLI::App& command, FieldArgs& args) {
     command
         .add_option("input", args.input,
-                    std::string("a .npy scalar field (with its .json sidecar) or a .vdb level "
-                                "set (read and meshed sparse, on the host), meshed at --iso; "
-                                "or a mesh file (") +
+                    std::string("a .npy scalar field (with its .json sidecar; read a layer at a "
+                                "time) or a .vdb level set (read sparse), meshed at --iso on the "
+                                "host's cores; an occupancy .npy (what voxelize writes) or a "
+                                "mesh file (") +
                         kMeshFormatsText +
                         "; - reads stdin), which is voxelized (mode solid, on the grid options' "
-                        "grid), turned into a field by occupancy_to_field (one smoothing pass) "
-                        "and meshed: a remeshed voxel surface, not the original")
+                        "grid) if a mesh, turned into a field by occupancy_to_field (one "
+                        "smoothing pass) and meshed: a remeshed voxel surface, not the original")
         ->type_name("INPUT")
         ->required();
     command
@@ -58,23 +59,33 @@ int run(const FieldArgs& args) {
     const bool field_in = is_field_path(args.input);
     if (field_in && any_given(args.grid_options))
         throw UsageError("grid options do not apply to a field input (its grid is used)");
-    if (is_sparse_field_path(args.input) && !args.device.selector.empty())
+    // A field file's header says whether it holds a field or an occupancy.
+    const bool level_set_in = is_sparse_field_path(args.input);
+    const bool npy_field_in = field_in && !level_set_in && oclvox::npy_holds_field(args.input);
+    if ((level_set_in || npy_field_in) && !args.device.selector.empty())
         throw UsageError(
-            "a .vdb level set is meshed sparse on the host's cores; --device applies "
-            "to .npy fields and meshes");
+            "a field file (a .npy field or a .vdb level set) is meshed sparse on the host's "
+            "cores; --device applies to occupancy .npy files and meshes");
     if (field_in && !args.files.input_format.empty())
         throw UsageError("--input-format applies to a mesh read from stdin (-) only");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the field, read (a level set sparse) or made from the mesh's solid voxels.
+    // Phase 2: the field: a level set read sparse, a .npy field read a layer at a time into its
+    // meshing view, or dense: an occupancy's, or one made from the mesh's solid voxels.
     std::optional<oclvox::ScalarField> field;
     std::optional<oclvox::SparseField> sparse;
     std::optional<oclvox::Device> device;
-    if (is_sparse_field_path(args.input)) {
+    if (level_set_in) {
         record.inputs.resize(1);
         sparse = timed(record.seconds.load,
                        [&] { return read_sparse_field_input(args.input, record.inputs[0]); });
         stop_if_interrupted();
+    } else if (npy_field_in) {
+        record.inputs = {{args.input, "field", 0}};
+        sparse = timed(record.seconds.load, [&] {
+            ProgressBar bar("loading", "", args.reporting);
+            return oclvox::read_meshing_view(args.input, float(args.iso), bar.callback());
+        });
     } else if (field_in) {
         record.inputs.resize(1);
         field = timed(record.seconds.load,

@@ -92,66 +92,49 @@ int run(const SdfArgs& args) {
     stop_if_interrupted();
     std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
 
-    // Phase 3: the distances, a narrow band as a sparse field (memory follows the surface), a full
-    // grid written a slab of layers at a time as it is computed (memory holds a slab), or dense
-    // when it is meshed or previewed; then the mesh of their zero level set if asked for, from the
-    // field as it is. Only the preview reads a dense field, made from the sparse one when the band
-    // is all there is.
+    // Phase 3: the distances: a narrow band as a sparse field (memory follows the surface), a full
+    // grid a slab of layers at a time, written as it is computed (memory holds a slab) and, for
+    // the mesh or the preview, gathered into its meshing view (leaves where it changes sign). Then
+    // the mesh of the zero level set if asked for, from the sparse field.
     oclvox::VoxelizeStats stats;
-    const bool in_slabs = args.full && args.mesh_output.empty() && args.preview.empty();
-    if (in_slabs) {
+    std::optional<oclvox::SparseField> sparse;
+    if (args.full) {
         timed(record.seconds.write, [&] {
-            record.border_inside = write_full_field_in_slabs(
-                output.path(), grid, device, args,
+            StreamedField field = full_field_in_slabs(
+                output.path(), !args.mesh_output.empty() || !args.preview.empty(), grid, device,
+                args,
                 [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
                     return device
                                ? oclvox::signed_distance(*device, mesh, grid, options, slab_stats)
                                : oclvox::signed_distance_reference(mesh, grid, options, slab_stats);
                 },
                 stats, record.seconds.compute);
-            output.finish();
+            record.border_inside = field.border_inside;
+            sparse = std::move(field.meshing_view);
             return 0;
         });
         record.seconds.write -= record.seconds.compute;
+    } else {
+        sparse = timed(record.seconds.compute,
+                       [&] { return signed_distance_sparse(device, mesh, grid, args, &stats); });
+        record.border_inside = oclvox::border_samples_inside(*sparse);
     }
-    std::optional<oclvox::SparseField> sparse;
-    std::optional<oclvox::ScalarField> dense;
-    if (!in_slabs)
-        timed(record.seconds.compute, [&] {
-            if (args.full)
-                dense = signed_distance(device, mesh, grid, args, &stats);
-            else
-                sparse = signed_distance_sparse(device, mesh, grid, args, &stats);
-            return 0;
-        });
     stop_if_interrupted();
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
-        surface = timed(record.seconds.mesh, [&] {
-            return sparse ? extract_surface(*sparse, args, 0.0f)
-                          : extract_surface(device, *dense, args, 0.0f);
-        });
+        surface = timed(record.seconds.mesh, [&] { return extract_surface(*sparse, args, 0.0f); });
         stop_if_interrupted();
     }
 
     // Phase 4: the files, then the report.
-    if (!in_slabs)
-        timed(record.seconds.write, [&] {
-            if (sparse)
-                write_field_output(output.path(), *sparse, args);
-            else
-                write_field_output(output.path(), *dense, 0.0, args);
-            if (surface) write_mesh_output(args.mesh_output, *surface, args);
-            if (!args.preview.empty())
-                sparse ? write_preview(args.preview, *sparse, 0.0f)
-                       : write_preview(args.preview, *dense, 0.0f);
-            output.finish();
-            return 0;
-        });
+    timed(record.seconds.write, [&] {
+        if (!args.full) write_field_output(output.path(), *sparse, args);
+        if (surface) write_mesh_output(args.mesh_output, *surface, args);
+        if (!args.preview.empty()) write_preview(args.preview, *sparse, 0.0f);
+        output.finish();
+        return 0;
+    });
     record.seconds.total = seconds_since(start);
-    if (!in_slabs)
-        record.border_inside =
-            sparse ? oclvox::border_samples_inside(*sparse) : oclvox::border_samples_inside(*dense);
 
     record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};
     record.outputs = {args.output};

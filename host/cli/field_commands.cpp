@@ -5,6 +5,7 @@
 
 #include "file_names.hpp"
 #include "host_memory.hpp"
+#include "interrupt.hpp"
 #include "progress_bar.hpp"
 
 namespace oclvox_cli {
@@ -49,8 +50,8 @@ void add_distance_options(CLI::App& command, FieldArgs& args) {
         ->group("Distance");
     command
         .add_flag("--full", args.full,
-                  "exact distances in every voxel, not only in the narrow band (to a file "
-                  "computed and written a slab of layers at a time)")
+                  "exact distances in every voxel, not only in the narrow band (computed, "
+                  "written and meshed a slab of layers at a time)")
         ->group("Distance");
 }
 
@@ -92,33 +93,16 @@ oclvox::SdfOptions sdf_options(const FieldArgs& args) {
 
 namespace {
 
-// run(options) with the field options of args and a progress bar named `what`. A full grid too
-// large to hold whole says how it can be had.
+// run(options) with the field options of args and a progress bar named `what`.
 template <class Run>
 auto with_progress(const FieldArgs& args, const char* what, Run&& run) {
     oclvox::SdfOptions options = sdf_options(args);
     ProgressBar bar(what, "", args.reporting);
     options.progress = bar.callback();
-    try {
-        return run(options);
-    } catch (const oclvox::GridError& e) {
-        if (!args.full) throw;
-        throw oclvox::GridError(std::string(e.what()) +
-                                " (a full grid written to .npy or .vdb, without --mesh or "
-                                "--preview, is computed and written a slab of layers at a time)");
-    }
+    return run(options);
 }
 
 }  // namespace
-
-oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
-                                    const oclvox::Grid& grid, const FieldArgs& args,
-                                    oclvox::VoxelizeStats* stats) {
-    return with_progress(args, "distance field", [&](const oclvox::SdfOptions& options) {
-        return device ? oclvox::signed_distance(*device, mesh, grid, options, stats)
-                      : oclvox::signed_distance_reference(mesh, grid, options, stats);
-    });
-}
 
 oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device,
                                            const oclvox::Mesh& mesh, const oclvox::Grid& grid,
@@ -126,15 +110,6 @@ oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device
     return with_progress(args, "distance field", [&](const oclvox::SdfOptions& options) {
         return device ? oclvox::signed_distance_sparse(*device, mesh, grid, options, stats)
                       : oclvox::signed_distance_sparse_reference(mesh, grid, options, stats);
-    });
-}
-
-oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
-                        const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
-                        const FieldArgs& args, oclvox::VoxelizeStats* stats) {
-    return with_progress(args, "distance fields", [&](const oclvox::SdfOptions& options) {
-        return device ? oclvox::csg(*device, a, b, op, grid, options, stats)
-                      : oclvox::csg_reference(a, b, op, grid, options, stats);
     });
 }
 
@@ -181,10 +156,31 @@ void add_slab_stats(oclvox::VoxelizeStats& sum, const oclvox::VoxelizeStats& sla
 
 }  // namespace
 
-uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& grid,
-                                   const std::optional<oclvox::Device>& device,
-                                   const FieldArgs& args, const SlabField& compute,
-                                   oclvox::VoxelizeStats& stats, double& seconds_compute) {
+StreamedField stream_field(const std::string& path, bool meshing_view, const oclvox::Grid& grid,
+                           const oclvox::FieldLayer& layer) {
+    std::optional<oclvox::MeshingViewBuilder> view;
+    if (meshing_view) view.emplace(grid, 0.0f);
+    StreamedField result;
+    auto take = [&](int64_t k, float* samples) {
+        layer(k, samples);
+        result.border_inside += oclvox::border_samples_inside(grid, k, samples);
+        if (view) view->add_layer(samples);
+    };
+    if (!path.empty()) {
+        oclvox::write_field(path, grid, 0.0, take);
+    } else {
+        std::vector<float> samples(size_t(grid.dims[0]) * size_t(grid.dims[1]));
+        for (int64_t k = 0; k < grid.dims[2]; ++k) take(k, samples.data());
+    }
+    if (view) result.meshing_view = view->finish();
+    return result;
+}
+
+StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
+                                  const oclvox::Grid& grid,
+                                  const std::optional<oclvox::Device>& device,
+                                  const FieldArgs& args, const SlabField& compute,
+                                  oclvox::VoxelizeStats& stats, double& seconds_compute) {
     const int64_t nz = grid.dims[2];
     const oclvox::SdfOptions defaults = sdf_options(args);
     const int64_t thickness = slab_layers(grid, device, defaults.brick_size);
@@ -193,10 +189,9 @@ uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& 
     const oclvox::ProgressCallback progress = bar.callback();
     oclvox::ScalarField slab;
     int64_t slab_first = 0;
-    uint64_t border_inside = 0;
-    // Each slab is computed when the writer asks for its first layer; its progress is its share
-    // of the layers.
-    auto layer = [&](int64_t k, float* out) {
+    // Each slab is computed when its first layer is asked for; its progress is its share of the
+    // layers.
+    return stream_field(path, meshing_view, grid, [&](int64_t k, float* out) {
         if (k == slab_first + slab.grid.dims[2] || slab.values.empty()) {
             const Clock::time_point start = Clock::now();
             slab_first = k;
@@ -217,12 +212,8 @@ uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& 
             add_slab_stats(stats, slab_stats);
             seconds_compute += seconds_since(start);
         }
-        const float* samples = &slab.values[size_t(k - slab_first) * per_layer];
-        std::copy_n(samples, per_layer, out);
-        border_inside += oclvox::border_samples_inside(grid, k, samples);
-    };
-    oclvox::write_field(path, grid, 0.0, layer);
-    return border_inside;
+        std::copy_n(&slab.values[size_t(k - slab_first) * per_layer], per_layer, out);
+    });
 }
 
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
@@ -272,10 +263,12 @@ oclvox::ScalarField read_field_input(const std::string& path, InputRecord& recor
     return std::get<oclvox::ScalarField>(std::move(data));
 }
 
-oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record) {
+oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record,
+                                            const oclvox::SparseField* onto) {
     if (path == "-") throw UsageError("a .vdb field cannot be read from stdin");
     record = {path, "level set", 0};
-    return oclvox::read_sparse_field(path);
+    return onto ? oclvox::read_sparse_field(path, onto->grid(), onto->band_voxels())
+                : oclvox::read_sparse_field(path);
 }
 
 void record_field_settings(RunRecord& record, const FieldArgs& args) {

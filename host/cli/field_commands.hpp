@@ -46,36 +46,40 @@ bool is_mesh_output(const std::string& path, const FileArgs& files);
 // zero level set closes inside it, unless the user places the grid (--pad, --origin or --dims).
 oclvox::GridFit field_fit(const FieldArgs& args);
 
-// The signed distance field of a mesh, and the CSG of two meshes' fields, on the device or the
-// CPU reference, drawing a progress bar and stopping on Ctrl-C.
-oclvox::ScalarField signed_distance(std::optional<oclvox::Device>& device, const oclvox::Mesh& mesh,
-                                    const oclvox::Grid& grid, const FieldArgs& args,
-                                    oclvox::VoxelizeStats* stats);
-// The narrow band as a sparse field (oclvox::signed_distance_sparse, oclvox::csg_sparse), the
-// same way.
+// The narrow band of a mesh's signed distance field, and of the CSG of two meshes' fields, as a
+// sparse field (oclvox::signed_distance_sparse, oclvox::csg_sparse) on the device or the CPU
+// reference, drawing a progress bar and stopping on Ctrl-C.
 oclvox::SparseField signed_distance_sparse(std::optional<oclvox::Device>& device,
                                            const oclvox::Mesh& mesh, const oclvox::Grid& grid,
                                            const FieldArgs& args, oclvox::VoxelizeStats* stats);
-oclvox::ScalarField csg(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
-                        const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
-                        const FieldArgs& args, oclvox::VoxelizeStats* stats);
 oclvox::SparseField csg_sparse(std::optional<oclvox::Device>& device, const oclvox::Mesh& a,
                                const oclvox::Mesh& b, oclvox::CsgOp op, const oclvox::Grid& grid,
                                const FieldArgs& args, oclvox::VoxelizeStats* stats);
 
-// A full-grid field (--full) written to a .npy or .vdb file as it is computed, a slab of layers
-// at a time (SdfOptions::first_layer / end_layer), so that memory holds one slab (and for .vdb
-// OpenVDB's tree of every sample), never the whole field: compute(options, stats) is the field of
-// options' layers (signed_distance or csg with those options), which equals the whole field there
-// bit for bit, so the file is the one the whole field gives. One progress bar runs over the slabs;
-// Ctrl-C stops between them and leaves no file. The slabs' stats are summed into `stats` and their
-// compute time into `seconds_compute`. Returns border_samples_inside of the whole field.
+// A field given a layer at a time by `layer` (k = 0, 1, ...), written to `path` as it comes (the
+// band found from its values) unless the path is empty, and with `meshing_view` gathered into its
+// meshing view (MeshingViewBuilder), which meshes and previews as the whole field does. Memory
+// holds a layer, the view's 16 and its leaves (and for .vdb OpenVDB's tree of every sample).
+struct StreamedField {
+    uint64_t border_inside = 0;  // border_samples_inside of the whole field
+    std::optional<oclvox::SparseField> meshing_view;
+};
+StreamedField stream_field(const std::string& path, bool meshing_view, const oclvox::Grid& grid,
+                           const oclvox::FieldLayer& layer);
+
+// A full-grid field (--full) streamed so, computed a slab of layers at a time
+// (SdfOptions::first_layer / end_layer): memory holds one slab, never the whole field.
+// compute(options, stats) is the field of options' layers (signed_distance or csg with those
+// options), which equals the whole field there bit for bit, so the file is the one the whole
+// field gives. One progress bar runs over the slabs; Ctrl-C stops between them and leaves no
+// file. The slabs' stats are summed into `stats` and their compute time into `seconds_compute`.
 using SlabField = std::function<oclvox::ScalarField(const oclvox::SdfOptions& options,
                                                     oclvox::VoxelizeStats* stats)>;
-uint64_t write_full_field_in_slabs(const std::string& path, const oclvox::Grid& grid,
-                                   const std::optional<oclvox::Device>& device,
-                                   const FieldArgs& args, const SlabField& compute,
-                                   oclvox::VoxelizeStats& stats, double& seconds_compute);
+StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
+                                  const oclvox::Grid& grid,
+                                  const std::optional<oclvox::Device>& device,
+                                  const FieldArgs& args, const SlabField& compute,
+                                  oclvox::VoxelizeStats& stats, double& seconds_compute);
 
 // The iso-surface by --mesher, with a progress bar, stopping on Ctrl-C.
 oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
@@ -96,8 +100,10 @@ void write_field_output(const std::string& path, const oclvox::SparseField& fiel
 // A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
 // occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
 oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record);
-// A .vdb level set as a sparse field (read_sparse_field); the record's kind is "level set".
-oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record);
+// A .vdb level set as a sparse field (read_sparse_field); the record's kind is "level set". With
+// `onto`, on its voxel lattice with its band (rebuilt there if it is not).
+oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record,
+                                            const oclvox::SparseField* onto = nullptr);
 
 // The settings every field command reports.
 void record_field_settings(RunRecord& record, const FieldArgs& args);

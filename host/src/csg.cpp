@@ -17,17 +17,10 @@ namespace oclvox {
 
 namespace {
 
-std::string describe(const Grid& g) {
-    return std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
-           std::to_string(g.dims[2]) + " voxels of " + std::to_string(g.voxel_size) + " at (" +
-           std::to_string(g.origin[0]) + ", " + std::to_string(g.origin[1]) + ", " +
-           std::to_string(g.origin[2]) + ")";
-}
-
 void require_same_grid(const Grid& a, const Grid& b, const char* what) {
     if (!same_grid(a, b))
         throw GridError(std::string("CSG needs both ") + what + " on the same grid, got " +
-                        describe(a) + " and " + describe(b) +
+                        to_string(a) + " and " + to_string(b) +
                         ": compute both on one grid (fit_grid of both meshes)");
 }
 
@@ -212,9 +205,9 @@ SparseField csg(const SparseField& a, const SparseField& b, CsgOp op) {
             throw GridError(
                 "CSG needs both fields on one voxel lattice (the same voxel size, "
                 "origins a whole number of voxels apart), got " +
-                describe(a.grid()) + " and " + describe(b.grid()) +
-                ": give both one voxel size and origins whole voxels apart, or compute both "
-                "on one grid (fit_grid of both meshes)");
+                to_string(a.grid()) + " and " + to_string(b.grid()) +
+                ": read one level set onto the other's lattice (read_sparse_field with a "
+                "lattice and band), or compute both on one grid (fit_grid of both meshes)");
         Index3 shift_a, shift_b;
         const Grid both = covering_grid(a.grid(), b.grid(), offset, shift_a, shift_b);
         return csg(moved_field(a, both, shift_a), moved_field(b, both, shift_b), op);

@@ -16,6 +16,7 @@
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <variant>
 
 #include "field_vdb.hpp"
@@ -404,13 +405,30 @@ SparseVoxels read_occupancy_samples(const std::string& path, std::ifstream& in,
     return voxels;
 }
 
-// Both kinds, read only after every check of the header, sidecar and budget has passed. Any
-// exception not of oclvox's hierarchy (an allocation failing despite the budget) is reported as
-// an InputError naming the file.
-std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path) {
+// work() with any exception not of oclvox's hierarchy (an allocation failing despite the budget)
+// reported as an InputError naming the file.
+template <class Work>
+auto with_npy_errors(const std::string& path, Work&& work) {
+    try {
+        return work();
+    } catch (const Error&) {
+        throw;
+    } catch (const std::bad_alloc&) {
+        bad_npy(path, "out of memory holding its samples");
+    } catch (const std::exception& e) {
+        bad_npy(path, e.what());
+    }
+}
+
+void require_npy_extension(const std::string& path) {
     if (detail::lowercase_extension(path) != ".npy")
         throw InputError("cannot read field " + path + ": only .npy fields can be read");
-    try {
+}
+
+// Both kinds, read only after every check of the header, sidecar and budget has passed.
+std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path) {
+    require_npy_extension(path);
+    return with_npy_errors(path, [&]() -> std::variant<ScalarField, SparseVoxels> {
         std::ifstream in;
         const NpyHeader header = read_npy_header(path, in);
         const Grid grid = read_sidecar(path, header.shape);
@@ -421,16 +439,93 @@ std::variant<ScalarField, SparseVoxels> read_npy_checked(const std::string& path
         }
         check_memory_budget(path, grid.voxel_count() * sizeof(float), "its samples");
         return read_float_samples(path, in, header, grid);
-    } catch (const Error&) {
-        throw;
-    } catch (const std::bad_alloc&) {
-        bad_npy(path, "out of memory holding its samples");
-    } catch (const std::exception& e) {
-        bad_npy(path, e.what());
-    }
+    });
 }
 
 }  // namespace
+
+struct FieldLayerReader::Impl {
+    std::string path;
+    std::ifstream in;
+    NpyHeader header;
+    Grid grid;
+    size_t per_layer = 0;
+    int64_t next_layer = 0;
+    std::optional<ScalarField> whole;  // a C-order file's samples
+    std::vector<unsigned char> bytes;  // a Fortran-order file's next layer
+};
+
+FieldLayerReader::FieldLayerReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
+    require_npy_extension(path);
+    Impl& r = *impl_;
+    r.path = path;
+    with_npy_errors(path, [&] {
+        r.header = read_npy_header(path, r.in);
+        if (r.header.type == NpyType::Uint8)
+            bad_npy(path, "it holds an occupancy (uint8 0/1), not float samples");
+        r.grid = read_sidecar(path, r.header.shape);
+        r.per_layer = size_t(r.grid.dims[0]) * size_t(r.grid.dims[1]);
+        if (r.header.fortran_order) {
+            check_memory_budget(path, r.per_layer * item_size(r.header.type), "a layer");
+            r.bytes.resize(r.per_layer * item_size(r.header.type));
+        } else {
+            check_memory_budget(path, r.grid.voxel_count() * sizeof(float),
+                                "its samples (C order: a layer is spread over the whole file)");
+            r.whole = read_float_samples(path, r.in, r.header, r.grid);
+        }
+        return 0;
+    });
+}
+
+FieldLayerReader::~FieldLayerReader() = default;
+FieldLayerReader::FieldLayerReader(FieldLayerReader&&) noexcept = default;
+FieldLayerReader& FieldLayerReader::operator=(FieldLayerReader&&) noexcept = default;
+
+const Grid& FieldLayerReader::grid() const {
+    return impl_->grid;
+}
+
+void FieldLayerReader::read_layer(float* samples) {
+    Impl& r = *impl_;
+    if (r.next_layer == r.grid.dims[2])
+        bad_npy(r.path, "it has no layer " + std::to_string(r.next_layer) + " (it has " +
+                            std::to_string(r.grid.dims[2]) + ")");
+    if (r.whole) {
+        std::copy_n(&r.whole->values[size_t(r.next_layer++) * r.per_layer], r.per_layer, samples);
+        return;
+    }
+    if (!r.in.read(reinterpret_cast<char*>(r.bytes.data()), std::streamsize(r.bytes.size())))
+        bad_npy(r.path, "the data is shorter than its shape says");
+    const size_t item = item_size(r.header.type);
+    for (size_t s = 0; s < r.per_layer; ++s)
+        samples[s] = float_sample(r.header.type, &r.bytes[s * item]);
+    ++r.next_layer;
+}
+
+SparseField read_meshing_view(const std::string& path, float iso,
+                              const ProgressCallback& progress) {
+    FieldLayerReader reader(path);
+    const Grid& grid = reader.grid();
+    MeshingViewBuilder view(grid, iso);
+    detail::ProgressPhases phases(progress, "reading " + path);
+    const size_t reading = phases.add(1.0);
+    std::vector<float> layer(size_t(grid.dims[0]) * size_t(grid.dims[1]));
+    for (int64_t k = 0; k < grid.dims[2]; ++k) {
+        reader.read_layer(layer.data());
+        view.add_layer(layer.data());
+        phases.report(reading, uint64_t(k + 1), uint64_t(grid.dims[2]));
+    }
+    phases.finish();
+    return view.finish();
+}
+
+bool npy_holds_field(const std::string& path) {
+    require_npy_extension(path);
+    return with_npy_errors(path, [&] {
+        std::ifstream in;
+        return read_npy_header(path, in).type != NpyType::Uint8;
+    });
+}
 
 void write_field(const std::string& path, const ScalarField& field, double band_voxels,
                  const ProgressCallback& progress) {
@@ -481,10 +576,23 @@ ScalarField read_field(const std::string& path) {
     return std::get<ScalarField>(std::move(data));
 }
 
-SparseField read_sparse_field(const std::string& path) {
+namespace {
+
+void require_vdb_extension(const std::string& path) {
     if (detail::lowercase_extension(path) != ".vdb")
         throw InputError("cannot read field " + path + ": only .vdb files hold sparse fields");
+}
+
+}  // namespace
+
+SparseField read_sparse_field(const std::string& path) {
+    require_vdb_extension(path);
     return detail::read_field_vdb(path);
+}
+
+SparseField read_sparse_field(const std::string& path, const Grid& lattice, double band_voxels) {
+    require_vdb_extension(path);
+    return detail::read_field_vdb(path, lattice, band_voxels);
 }
 
 }  // namespace oclvox

@@ -10,6 +10,13 @@
 #include "host_memory.hpp"
 #include "vdb_format.hpp"
 
+// Only here: rebuilding pulls in OpenVDB's mesher and mesh-to-volume (see openvdb_headers.hpp for
+// the visibility).
+#pragma GCC visibility push(default)
+#include <openvdb/tools/ChangeBackground.h>
+#include <openvdb/tools/LevelSetRebuild.h>
+#pragma GCC visibility pop
+
 namespace oclvox::detail {
 
 namespace {
@@ -154,7 +161,7 @@ openvdb::FloatGrid::ConstPtr pick_level_set(const std::string& path,
 // in metadata; for others it is the box of the leaves and inside tiles, one voxel wider (so the
 // border is outside), its low corner on a multiple of the leaf size (so leaves stay leaves).
 Grid field_grid(const std::string& path, const openvdb::FloatGrid& vdb,
-                const openvdb::CoordBBox& used, openvdb::Coord& shift) {
+                const openvdb::CoordBBox& used, openvdb::Coord& shift, const Grid* lattice) {
     const openvdb::math::Transform& transform = vdb.transform();
     const openvdb::Vec3d zero = transform.indexToWorld(openvdb::Vec3d(0, 0, 0));
     const double voxel = transform.voxelSize()[0];
@@ -203,6 +210,13 @@ Grid field_grid(const std::string& path, const openvdb::FloatGrid& vdb,
         for (int a = 0; a < 3; ++a) grid.origin[a] = origin->value()[a];
         grid.voxel_size = size->value();
     }
+    if (lattice) {  // rebuilt on it: its exact voxel size and voxel corners
+        for (int a = 0; a < 3; ++a)
+            grid.origin[a] = lattice->origin[a] + std::round((grid.origin[a] - lattice->origin[a]) /
+                                                             lattice->voxel_size) *
+                                                      lattice->voxel_size;
+        grid.voxel_size = lattice->voxel_size;
+    }
     try {
         validate_grid(grid);
     } catch (const GridError& e) {
@@ -211,11 +225,9 @@ Grid field_grid(const std::string& path, const openvdb::FloatGrid& vdb,
     return grid;
 }
 
-}  // namespace
-
-SparseField read_field_vdb(const std::string& path) {
+// The file's level set (pick_level_set), with a background a level set can have.
+openvdb::FloatGrid::ConstPtr read_level_set(const std::string& path) {
     openvdb::initialize();
-    // Phase 1: the file and its level set.
     openvdb::GridPtrVecPtr grids;
     try {
         openvdb::io::File file(path);
@@ -225,12 +237,21 @@ SparseField read_field_vdb(const std::string& path) {
     } catch (const std::exception& e) {
         bad_vdb(path, std::string("not a readable .vdb file (") + e.what() + ")");
     }
-    const openvdb::FloatGrid::ConstPtr vdb = pick_level_set(path, *grids);
-    const openvdb::FloatTree& tree = vdb->tree();
+    openvdb::FloatGrid::ConstPtr vdb = pick_level_set(path, *grids);
     const float background = vdb->background();
     if (!(background > 0) || !std::isfinite(background))
         bad_vdb(path, "its background " + std::to_string(background) +
                           " is not positive and finite, as a level set's is");
+    return vdb;
+}
+
+// A level set as a sparse field; `path` names it in errors. A level set rebuilt on `lattice`
+// takes its exact voxel size and voxel corners (its transform holds them up to rounding).
+SparseField level_set_field(const std::string& path, const openvdb::FloatGrid& level_set,
+                            const Grid* lattice = nullptr) {
+    const openvdb::FloatGrid* vdb = &level_set;
+    const openvdb::FloatTree& tree = vdb->tree();
+    const float background = vdb->background();
 
     // Phase 2: what the field will hold: the leaves and the tiles below zero (inside), never an
     // active tile (a narrow band's values are all in leaves).
@@ -254,7 +275,7 @@ SparseField read_field_vdb(const std::string& path) {
         }
     }
     openvdb::Coord shift;
-    const Grid grid = field_grid(path, *vdb, used, shift);
+    const Grid grid = field_grid(path, *vdb, used, shift, lattice);
     auto to_grid = [&](const openvdb::Coord& c) {
         return std::array<int64_t, 3>{int64_t(c[0]) - shift[0], int64_t(c[1]) - shift[1],
                                       int64_t(c[2]) - shift[2]};
@@ -367,6 +388,58 @@ SparseField read_field_vdb(const std::string& path) {
         field.append_leaf(key, samples);
     }
     return field;
+}
+
+}  // namespace
+
+SparseField read_field_vdb(const std::string& path) {
+    return level_set_field(path, *read_level_set(path));
+}
+
+SparseField read_field_vdb(const std::string& path, const Grid& lattice, double band_voxels) {
+    validate_grid(lattice);
+    const float background = float(band_voxels * lattice.voxel_size);
+    if (!(background > 0) || !std::isfinite(background))
+        throw GridError("a level set's band must be finite and positive, got " +
+                        std::to_string(band_voxels) + " voxels");
+    const openvdb::FloatGrid::ConstPtr vdb = read_level_set(path);
+    // On the lattice already: the same voxel size, and index 0's centre whole voxels from the
+    // lattice's voxel (0, 0, 0) (the tolerances of csg's lattice test).
+    const openvdb::Vec3d zero = vdb->transform().indexToWorld(openvdb::Vec3d(0, 0, 0));
+    bool on_lattice =
+        vdb->transform().isLinear() &&
+        std::abs(vdb->voxelSize()[0] - lattice.voxel_size) <= 1e-9 * lattice.voxel_size &&
+        vdb->background() == background;
+    for (int a = 0; a < 3 && on_lattice; ++a) {
+        const double voxels =
+            (zero[a] - (lattice.origin[a] + 0.5 * lattice.voxel_size)) / lattice.voxel_size;
+        on_lattice = std::abs(voxels - std::round(voxels)) <= 1e-6;
+    }
+    if (on_lattice) return level_set_field(path, *vdb);
+    // The rebuild polygonizes the surface and signs the new band by flooding from outside, which
+    // needs a closed surface: one its grid's box cuts (inside samples on the box's faces, as a
+    // field computed on too small a grid has) would come back with its inside lost.
+    const uint64_t cut = border_samples_inside(level_set_field(path, *vdb));
+    if (cut > 0)
+        bad_vdb(path, "its surface is cut by its grid's box (" + std::to_string(cut) +
+                          " samples on the box's faces are inside), so it cannot be rebuilt on "
+                          "another lattice: compute it on a grid that holds the whole surface");
+
+    // Rebuilt on the lattice's transform with its band (levelSetRebuild also when the transform
+    // is the file's, where resampleToMatch would copy the tree and keep the file's band).
+    openvdb::FloatGrid::Ptr rebuilt;
+    try {
+        const float half_width = float(band_voxels);
+        rebuilt = openvdb::tools::levelSetRebuild(*vdb, 0.0f, half_width, half_width,
+                                                  voxel_centre_transform(lattice).get());
+        // The rebuild's background is band * voxel size rounded its own way; the band's
+        // background, as the lattice's fields hold it, is what combining them compares.
+        openvdb::tools::changeLevelSetBackground(rebuilt->tree(), background);
+    } catch (const std::exception& e) {
+        bad_vdb(path, std::string("its level set could not be rebuilt on the lattice (") +
+                          e.what() + ")");
+    }
+    return level_set_field(path, *rebuilt, &lattice);
 }
 
 }  // namespace oclvox::detail

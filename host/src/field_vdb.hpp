@@ -16,7 +16,8 @@ void write_field_vdb(const std::string& path, const Grid& grid, double band_voxe
                      const FieldLayer& layer, ProgressPhases& progress);
 // The same from a sparse field's leaves, its band field.band_voxels().
 void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress);
-// See read_sparse_field (oclvox/sdf.hpp). Throws InputError.
+// See read_sparse_field (oclvox/sdf.hpp), both forms. Throw InputError.
 SparseField read_field_vdb(const std::string& path);
+SparseField read_field_vdb(const std::string& path, const Grid& lattice, double band_voxels);
 
 }  // namespace oclvox::detail

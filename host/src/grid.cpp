@@ -30,6 +30,13 @@ bool same_grid(const Grid& a, const Grid& b) {
     return a.origin == b.origin && a.voxel_size == b.voxel_size && a.dims == b.dims;
 }
 
+std::string to_string(const Grid& g) {
+    return std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
+           std::to_string(g.dims[2]) + " voxels of " + std::to_string(g.voxel_size) + " at (" +
+           std::to_string(g.origin[0]) + ", " + std::to_string(g.origin[1]) + ", " +
+           std::to_string(g.origin[2]) + ")";
+}
+
 void validate_grid(const Grid& grid) {
     if (!(grid.voxel_size > 0) || !std::isfinite(grid.voxel_size))
         throw GridError("voxel size must be a positive finite number, got " +

@@ -1,10 +1,11 @@
 // Surface Nets and Marching Cubes on the host: of a sparse narrow-band field without a dense
 // copy, and of a dense field through its meshing view (the leaves around its sign changes, the
-// sides of its other samples). The per-sample functions of the dense reference and the kernels
-// (kernels/meshing_math.h) run on small dense boxes read from the leaves, and the prefix sums
-// follow the same global sample order, so the mesh equals meshing field.to_dense() bit for bit: the
-// same vertices in the same order and the same triangles. Work and memory follow the surface: the
-// blocks near it, three slabs of them at a time, plus the mesh.
+// sides of its other samples), which MeshingViewBuilder gathers a layer at a time, so fields that
+// are never whole (computed in slabs, read from a file) are meshed too. The per-sample functions of
+// the dense reference and the kernels (kernels/meshing_math.h) run on small dense boxes read from
+// the leaves, and the prefix sums follow the same global sample order, so the mesh equals meshing
+// field.to_dense() bit for bit: the same vertices in the same order and the same triangles. Work
+// and memory follow the surface: the blocks near it, three slabs of them at a time, plus the mesh.
 //
 // Phases:
 //  1. Candidate blocks: the 8^3 blocks of the leaves' tiling whose samples, with the one-sample
@@ -617,122 +618,219 @@ Mesh mesh_sparse(const SparseField& field, float iso, detail::MeshingMethod meth
 
 }  // namespace
 
+// Leaf layer by leaf layer (8 layers of samples): pass 1 takes each leaf's sides when its layers
+// are in, pass 2 keeps a leaf once the leaf layer above it is in (its halo reaches that layer's
+// low face), pass 3 copies the kept leaves' samples. So two leaf layers of samples are held: the
+// one being filled and the one below it, still to be decided.
+struct MeshingViewBuilder::Impl {
+    // The sides of a leaf's samples and of its six faces (x = 0, x = 7, y = 0, ...; a face beyond
+    // the grid has none).
+    using LeafSides = std::array<uint8_t, 7>;
+
+    Grid grid;
+    float iso = 0, background = 0;
+    Index3 nb{};  // leaves per axis
+    size_t per_layer = 0, leaves_per_layer = 0;
+    int64_t layers_in = 0;
+    std::vector<float> below, filling;  // the leaf layers' samples, x fastest, 8 layers each
+    std::vector<LeafSides> sides_before, sides_below, sides_filling;
+    SparseVoxels inside;
+    std::vector<uint64_t> kept_keys;
+    std::vector<float> kept_samples;
+
+    Impl(const Grid& g, float iso_value) : grid(g), iso(iso_value), inside(g, kBlock) {
+        validate_grid(g);
+        if (!std::isfinite(iso)) throw InputError("meshing view: the iso value is not finite");
+        // Every sample outside the leaves becomes a background beyond iso on its side, so only its
+        // side (its inside voxel) is kept; a value must be kept wherever it is read as a value,
+        // which is at the corners of cells with both sides (crossings, face deciders, centres).
+        background = std::abs(iso) < FLT_MAX / 2 ? std::max(1.0f, 2.0f * std::abs(iso)) : FLT_MAX;
+        const auto& n = g.dims;
+        nb = {(n[0] + kBlock - 1) / kBlock, (n[1] + kBlock - 1) / kBlock,
+              (n[2] + kBlock - 1) / kBlock};
+        per_layer = size_t(n[0]) * size_t(n[1]);
+        leaves_per_layer = size_t(nb[0]) * size_t(nb[1]);
+        detail::check_host_memory(uint64_t(2 * kBlock) * per_layer * sizeof(float) +
+                                      3 * leaves_per_layer * sizeof(LeafSides),
+                                  detail::default_host_budget(),
+                                  "the meshing view's 16 layers of " + std::to_string(n[0]) + "x" +
+                                      std::to_string(n[1]) + " samples");
+        below.resize(size_t(kBlock) * per_layer);
+        filling.resize(size_t(kBlock) * per_layer);
+    }
+
+    void add_layer(const float* samples) {
+        const auto& n = grid.dims;
+        if (layers_in == n[2])
+            throw GridError("meshing view: every one of the grid's " + std::to_string(n[2]) +
+                            " layers was added already");
+        std::copy_n(samples, per_layer, &filling[size_t(layers_in % kBlock) * per_layer]);
+        ++layers_in;
+        if (layers_in % kBlock != 0 && layers_in != n[2]) return;
+        const int64_t lz = (layers_in - 1) / kBlock;
+        sides_filling = take_sides(lz);
+        if (lz > 0) keep_leaves(lz - 1, below, sides_before, sides_below, &sides_filling);
+        std::swap(below, filling);
+        sides_before = std::move(sides_below);
+        sides_below = std::move(sides_filling);
+        if (layers_in == n[2]) keep_leaves(lz, below, sides_before, sides_below, nullptr);
+    }
+
+    // Pass 1 for the leaf layer lz, just filled: its samples' sides as inside voxels, and each
+    // leaf's sides.
+    std::vector<LeafSides> take_sides(int64_t lz) {
+        const auto& n = grid.dims;
+        const int64_t depth = std::min<int64_t>(kBlock, n[2] - lz * kBlock);
+        std::vector<LeafSides> sides(leaves_per_layer);
+        std::vector<std::array<uint64_t, 8>> words(leaves_per_layer);
+        std::atomic<bool> finite{true};
+        tbb::parallel_for(size_t(0), leaves_per_layer, [&](size_t l) {
+            const int64_t ox = int64_t(l % size_t(nb[0])) * kBlock,
+                          oy = int64_t(l / size_t(nb[0])) * kBlock;
+            const int64_t ex = std::min<int64_t>(kBlock, n[0] - ox),
+                          ey = std::min<int64_t>(kBlock, n[1] - oy);
+            LeafSides part{};
+            for (int64_t z = 0; z < depth; ++z)
+                for (int64_t y = 0; y < ey; ++y) {
+                    const float* row =
+                        &filling[size_t(z) * per_layer + size_t(ox + n[0] * (oy + y))];
+                    uint8_t row_sides = 0;
+                    for (int64_t x = 0; x < ex; ++x) {
+                        if (!std::isfinite(row[x])) finite = false;
+                        const bool in = detail::om_inside(row[x], iso);
+                        row_sides |= in ? kInsideSide : kOutsideSide;
+                        if (in)
+                            words[l][size_t(x / 4 + 2 * (y / 4 + 2 * (z / 4)))] |=
+                                uint64_t(1) << (x % 4 + 4 * (y % 4 + 4 * (z % 4)));
+                    }
+                    part[0] |= row_sides;
+                    part[1] |= side_of(row[0], iso);
+                    if (ex == kBlock) part[2] |= side_of(row[kBlock - 1], iso);
+                    if (y == 0) part[3] |= row_sides;
+                    if (y == kBlock - 1) part[4] |= row_sides;
+                    if (z == 0) part[5] |= row_sides;
+                    if (z == kBlock - 1) part[6] |= row_sides;
+                }
+            sides[l] = part;
+        });
+        if (!finite)
+            for (size_t s = 0; s < size_t(depth) * per_layer; ++s)
+                if (!std::isfinite(filling[s]))
+                    throw InputError("sample (" + std::to_string(s % size_t(n[0])) + ", " +
+                                     std::to_string(s / size_t(n[0]) % size_t(n[1])) + ", " +
+                                     std::to_string(lz * kBlock + int64_t(s / per_layer)) +
+                                     ") of the field is not finite");
+        for (size_t l = 0; l < leaves_per_layer; ++l)
+            inside.merge_brick(uint64_t(lz) * leaves_per_layer + l, words[l].data());
+        return sides;
+    }
+
+    // Passes 2 and 3 for the leaf layer lz: a leaf holds a corner of a cell on both sides iff its
+    // samples with the one-sample halo lie on both sides; the halo is the facing face of each face
+    // neighbour and (counted whole, which only keeps a few leaves more than needed) the edge and
+    // corner neighbours. `before` is empty for the lowest leaf layer, `above` null for the top one.
+    void keep_leaves(int64_t lz, const std::vector<float>& samples,
+                     const std::vector<LeafSides>& before, const std::vector<LeafSides>& own,
+                     const std::vector<LeafSides>* above) {
+        const auto& n = grid.dims;
+        std::vector<uint8_t> keep(leaves_per_layer, 0);
+        tbb::parallel_for(size_t(0), leaves_per_layer, [&](size_t l) {
+            const int64_t lx = int64_t(l % size_t(nb[0])), ly = int64_t(l / size_t(nb[0]));
+            uint8_t both = own[l][0];
+            for (int dz = -1; dz <= 1 && both != kBothSides; ++dz) {
+                const std::vector<LeafSides>* layer = dz < 0 ? &before : dz > 0 ? above : &own;
+                if (!layer || layer->empty()) continue;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int64_t mx = lx + dx, my = ly + dy;
+                        if ((dx | dy | dz) == 0 || mx < 0 || my < 0 || mx >= nb[0] || my >= nb[1])
+                            continue;
+                        const LeafSides& s = (*layer)[size_t(mx + nb[0] * my)];
+                        const int axes = (dx != 0) + (dy != 0) + (dz != 0);
+                        if (axes > 1)
+                            both |= s[0];
+                        else if (dx)
+                            both |= s[dx > 0 ? 1 : 2];  // its x = 0 face, or its x = 7 face
+                        else if (dy)
+                            both |= s[dy > 0 ? 3 : 4];
+                        else
+                            both |= s[dz > 0 ? 5 : 6];
+                    }
+            }
+            keep[l] = both == kBothSides;
+        });
+        std::vector<size_t> kept;
+        for (size_t l = 0; l < leaves_per_layer; ++l)
+            if (keep[l]) kept.push_back(l);
+        const size_t first = kept_keys.size();
+        // Twice: finish() copies them into the view.
+        detail::check_host_memory(
+            2 * (first + kept.size()) * kBlockSamples * sizeof(float),
+            detail::default_host_budget(),
+            "the meshing view's " + std::to_string(first + kept.size()) + " leaves");
+        kept_samples.resize((first + kept.size()) * kBlockSamples, background);
+        const int64_t depth = std::min<int64_t>(kBlock, n[2] - lz * kBlock);
+        tbb::parallel_for(size_t(0), kept.size(), [&](size_t k) {
+            const int64_t ox = int64_t(kept[k] % size_t(nb[0])) * kBlock,
+                          oy = int64_t(kept[k] / size_t(nb[0])) * kBlock;
+            float* out = &kept_samples[(first + k) * kBlockSamples];
+            for (int64_t z = 0; z < depth; ++z)
+                for (int64_t y = oy; y < std::min(oy + kBlock, n[1]); ++y)
+                    std::copy(&samples[size_t(z) * per_layer + size_t(ox + n[0] * y)],
+                              &samples[size_t(z) * per_layer +
+                                       size_t(std::min(ox + kBlock, n[0]) + n[0] * y)],
+                              &out[size_t(kBlock * ((y - oy) + kBlock * z))]);
+        });
+        for (const size_t l : kept) kept_keys.push_back(uint64_t(lz) * leaves_per_layer + l);
+    }
+
+    SparseField finish() {
+        if (layers_in != grid.dims[2])
+            throw GridError("meshing view: " + std::to_string(layers_in) + " of the grid's " +
+                            std::to_string(grid.dims[2]) + " layers were added");
+        SparseField view(grid, double(background) / grid.voxel_size, std::move(inside));
+        view.reserve_leaves(kept_keys.size());
+        for (size_t k = 0; k < kept_keys.size(); ++k)
+            view.append_leaf(kept_keys[k], &kept_samples[k * kBlockSamples]);
+        return view;
+    }
+};
+
+MeshingViewBuilder::MeshingViewBuilder(const Grid& grid, float iso)
+    : impl_(std::make_unique<Impl>(grid, iso)) {}
+MeshingViewBuilder::~MeshingViewBuilder() = default;
+MeshingViewBuilder::MeshingViewBuilder(MeshingViewBuilder&&) noexcept = default;
+MeshingViewBuilder& MeshingViewBuilder::operator=(MeshingViewBuilder&&) noexcept = default;
+
+void MeshingViewBuilder::add_layer(const float* samples) {
+    if (!impl_) throw GridError("meshing view: the builder has finished");
+    impl_->add_layer(samples);
+}
+
+SparseField MeshingViewBuilder::finish() {
+    if (!impl_) throw GridError("meshing view: the builder has finished");
+    SparseField view = impl_->finish();
+    impl_.reset();
+    return view;
+}
+
 namespace detail {
 
 SparseField meshing_view(const ScalarField& field, float iso, const char* who) {
-    // validate_field's checks, its pass over every sample made in pass 1 below: a non-finite
-    // sample found there has validate_field name the first one.
     if (!std::isfinite(iso) || field.values.size() != field.grid.voxel_count() ||
         field.grid.voxel_count() > std::numeric_limits<uint32_t>::max())
         validate_field(field, iso, who);
-    validate_grid(field.grid);
-    const Grid& g = field.grid;
-    const auto& n = g.dims;
-    // Every sample outside the leaves becomes a background beyond iso on its side, so only its
-    // side (its inside voxel) is kept; a value must be kept wherever it is read as a value, which
-    // is at the corners of cells with both sides (crossings, face deciders, centres).
-    const float background =
-        std::abs(iso) < FLT_MAX / 2 ? std::max(1.0f, 2.0f * std::abs(iso)) : FLT_MAX;
-    SparseVoxels inside(g, kBlock);
-    const Index3 nb = {(n[0] + kBlock - 1) / kBlock, (n[1] + kBlock - 1) / kBlock,
-                       (n[2] + kBlock - 1) / kBlock};
-    const uint64_t leaves = uint64_t(nb[0]) * uint64_t(nb[1]) * uint64_t(nb[2]);
-    check_host_memory(
-        leaves * (sizeof(std::array<uint64_t, 8>) + 1), default_host_budget(),
-        std::string(who) + ": the inside voxels of " + std::to_string(leaves) + " leaves");
-    // Pass 1, leaf by leaf: each sample's side, as inside bits, and the sides of the leaf and of
-    // its six faces (x = 0, x = 7, y = 0, ...; a face beyond the grid has none).
-    std::vector<std::array<uint64_t, 8>> words(leaves);
-    std::vector<std::array<uint8_t, 7>> sides(leaves);
-    std::atomic<bool> finite{true};
-    auto at = [&](int64_t x, int64_t y, int64_t z) {
-        return field.values[size_t(x + n[0] * (y + n[1] * z))];
-    };
-    auto leaf_origin = [&](uint64_t l) {
-        const Index3 c = unravel(l, nb);
-        return Index3{c[0] * kBlock, c[1] * kBlock, c[2] * kBlock};
-    };
-    tbb::parallel_for(uint64_t(0), leaves, [&](uint64_t l) {
-        const Index3 o = leaf_origin(l);
-        const Index3 e = {std::min<int64_t>(kBlock, n[0] - o[0]),
-                          std::min<int64_t>(kBlock, n[1] - o[1]),
-                          std::min<int64_t>(kBlock, n[2] - o[2])};
-        std::array<uint8_t, 7> part{};
-        for (int64_t z = 0; z < e[2]; ++z)
-            for (int64_t y = 0; y < e[1]; ++y) {
-                const float* row =
-                    &field.values[size_t(o[0] + n[0] * (o[1] + y + n[1] * (o[2] + z)))];
-                uint8_t row_sides = 0;
-                for (int64_t x = 0; x < e[0]; ++x) {
-                    if (!std::isfinite(row[x])) finite = false;
-                    const bool in = om_inside(row[x], iso);
-                    row_sides |= in ? kInsideSide : kOutsideSide;
-                    if (in)
-                        words[l][size_t(x / 4 + 2 * (y / 4 + 2 * (z / 4)))] |=
-                            uint64_t(1) << (x % 4 + 4 * (y % 4 + 4 * (z % 4)));
-                }
-                part[0] |= row_sides;
-                part[1] |= side_of(row[0], iso);
-                if (e[0] == kBlock) part[2] |= side_of(row[kBlock - 1], iso);
-                if (y == 0) part[3] |= row_sides;
-                if (y == kBlock - 1) part[4] |= row_sides;
-                if (z == 0) part[5] |= row_sides;
-                if (z == kBlock - 1) part[6] |= row_sides;
-            }
-        sides[l] = part;
-    });
-    if (!finite) validate_field(field, iso, who);
-    // Pass 2: a leaf holds a corner of a cell on both sides iff its samples with the one-sample
-    // halo lie on both sides; the halo is the facing face of each face neighbour and (counted
-    // whole, which only keeps a few leaves more than needed) the edge and corner neighbours.
-    std::vector<uint8_t> keep(leaves, 0);
-    tbb::parallel_for(uint64_t(0), leaves, [&](uint64_t l) {
-        const Index3 c = unravel(l, nb);
-        uint8_t both = sides[l][0];
-        for (int dz = -1; dz <= 1 && both != kBothSides; ++dz)
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const Index3 m = {c[0] + dx, c[1] + dy, c[2] + dz};
-                    if ((dx | dy | dz) == 0 || m[0] < 0 || m[1] < 0 || m[2] < 0 || m[0] >= nb[0] ||
-                        m[1] >= nb[1] || m[2] >= nb[2])
-                        continue;
-                    const std::array<uint8_t, 7>& s = sides[ravel(m, nb)];
-                    const int axes = (dx != 0) + (dy != 0) + (dz != 0);
-                    if (axes > 1)
-                        both |= s[0];
-                    else if (dx)
-                        both |= s[dx > 0 ? 1 : 2];  // its x = 0 face, or its x = 7 face
-                    else if (dy)
-                        both |= s[dy > 0 ? 3 : 4];
-                    else
-                        both |= s[dz > 0 ? 5 : 6];
-                }
-        keep[l] = both == kBothSides;
-    });
-    for (uint64_t l = 0; l < leaves; ++l) inside.merge_brick(l, words[l].data());
-    std::vector<std::array<uint64_t, 8>>().swap(words);
-
-    // Pass 3: the kept leaves' values, gathered in parallel and appended in order.
-    SparseField view(g, double(background) / g.voxel_size, std::move(inside));
-    std::vector<uint64_t> kept;
-    for (uint64_t l = 0; l < leaves; ++l)
-        if (keep[l]) kept.push_back(l);
-    check_host_memory(
-        2 * kept.size() * kBlockSamples * sizeof(float), default_host_budget(),
-        std::string(who) + ": the values of " + std::to_string(kept.size()) + " leaves");
-    std::vector<float> samples(kept.size() * kBlockSamples, view.background());
-    tbb::parallel_for(size_t(0), kept.size(), [&](size_t k) {
-        const Index3 o = leaf_origin(kept[k]);
-        float* out = &samples[k * kBlockSamples];
-        for (int64_t z = o[2]; z < std::min(o[2] + kBlock, n[2]); ++z)
-            for (int64_t y = o[1]; y < std::min(o[1] + kBlock, n[1]); ++y)
-                for (int64_t x = o[0]; x < std::min(o[0] + kBlock, n[0]); ++x)
-                    out[size_t((x - o[0]) + kBlock * ((y - o[1]) + kBlock * (z - o[2])))] =
-                        at(x, y, z);
-    });
-    view.reserve_leaves(kept.size());
-    for (size_t k = 0; k < kept.size(); ++k) view.append_leaf(kept[k], &samples[k * kBlockSamples]);
-    return view;
+    try {
+        MeshingViewBuilder builder(field.grid, iso);
+        const size_t per_layer = size_t(field.grid.dims[0]) * size_t(field.grid.dims[1]);
+        for (int64_t k = 0; k < field.grid.dims[2]; ++k)
+            builder.add_layer(&field.values[size_t(k) * per_layer]);
+        return builder.finish();
+    } catch (const InputError& e) {  // the caller's name on the builder's errors
+        throw InputError(std::string(who) + ": " + e.what());
+    } catch (const GridError& e) {
+        throw GridError(std::string(who) + ": " + e.what());
+    }
 }
 
 }  // namespace detail

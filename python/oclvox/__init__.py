@@ -259,8 +259,9 @@ def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, r
          progress=None):
     """Triangulates a field's iso-surface; returns (vertices float64 (N, 3), faces int64 (M, 3)).
 
-    field: a Field, a SparseField, a field file (.npy, or a .vdb level set, read sparse), or a
-    VoxelGrid (turned into a field with `smoothing` box-filter passes). method: "marching-cubes"
+    field: a Field, a SparseField, a field file (a .npy field, read a layer at a time unless a
+    device or the reference is asked for, or a .vdb level set, read sparse), or a VoxelGrid (turned
+    into a field with `smoothing` box-filter passes). method: "marching-cubes"
     or "surface-nets". Samples < iso are inside; triangles are wound counter-clockwise seen from
     outside. progress: as for sdf. A SparseField is meshed on the host's cores, without a dense
     copy, into the mesh its dense copy gives (so `device` and `reference` apply to dense fields
@@ -268,6 +269,11 @@ def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, r
     """
     if isinstance(field, VoxelGrid):
         field = field.to_field(smoothing=smoothing)
+    elif (isinstance(field, (str, os.PathLike)) and os.fspath(field).lower().endswith(".npy")
+          and device is None and not reference):
+        # Read a layer at a time into the samples and sides the meshers read (its meshing
+        # view), so memory follows the surface, not the field's volume.
+        field = _oclvox.load_meshing_view(field, iso=iso, progress=progress)
     elif isinstance(field, (str, os.PathLike)):
         field = load_field(field)
     if isinstance(field, SparseField):
@@ -303,11 +309,22 @@ SparseField.mesh = _field_mesh
 VoxelGrid.mesh = _grid_mesh
 
 
-def load_field(path):
+def load_field(path, *, onto=None):
     """Reads a field file: a .npy field (with its JSON sidecar) as a Field, a .vdb level set
-    (ours, or any OpenVDB narrow-band level set) as a SparseField, without a dense copy."""
+    (ours, or any OpenVDB narrow-band level set) as a SparseField, without a dense copy.
+
+    onto: a SparseField whose voxel lattice and band a .vdb level set is read onto, so the two
+    combine in csg(); one on another lattice is rebuilt there by OpenVDB's levelSetRebuild (its
+    values are then distances to a polygonization of its surface, within a fraction of a voxel).
+    """
     if os.fspath(path).lower().endswith(".vdb"):
+        if onto is not None:
+            if not isinstance(onto, SparseField):
+                raise TypeError(f"onto must be a SparseField, got {type(onto).__name__}")
+            return _oclvox.load_sparse_field_onto(path, onto)
         return _oclvox.load_sparse_field(path)
+    if onto is not None:
+        raise ValueError("onto applies to .vdb level sets only")
     return _oclvox.load_field(path)
 
 

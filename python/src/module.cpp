@@ -716,6 +716,17 @@ PYBIND11_MODULE(_oclvox, m) {
         },
         "path"_a);
     m.def(
+        "load_meshing_view",
+        [](const std::filesystem::path& path, float iso, py::object progress) {
+            SparseField result;
+            ProgressBridge bridge(std::move(progress));
+            result.field = bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                return oclvox::read_meshing_view(path.string(), iso, callback);
+            });
+            return result;
+        },
+        "path"_a, "iso"_a, "progress"_a = py::none());
+    m.def(
         "load_sparse_field",
         [](const std::filesystem::path& path) {
             SparseField result;
@@ -724,6 +735,16 @@ PYBIND11_MODULE(_oclvox, m) {
             return result;
         },
         "path"_a);
+    m.def(
+        "load_sparse_field_onto",
+        [](const std::filesystem::path& path, const SparseField& onto) {
+            SparseField result;
+            py::gil_scoped_release release;
+            result.field = oclvox::read_sparse_field(path.string(), onto.field.grid(),
+                                                     onto.field.band_voxels());
+            return result;
+        },
+        "path"_a, "onto"_a);
     m.def(
         "voxelize",
         [](const oclvox::Mesh& mesh, const oclvox::GridFit& fit, const std::string& mode,

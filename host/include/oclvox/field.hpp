@@ -170,6 +170,35 @@ Mesh surface_nets(const SparseField& field, float iso = 0.0f,
 Mesh marching_cubes(const SparseField& field, float iso = 0.0f,
                     const ProgressCallback& progress = {});
 
+// The sparse field that meshes at `iso` exactly as a dense field does (surface_nets and
+// marching_cubes of it give the dense field's mesh bit for bit, and its samples below iso are the
+// dense field's), built from the dense field given a layer at a time, so that a field too large
+// to hold whole (a full-grid distance field computed a slab of layers at a time, a large .npy) can
+// still be meshed and previewed. It keeps the 8x8x8 leaves holding a corner of a cell with samples
+// on both sides of iso, and elsewhere only each sample's side, as inside voxels under a background
+// beyond iso. Memory holds 16 layers, the inside voxels and the kept leaves. The dense meshing
+// functions above mesh through it.
+class MeshingViewBuilder {
+  public:
+    // Throws GridError for an invalid grid or when 16 of its layers exceed the host memory
+    // budget, InputError for a non-finite iso.
+    MeshingViewBuilder(const Grid& grid, float iso);
+    ~MeshingViewBuilder();
+    MeshingViewBuilder(MeshingViewBuilder&&) noexcept;
+    MeshingViewBuilder& operator=(MeshingViewBuilder&&) noexcept;
+
+    // Adds the next layer (k = 0, 1, ... in order): grid.dims[0] * grid.dims[1] samples, x
+    // fastest. Throws InputError naming a non-finite sample, GridError after the last layer or
+    // when the kept leaves exceed the host memory budget.
+    void add_layer(const float* samples);
+    // The view, once every layer is added (GridError before); the builder is then empty.
+    SparseField finish();
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
 // Writes a triangle mesh by extension (case-insensitive): .obj (text, exact shortest decimals),
 // .ply (binary little-endian, double vertices, int indices), .stl (binary, float, facet normals).
 // Written to a temporary file and renamed into place. Throws OutputError for an unknown extension,

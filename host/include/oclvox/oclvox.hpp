@@ -130,6 +130,8 @@ Grid fit_grid(const Mesh& mesh, const GridFit& fit);
 void validate_grid(const Grid& grid);
 // The same voxels: equal origin, voxel size and dims.
 bool same_grid(const Grid& a, const Grid& b);
+// "NXxNYxNZ voxels of SIZE at (X, Y, Z)", for messages.
+std::string to_string(const Grid& grid);
 
 // ---------------------------------------------------------------------------------------------
 // Sparse voxel results

@@ -196,6 +196,42 @@ std::variant<ScalarField, SparseVoxels> read_npy(const std::string& path);
 // read_npy for a field only: an occupancy .npy is an InputError.
 ScalarField read_field(const std::string& path);
 
+// A .npy field read a layer at a time (k = 0, 1, ...: grid.dims[0] * grid.dims[1] samples, x
+// fastest), so that a field larger than memory can be meshed (MeshingViewBuilder) or combined
+// and written (write_field with a FieldLayer). Opening checks the header, the data length and the
+// sidecar as read_npy does. Fortran-order files (as write_field writes them) hold each layer's
+// samples together and are streamed, one layer in memory; C-order files spread a layer over the
+// whole file, so they are read whole on opening, within the host memory budget.
+class FieldLayerReader {
+  public:
+    // Throws InputError naming the file and the problem, also for an occupancy .npy.
+    explicit FieldLayerReader(const std::string& path);
+    ~FieldLayerReader();
+    FieldLayerReader(FieldLayerReader&&) noexcept;
+    FieldLayerReader& operator=(FieldLayerReader&&) noexcept;
+
+    const Grid& grid() const;
+    // Fills `samples` with the next layer. Throws InputError naming the file when the file ends
+    // early (it changed since it was opened) or after the last layer.
+    void read_layer(float* samples);
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+// The meshing view at iso (MeshingViewBuilder, oclvox/field.hpp) of a .npy field read a layer at a
+// time: surface_nets and marching_cubes of it give the field's mesh bit for bit, with memory for
+// the view (the leaves near the iso-surface, the inside bits) instead of the field. Throws as
+// FieldLayerReader and MeshingViewBuilder do; `progress` as for write_field (the fraction of the
+// layers read; false throws Cancelled).
+SparseField read_meshing_view(const std::string& path, float iso,
+                              const ProgressCallback& progress = {});
+
+// Whether a .npy file holds a field (float samples) rather than an occupancy (uint8), from its
+// header alone. Throws InputError as read_npy does for a file it cannot read.
+bool npy_holds_field(const std::string& path);
+
 // Reads an OpenVDB level set (.vdb) as a sparse field, without a dense copy: the FloatGrid named
 // "sdf" (as write_field writes), else the file's only float grid of class level set. Its leaves
 // become the field's leaves (every value, active or not), its tiles below zero and its leaves'
@@ -207,6 +243,17 @@ ScalarField read_field(const std::string& path);
 // a transform other than axis-aligned cubic voxels, a background that is not positive, active
 // tiles, non-finite values, or a field beyond the host memory budget.
 SparseField read_sparse_field(const std::string& path);
+// The same level set on the voxel lattice of `lattice` (its voxel size, and voxel centres a whole
+// number of voxels from its own) with a band of band_voxels of those voxels, so that it combines
+// with the fields there (csg). A level set already on that lattice with that background is read
+// as above; any other is rebuilt there by OpenVDB's tools::levelSetRebuild (its zero level set
+// polygonized, one point per cell at the mean of its edge crossings, and the exact narrow band of
+// that polygon surface taken on the lattice), so its values are no longer exact distances to the
+// file's surface: the polygonization moves a convex surface inwards by about h^2 / (2 R) for the
+// file's voxel size h and a radius of curvature R (on a sphere of 10.6 voxels' radius, within 1.5
+// voxels of the surface: 0.036 of the file's voxels on average, 0.13 at worst). Throws as
+// read_sparse_field, and GridError for an invalid lattice or band.
+SparseField read_sparse_field(const std::string& path, const Grid& lattice, double band_voxels);
 
 }  // namespace oclvox
 
