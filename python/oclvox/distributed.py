@@ -4,7 +4,9 @@
   into shards, runs one task per shard on the workers and merges the sparse results into one
   VoxelGrid, bit for bit the one ``oclvox.voxelize`` returns.
 - ``sdf_sharded(mesh, resolution, client=...)`` does the same for a signed distance field (a
-  narrow band, sparse or dense, or a full grid), by slabs of z layers.
+  narrow band, sparse or dense, or a full grid), by slabs of z layers;
+  ``sdf_sharded_to_file(mesh, path, resolution, client=...)`` writes a dense one to a file a slab
+  at a time, never holding it whole.
 - ``voxelize_many(paths, out_dir, resolution, client=...)`` voxelizes one mesh per task into one
   file per mesh, skips outputs already written, retries a failed task once and reports failures at
   the end.
@@ -20,6 +22,7 @@ also the back end of the CLI's ``oclvox voxelize --workers/--scheduler`` and ``o
 """
 
 import argparse
+import bisect
 import contextlib
 import dataclasses
 import inspect
@@ -232,19 +235,85 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
     oclvox.sdf(..., layers=(first, end)), whose samples are the whole field's there. Each slab's
     sign comes from a solid voxelization of its whole columns of bricks.
     Dense: the client copies each slab into the whole field as it arrives, and needs the memory
-    of the field twice at the end (4 bytes a voxel, once for the slabs, once in the Field).
+    of the field twice at the end (4 bytes a voxel, once for the slabs, once in the Field);
+    sdf_sharded_to_file writes it instead, never holding it whole.
     Sparse: each slab comes back as its leaves and inside voxels, and the client merges the slabs
     in z order as they become contiguous (SparseField.merge): memory follows the surface, as for
     oclvox.sdf(..., sparse=True), plus the slabs that arrived ahead of their turn.
     progress: called as progress(layers_done, layers_total) as slabs arrive; returning False
     cancels (oclvox.Cancelled), and the slabs not yet finished are cancelled on the cluster.
     """
+    slabs = _submit_sdf_slabs(mesh, resolution, client, shard_layers, device, options)
+    done = [0]
+
+    def report(first):
+        done[0] += slabs.cuts[slabs.cuts.index(first) + 1] - first
+        _report(progress, done[0], slabs.dims[2])
+
+    if options.get("sparse", False):
+        return _merge_slabs(client, slabs.futures, slabs.cuts, report)
+    values = np.empty(slabs.dims, np.float32, order="F")
+
+    def place(future, first):
+        slab = future.result()
+        values[:, :, first:first + slab.shape[2]] = slab
+        report(first)
+
+    _collect(client, slabs.futures, place)
+    return oclvox.Field(values, slabs.origin, slabs.voxel_size, slabs.band)
+
+
+def sdf_sharded_to_file(mesh, path, resolution=256, *, client, shard_layers=None, device=None,
+                        progress=None, **options):
+    """sdf_sharded's dense field (a full grid, or a narrow band without sparse=True) written to
+    `path` (.npy or .vdb) a layer at a time in z order: the client waits for each slab in turn,
+    so it holds one slab, never the whole field (for .vdb OpenVDB's tree of it). The file holds
+    what sdf_sharded(...).save(path) writes (.npy byte for byte). Returns the grid as (origin,
+    voxel_size, dims). progress: progress(layers_written, layers_total), False cancelling with no
+    file left. Options as for sdf_sharded, but not sparse."""
+    if options.get("sparse"):
+        raise ValueError("sdf_sharded_to_file writes dense slabs; save a sparse sdf_sharded result")
+    slabs = _submit_sdf_slabs(mesh, resolution, client, shard_layers, device, options)
+    by_first = {first: future for future, first in slabs.futures.items()}
+    slabs.futures.clear()
+    held = {"first": None, "values": None}
+
+    def layer(k):
+        first = slabs.cuts[bisect.bisect_right(slabs.cuts, k) - 1]
+        if held["first"] != first:
+            held["values"] = None  # before the next slab arrives
+            held["values"], held["first"] = by_first.pop(first).result(), first
+        return held["values"][:, :, k - first]
+
+    try:
+        oclvox._oclvox.write_field_layers(os.fspath(path), slabs.origin, slabs.voxel_size,
+                                          slabs.dims, slabs.band, layer, progress)
+    finally:
+        if by_first:
+            client.cancel(list(by_first.values()))
+    return slabs.origin, slabs.voxel_size, slabs.dims
+
+
+@dataclasses.dataclass
+class _SdfSlabs:
+    """What _submit_sdf_slabs starts: the whole grid, the field's band as Field keeps it (0 for a
+    full grid: taken from the values when written), the slabs' first layers, and their futures."""
+    origin: tuple
+    voxel_size: float
+    dims: tuple
+    band: float
+    cuts: list
+    futures: dict  # future -> first layer
+
+
+def _submit_sdf_slabs(mesh, resolution, client, shard_layers, device, options):
+    """Phases 1 and 2 of sdf_sharded: the checks, the grid oclvox.sdf fits, and one task per slab
+    of layers (the mesh sent to every worker once)."""
     if options.get("full_grid") and options.get("sparse"):
         raise ValueError("full_grid=True gives a dense field: sparse=True holds narrow bands only")
     unknown = sorted(set(options) - _SDF_OPTIONS)
     if unknown:
         raise TypeError(f"unknown sdf option(s): {', '.join(unknown)}")
-    # Phase 1: the mesh and the whole grid (the one oclvox.sdf fits), without a device.
     mesh = oclvox._as_mesh(mesh)
     defaults = inspect.signature(oclvox.sdf).parameters
     band = options.get("band", defaults["band"].default)
@@ -263,31 +332,12 @@ def sdf_sharded(mesh, resolution=256, *, client, shard_layers=None, device=None,
         raise ValueError(f"shard_layers must be at least 1{' and a multiple of 8' if sparse else ''}"
                          f", got {shard_layers}")
     cuts = list(range(0, dims[2], shard_layers)) + [dims[2]]
-
-    # Phase 2: the mesh to every worker once, one task per slab.
     [mesh_on_workers] = client.scatter([mesh], broadcast=True)
     futures = {client.submit(_sdf_layers, mesh_on_workers, resolution, (first, end), device,
                              options): first
                for first, end in zip(cuts, cuts[1:])}
-
-    # Phase 3: each slab into its place.
-    done = [0]
-
-    def report(first):
-        done[0] += cuts[cuts.index(first) + 1] - first
-        _report(progress, done[0], dims[2])
-
-    if sparse:
-        return _merge_slabs(client, futures, cuts, report)
-    values = np.empty(dims, np.float32, order="F")
-
-    def place(future, first):
-        slab = future.result()
-        values[:, :, first:first + slab.shape[2]] = slab
-        report(first)
-
-    _collect(client, futures, place)
-    return oclvox.Field(values, origin, voxel_size, 0.0 if options.get("full_grid") else band)
+    return _SdfSlabs(tuple(origin), voxel_size, tuple(dims),
+                     0.0 if options.get("full_grid") else band, cuts, futures)
 
 
 def _merge_slabs(client, futures, cuts, report):
@@ -497,22 +547,31 @@ def main(argv=None):
         with _cluster_client(args) as client:
             start = time.perf_counter()
             if args.command in ("voxelize", "sdf"):
+                result = None
                 if args.command == "voxelize":
                     result = voxelize_sharded(
                         args.input, args.resolution, client=client,
                         shard_bricks=args.shard_bricks, device=args.device,
                         progress=_progress_line("bricks", args.quiet), **options)
                     made = f"{result.count} voxels set"
+                elif options.get("full_grid", False):
+                    # A full grid is dense: written a slab at a time as the slabs come in.
+                    _, _, dims = sdf_sharded_to_file(
+                        args.input, args.output, args.resolution, client=client,
+                        device=args.device, progress=_progress_line("layers", args.quiet),
+                        **options)
+                    made = "every voxel"
                 else:
-                    # A narrow band kept sparse; a full grid (full_grid) is dense.
-                    sparse = not options.get("full_grid", False)
+                    # A narrow band kept sparse.
                     result = sdf_sharded(args.input, args.resolution, client=client,
-                                         device=args.device, sparse=sparse,
+                                         device=args.device, sparse=True,
                                          progress=_progress_line("layers", args.quiet), **options)
-                    made = f"{result.leaf_count} leaves" if sparse else "every voxel"
-                result.save(args.output)
+                    made = f"{result.leaf_count} leaves"
+                if result is not None:
+                    result.save(args.output)
+                    dims = result.dims
                 if not args.quiet:
-                    print(f"{args.output}: {made} in {'x'.join(map(str, result.dims))}, "
+                    print(f"{args.output}: {made} in {'x'.join(map(str, dims))}, "
                           f"{time.perf_counter() - start:.2f} s", file=sys.stderr)
                 return 0
             summary = voxelize_many(mesh_paths(args.input), args.output, args.resolution,

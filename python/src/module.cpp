@@ -716,6 +716,57 @@ PYBIND11_MODULE(_oclvox, m) {
         },
         "path"_a);
     m.def(
+        "write_field_layers",
+        [](const std::filesystem::path& path, const std::array<double, 3>& origin,
+           double voxel_size, const std::array<int64_t, 3>& dims, double band_voxels,
+           py::function layer, py::object progress) {
+            oclvox::Grid grid;
+            grid.origin = origin;
+            grid.voxel_size = voxel_size;
+            grid.dims = dims;
+            oclvox::validate_grid(grid);
+            const size_t per_layer = size_t(dims[0]) * size_t(dims[1]);
+            // An exception `layer` raises stops the write as a cancel (no file is left) and is
+            // raised again as it was, not as the write's error.
+            std::optional<py::error_already_set> raised;
+            ProgressBridge bridge(std::move(progress));
+            try {
+                bridge.run_released([&](const oclvox::ProgressCallback& callback) {
+                    oclvox::write_field(
+                        path.string(), grid, band_voxels,
+                        [&](int64_t k, float* out) {
+                            py::gil_scoped_acquire gil;
+                            py::object given;
+                            try {
+                                given = layer(k);
+                            } catch (py::error_already_set& e) {
+                                raised.emplace(std::move(e));
+                                throw oclvox::Cancelled("the layer callable raised");
+                            }
+                            // (nx, ny) in x-fastest order, whatever the callable returned.
+                            const auto samples =
+                                py::array_t<float, py::array::f_style |
+                                                       py::array::forcecast>::ensure(given);
+                            if (!samples || samples.ndim() != 2 || samples.shape(0) != dims[0] ||
+                                samples.shape(1) != dims[1])
+                                throw oclvox::InputError(
+                                    "layer " + std::to_string(k) + " must be an (nx, ny) = (" +
+                                    std::to_string(dims[0]) + ", " + std::to_string(dims[1]) +
+                                    ") array of numbers");
+                            std::copy_n(samples.data(), per_layer, out);
+                        },
+                        callback);
+                });
+            } catch (const oclvox::Cancelled&) {
+                if (!raised) throw;
+                py::error_already_set error = std::move(*raised);
+                raised.reset();
+                throw error;
+            }
+        },
+        "path"_a, "origin"_a, "voxel_size"_a, "dims"_a, "band"_a, "layer"_a,
+        "progress"_a = py::none());
+    m.def(
         "load_meshing_view",
         [](const std::filesystem::path& path, float iso, py::object progress) {
             SparseField result;

@@ -20,7 +20,8 @@ from conftest import SPOT
 
 distributed = pytest.importorskip("distributed", reason="Dask (python3-distributed) not installed")
 from oclvox.distributed import (  # noqa: E402
-    _plan_shards, mesh_paths, sdf_sharded, shards_of, voxelize_many, voxelize_sharded)
+    _plan_shards, mesh_paths, sdf_sharded, sdf_sharded_to_file, shards_of, voxelize_many,
+    voxelize_sharded)
 
 CLI = os.environ.get("OCLVOX_CLI")
 
@@ -197,6 +198,35 @@ def test_sharded_without_candidate_bricks_is_the_empty_whole_grid(client):
     sharded = voxelize_sharded(SPOT, client=client, **grid)
     assert sharded.count == 0 and sharded.dims == (30, 20, 10)
     assert sharded.same_voxels(oclvox.voxelize(SPOT, **grid))
+
+
+@pytest.mark.parametrize("extension", [".npy", ".vdb"])
+def test_full_grid_sdf_sharded_to_file_writes_the_single_process_file(client, tmp_path, extension):
+    # Written a layer at a time as the slabs are waited for in turn: the file the single
+    # process's field saves (.npy byte for byte, .vdb the same level set); a cancel from the
+    # progress callback leaves no file.
+    options = dict(band=1.0, brick_size=8, full_grid=True)
+    single = oclvox.sdf(SPOT, 40, **options)
+    single.save(tmp_path / f"single{extension}")
+    written = []
+    grid = sdf_sharded_to_file(SPOT, tmp_path / f"sharded{extension}", 40, client=client,
+                               shard_layers=8, progress=lambda done, total: written.append(done),
+                               **options)
+    assert grid == (single.origin, single.voxel_size, single.dims)
+    assert written and written[-1] == max(written)
+    if extension == ".npy":
+        assert filecmp.cmp(tmp_path / "single.npy", tmp_path / "sharded.npy", shallow=False)
+    else:  # the same level set read back (its band found as the layers passed, then pruned)
+        a, b = (oclvox.load_field(tmp_path / f"{n}.vdb") for n in ("single", "sharded"))
+        assert (a.dims, a.origin, a.band, a.leaf_count) == (b.dims, b.origin, b.band, b.leaf_count)
+        assert np.array_equal(a.to_field().to_numpy().view(np.uint32),
+                              b.to_field().to_numpy().view(np.uint32))
+    with pytest.raises(oclvox.Cancelled):
+        sdf_sharded_to_file(SPOT, tmp_path / f"cancelled{extension}", 40, client=client,
+                            shard_layers=8, progress=lambda done, total: False, **options)
+    assert not any(p.name.startswith("cancelled") for p in tmp_path.iterdir())
+    with pytest.raises(ValueError, match="sparse"):
+        sdf_sharded_to_file(SPOT, tmp_path / "x.npy", 24, client=client, sparse=True)
 
 
 @pytest.mark.parametrize("mesh,options", [

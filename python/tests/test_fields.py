@@ -276,3 +276,28 @@ def test_sparse_field_meshes_as_its_dense_copy_and_reads_back_from_vdb(method, t
     (tmp_path / "bad.vdb").write_bytes(b"not a vdb")
     with pytest.raises(oclvox.InputError):
         oclvox.load_field(tmp_path / "bad.vdb")
+
+
+def test_layers_written_from_a_callable_are_the_file_and_its_errors_come_back_as_they_were(
+        tmp_path):
+    # The writer behind sdf_sharded_to_file: layer k from a callable, x fastest; an exception the
+    # callable raises comes back as itself, a wrong shape as an error naming the layer, and
+    # neither leaves a file.
+    write = oclvox._oclvox.write_field_layers
+    write(tmp_path / "ramp.npy", (0.0, 0.0, 0.0), 1.0, (4, 5, 6), 0.0,
+          lambda k: np.full((4, 5), k - 2.5) + np.arange(4)[:, None] * 0.125)
+    ramp = np.load(tmp_path / "ramp.npy")
+    assert ramp.shape == (4, 5, 6)
+    assert np.array_equal(ramp[3, 2, :], np.arange(6) - 2.5 + 0.375)
+
+    def failing(k):
+        if k == 3:
+            raise KeyError("slab lost")
+        return np.zeros((4, 5), np.float32)
+
+    with pytest.raises(KeyError, match="slab lost"):
+        write(tmp_path / "failed.npy", (0.0, 0.0, 0.0), 1.0, (4, 5, 6), 0.0, failing)
+    with pytest.raises(oclvox.Error, match="layer 0 must be an"):
+        write(tmp_path / "failed.vdb", (0.0, 0.0, 0.0), 1.0, (4, 5, 6), 0.0,
+              lambda k: np.zeros((5, 4)))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ramp.npy", "ramp.npy.json"]
