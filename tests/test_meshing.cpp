@@ -778,6 +778,68 @@ TEST(Meshing, OneSmoothingPassAveragesTheTwentySevenNeighbours) {
     EXPECT_EQ(field.at(0, 0, 0), 0.5f);
 }
 
+// The smoothing as the whole-grid passes it is defined by (x, then y, then z, each a 3-tap average
+// with +0.5 beyond the grid), written here over the whole grid: the independent reference of the
+// layer-at-a-time filter.
+std::vector<float> smoothed_whole_grid(const SparseVoxels& voxels, int passes) {
+    const int64_t pad = passes + 1;
+    const auto& d = voxels.grid().dims;
+    const int64_t n[3] = {d[0] + 2 * pad, d[1] + 2 * pad, d[2] + 2 * pad};
+    std::vector<float> values(size_t(n[0] * n[1] * n[2]), 0.5f), next(values.size());
+    voxels.for_each([&](int64_t i, int64_t j, int64_t k) {
+        values[size_t((i + pad) + n[0] * ((j + pad) + n[1] * (k + pad)))] = -0.5f;
+    });
+    const int64_t stride[3] = {1, n[0], n[0] * n[1]};
+    for (int pass = 0; pass < passes; ++pass)
+        for (int axis = 0; axis < 3; ++axis) {
+            for (int64_t z = 0; z < n[2]; ++z)
+                for (int64_t y = 0; y < n[1]; ++y)
+                    for (int64_t x = 0; x < n[0]; ++x) {
+                        const int64_t s = x + n[0] * (y + n[1] * z);
+                        const int64_t c = axis == 0 ? x : axis == 1 ? y : z;
+                        const float below = c > 0 ? values[size_t(s - stride[axis])] : 0.5f;
+                        const float above =
+                            c + 1 < n[axis] ? values[size_t(s + stride[axis])] : 0.5f;
+                        next[size_t(s)] = (below + values[size_t(s)] + above) / 3.0f;
+                    }
+            values.swap(next);
+        }
+    return values;
+}
+
+// Random voxels over several bricks (some empty), 0 to 3 passes: the field made a layer at a time
+// is the whole-grid filter's bit for bit, and its meshing view meshes as that field does.
+TEST(Meshing, OccupancyFieldLayersAreTheWholeGridSmoothingBitForBit) {
+    Grid grid;
+    grid.dims = {21, 13, 30};
+    grid.origin = {-1.0, 2.5, 0.25};
+    grid.voxel_size = 0.5;
+    SparseVoxels voxels(grid, 8);
+    std::mt19937 rng(17);
+    for (int v = 0; v < 900; ++v) {
+        const int64_t k = int64_t(rng() % 30);
+        if (k >= 8 && k < 16) continue;  // a layer of empty bricks
+        voxels.set(int64_t(rng() % 21), int64_t(rng() % 13), k);
+    }
+    for (int passes = 0; passes <= 3; ++passes) {
+        SCOPED_TRACE(std::to_string(passes) + " passes");
+        const std::vector<float> want = smoothed_whole_grid(voxels, passes);
+        const ScalarField field = occupancy_to_field(voxels, passes);
+        ASSERT_EQ(field.values.size(), want.size());
+        EXPECT_EQ(field.grid.origin[0], grid.origin[0] - (passes + 1) * grid.voxel_size);
+        for (size_t s = 0; s < want.size(); ++s)
+            ASSERT_EQ(bits(field.values[s]), bits(want[s])) << "sample " << s;
+        const SparseField view = occupancy_meshing_view(voxels, passes, 0.1f);
+        expect_identical(
+            marching_cubes(view, 0.1f),
+            detail::mesh_field_reference(field, 0.1f, detail::MeshingMethod::MarchingCubes, 32));
+    }
+    OccupancyFieldLayers layers(voxels, 1);
+    std::vector<float> layer(size_t(layers.grid().dims[0] * layers.grid().dims[1]));
+    for (int64_t k = 0; k < layers.grid().dims[2]; ++k) layers.next_layer(layer.data());
+    EXPECT_THROW(layers.next_layer(layer.data()), GridError);
+}
+
 TEST(Meshing, FieldsWithoutASignChangeOrWithoutCellsGiveEmptyMeshes) {
     const ScalarField outside = sample_field(6, 5, 4, [](const Vec3&) { return 1.0; });
     const ScalarField flat = sample_field(6, 5, 1, [](const Vec3& p) { return p[0] - 3; });

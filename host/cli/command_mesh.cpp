@@ -1,4 +1,6 @@
 // `oclvox mesh`: the iso-surface of a .npy field, or a mesh remeshed through a voxel field.
+#include <variant>
+
 #include "commands.hpp"
 #include "field_commands.hpp"
 #include "interrupt.hpp"
@@ -62,24 +64,24 @@ int run(const FieldArgs& args) {
     // A field file's header says whether it holds a field or an occupancy.
     const bool level_set_in = is_sparse_field_path(args.input);
     const bool npy_field_in = field_in && !level_set_in && oclvox::npy_holds_field(args.input);
-    if ((level_set_in || npy_field_in) && !args.device.selector.empty())
+    if (field_in && !args.device.selector.empty())
         throw UsageError(
-            "a field file (a .npy field or a .vdb level set) is meshed sparse on the host's "
-            "cores; --device applies to occupancy .npy files and meshes");
+            "a field or occupancy file is meshed on the host's cores; --device applies to "
+            "voxelizing a mesh input");
     if (field_in && !args.files.input_format.empty())
         throw UsageError("--input-format applies to a mesh read from stdin (-) only");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the field: a level set read sparse, a .npy field read a layer at a time into its
-    // meshing view, or dense: an occupancy's, or one made from the mesh's solid voxels.
-    std::optional<oclvox::ScalarField> field;
+    // Phase 2: the field as a sparse field: a level set read sparse; a .npy field, or the smoothed
+    // field of an occupancy (read, or the mesh's solid voxels), a layer at a time into its meshing
+    // view. Memory follows the surface (and the voxels), never the field's volume.
     std::optional<oclvox::SparseField> sparse;
+    std::optional<oclvox::SparseVoxels> voxels;
     std::optional<oclvox::Device> device;
     if (level_set_in) {
         record.inputs.resize(1);
         sparse = timed(record.seconds.load,
                        [&] { return read_sparse_field_input(args.input, record.inputs[0]); });
-        stop_if_interrupted();
     } else if (npy_field_in) {
         record.inputs = {{args.input, "field", 0}};
         sparse = timed(record.seconds.load, [&] {
@@ -87,11 +89,10 @@ int run(const FieldArgs& args) {
             return oclvox::read_meshing_view(args.input, float(args.iso), bar.callback());
         });
     } else if (field_in) {
-        record.inputs.resize(1);
-        field = timed(record.seconds.load,
-                      [&] { return read_field_input(args.input, record.inputs[0]); });
-        stop_if_interrupted();
-        device = open_device(args.device, record.seconds.device_open);
+        record.inputs = {{args.input, "occupancy", 0}};
+        voxels = timed(record.seconds.load, [&] {
+            return std::get<oclvox::SparseVoxels>(oclvox::read_npy(args.input));
+        });
     } else {
         const MeshInput input(args.input, args.files.input_format);
         const oclvox::Mesh mesh =
@@ -105,23 +106,24 @@ int run(const FieldArgs& args) {
         options.mode = oclvox::VoxelizeMode::Solid;
         options.inside = oclvox::inside_test_from_string(args.inside);
         oclvox::VoxelizeStats stats;
-        field = timed(record.seconds.compute, [&] {
+        voxels = timed(record.seconds.compute, [&] {
             ProgressBar bar("voxelizing", "bricks", args.reporting);
             options.progress = bar.callback();
-            const oclvox::SparseVoxels voxels =
-                device ? device->voxelize(mesh, grid, options, &stats)
-                       : oclvox::voxelize_reference(mesh, grid, options, &stats);
-            return oclvox::occupancy_to_field(voxels);
+            return device ? device->voxelize(mesh, grid, options, &stats)
+                          : oclvox::voxelize_reference(mesh, grid, options, &stats);
         });
         record.stats = stats;
+    }
+    stop_if_interrupted();
+    if (voxels) {
+        sparse = timed(record.seconds.compute,
+                       [&] { return oclvox::occupancy_meshing_view(*voxels, 1, float(args.iso)); });
         stop_if_interrupted();
     }
 
     // Phase 3: the surface, the file, the report.
-    const oclvox::Mesh surface = timed(record.seconds.mesh, [&] {
-        return sparse ? extract_surface(*sparse, args, float(args.iso))
-                      : extract_surface(device, *field, args, float(args.iso));
-    });
+    const oclvox::Mesh surface =
+        timed(record.seconds.mesh, [&] { return extract_surface(*sparse, args, float(args.iso)); });
     stop_if_interrupted();
     timed(record.seconds.write, [&] {
         write_mesh_output(output.path(), surface, args);
@@ -131,12 +133,11 @@ int run(const FieldArgs& args) {
     record.seconds.total = seconds_since(start);
 
     record.outputs = {args.output};
-    record.grid = sparse ? sparse->grid() : field->grid;
+    record.grid = sparse->grid();
     if (device) record.device = device->info();
     record_field_settings(record, args);
     record.mesh_made = {{surface.triangles.size(), surface.positions.size()}};
-    record.border_inside = sparse ? oclvox::border_samples_inside(*sparse, float(args.iso))
-                                  : oclvox::border_samples_inside(*field, float(args.iso));
+    record.border_inside = oclvox::border_samples_inside(*sparse, float(args.iso));
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }

@@ -268,7 +268,11 @@ def mesh(field, iso=0.0, method="marching-cubes", *, smoothing=1, device=None, r
     only, and naming a device for a SparseField is an error).
     """
     if isinstance(field, VoxelGrid):
-        field = field.to_field(smoothing=smoothing)
+        # Its smoothed field a layer at a time into the samples and sides the meshers read,
+        # unless a device or the reference meshes the dense field.
+        use_view = device is None and not reference
+        field = (field.meshing_view(smoothing, iso) if use_view
+                 else field.to_field(smoothing=smoothing))
     elif (isinstance(field, (str, os.PathLike)) and os.fspath(field).lower().endswith(".npy")
           and device is None and not reference):
         # Read a layer at a time into the samples and sides the meshers read (its meshing

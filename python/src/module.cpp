@@ -580,6 +580,17 @@ PYBIND11_MODULE(_oclvox, m) {
             },
             "smoothing"_a)
         .def(
+            "meshing_view",
+            [](const VoxelGrid& g, int smoothing, float iso) {
+                SparseField result;
+                py::gil_scoped_release release;
+                result.field = oclvox::occupancy_meshing_view(g.voxels, smoothing, iso);
+                return result;
+            },
+            "smoothing"_a, "iso"_a,
+            "to_field(smoothing)'s meshing view at iso, made a layer at a time (never the dense "
+            "field)")
+        .def(
             "save",
             [](const VoxelGrid& g, const std::filesystem::path& path, py::object progress) {
                 ProgressBridge bridge(std::move(progress));

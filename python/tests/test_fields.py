@@ -120,6 +120,12 @@ def test_mesh_of_voxels_and_of_a_field_file(tmp_path):
     # Without smoothing the surface runs through the faces between set and unset voxels.
     assert np.allclose(vertices.min(axis=0), [2, 3, 1]) and np.allclose(vertices.max(axis=0),
                                                                         [7, 10, 6])
+    # Voxels are meshed through their smoothed field's meshing view, made a layer at a time: the
+    # dense field's reference mesh, vertex for vertex.
+    for smoothing in (0, 1, 2):
+        layered = oclvox.mesh(grid, smoothing=smoothing)
+        whole = oclvox.mesh(grid, smoothing=smoothing, reference=True)
+        assert np.array_equal(layered[0], whole[0]) and np.array_equal(layered[1], whole[1])
     # A saved field reads back equal, with its grid, and meshes the same.
     field, _, _, _ = sphere_field()
     field.save(tmp_path / "sphere.npy")

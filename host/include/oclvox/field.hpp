@@ -113,6 +113,32 @@ class SparseField {
 // hold.
 ScalarField occupancy_to_field(const SparseVoxels& voxels, int smoothing_passes = 1);
 
+// occupancy_to_field's samples a layer at a time (k = 0, 1, ... of its grown grid), bit for bit,
+// holding three layers per smoothing pass instead of the field: with MeshingViewBuilder, voxels
+// whose field would not fit in memory can still be meshed. `voxels` must outlive it. Throws as
+// occupancy_to_field, and GridError past the last layer.
+class OccupancyFieldLayers {
+  public:
+    OccupancyFieldLayers(const SparseVoxels& voxels, int smoothing_passes = 1);
+    ~OccupancyFieldLayers();
+    OccupancyFieldLayers(const OccupancyFieldLayers&) = delete;
+    OccupancyFieldLayers& operator=(const OccupancyFieldLayers&) = delete;
+
+    const Grid& grid() const;  // the voxels' grid grown by smoothing_passes + 1 on every side
+    // The next layer's grid().dims[0] * grid().dims[1] samples, x fastest.
+    void next_layer(float* samples);
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+// The meshing view at iso (MeshingViewBuilder) of occupancy_to_field(voxels, smoothing_passes),
+// made a layer at a time (OccupancyFieldLayers): it meshes as that field does, with memory for the
+// view instead of the field.
+SparseField occupancy_meshing_view(const SparseVoxels& voxels, int smoothing_passes = 1,
+                                   float iso = 0.0f);
+
 // How many samples of the grid's outer layer are inside (value < iso). Zero means no part of the
 // shape reaches the grid border, so both meshing methods give a closed surface; otherwise the
 // shape is cut by the grid box and its meshes are open there. Throws GridError if values.size()
