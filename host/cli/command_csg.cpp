@@ -1,5 +1,9 @@
 // `oclvox csg`: union, intersection or difference of two meshes (through their signed distance
 // fields on one grid) or of two fields: .npy (dense) or .vdb level sets (sparse).
+#include <memory>
+#include <optional>
+#include <variant>
+
 #include "commands.hpp"
 #include "field_commands.hpp"
 #include "interrupt.hpp"
@@ -43,6 +47,31 @@ void add_options(CLI::App& command, FieldArgs& args) {
     add_reporting_options(command, args.reporting);
 }
 
+// A .npy operand given a layer at a time: a field read from its file, or the smoothed field of an
+// occupancy (occupancy_to_field's, made a layer at a time), as `mesh` makes it.
+class NpyOperand {
+  public:
+    explicit NpyOperand(const std::string& path) {
+        if (oclvox::npy_holds_field(path)) {
+            field_.emplace(path);
+            return;
+        }
+        voxels_ = std::make_unique<oclvox::SparseVoxels>(
+            std::get<oclvox::SparseVoxels>(oclvox::read_npy(path)));
+        smoothed_.emplace(*voxels_);
+    }
+    const char* kind() const { return field_ ? "field" : "occupancy"; }
+    const oclvox::Grid& grid() const { return field_ ? field_->grid() : smoothed_->grid(); }
+    void next_layer(float* samples) {
+        field_ ? field_->read_layer(samples) : smoothed_->next_layer(samples);
+    }
+
+  private:
+    std::optional<oclvox::FieldLayerReader> field_;
+    std::unique_ptr<oclvox::SparseVoxels> voxels_;  // where smoothed_ reads them
+    std::optional<oclvox::OccupancyFieldLayers> smoothed_;
+};
+
 int run(const FieldArgs& args) {
     const Clock::time_point start = Clock::now();
     RunRecord record;
@@ -65,22 +94,23 @@ int run(const FieldArgs& args) {
     const bool level_sets_in = fields_in && is_sparse_field_path(args.input);
     if (fields_in && level_sets_in != is_sparse_field_path(args.input_b))
         throw UsageError("csg takes two .npy fields or two .vdb level sets, not one of each");
-    // Two .npy fields (not occupancies, as their headers say) are combined a layer at a time.
-    const bool npy_fields_in = fields_in && !level_sets_in && oclvox::npy_holds_field(args.input) &&
-                               oclvox::npy_holds_field(args.input_b);
-    if ((level_sets_in || npy_fields_in) && !args.device.selector.empty())
+    if (fields_in && !args.device.selector.empty())
         throw UsageError(
-            "two field files (.npy fields or .vdb level sets) are combined and meshed on the "
-            "host's cores; --device applies to meshes and occupancy .npy files");
+            "two field files are combined and meshed on the host's cores; --device applies to "
+            "meshes");
+    // occupancy_to_field's values step by +-0.5 across the surface; they are not distances. The
+    // headers say which .npy files hold occupancies.
+    if (fields_in && !level_sets_in && !mesh_out &&
+        !(oclvox::npy_holds_field(args.input) && oclvox::npy_holds_field(args.input_b)))
+        throw UsageError(
+            "csg of an occupancy .npy writes a mesh (.obj, .ply, .stl), not a distance field");
     if (fields_in && any_given(args.grid_options))
         throw UsageError("grid options do not apply to field inputs (their grids are used)");
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
     // Phase 2: both operands as fields on one grid, combined: .vdb level sets and narrow bands of
-    // meshes sparse (and meshed sparse), .npy fields a layer at a time and full grids of meshes a
-    // slab of layers at a time (written as they come, or meshed through their meshing view),
-    // occupancy .npy files dense.
-    oclvox::ScalarField combined;
+    // meshes sparse (and meshed sparse), .npy files a layer at a time and full grids of meshes a
+    // slab of layers at a time (written as they come, or meshed through their meshing view).
     std::optional<oclvox::SparseField> sparse;
     bool streamed = false;  // a field made a layer at a time: written as it comes
     std::optional<oclvox::Device> device;
@@ -97,16 +127,21 @@ int run(const FieldArgs& args) {
         sparse = timed(record.seconds.compute, [&] { return oclvox::csg(*a, *b, op); });
         record.grid = sparse->grid();
         stop_if_interrupted();
-    } else if (npy_fields_in) {
-        record.inputs = {{args.input, "field", 0}, {args.input_b, "field", 0}};
-        oclvox::FieldLayerReader a(args.input), b(args.input_b);
-        if (!oclvox::same_grid(a.grid(), b.grid()))
+    } else if (fields_in) {
+        std::optional<NpyOperand> a, b;
+        timed(record.seconds.load, [&] {
+            a.emplace(args.input);
+            b.emplace(args.input_b);
+            return 0;
+        });
+        record.inputs = {{args.input, a->kind(), 0}, {args.input_b, b->kind(), 0}};
+        if (!oclvox::same_grid(a->grid(), b->grid()))
             throw oclvox::GridError(
-                "csg of two .npy fields needs them on one grid (the same "
+                "csg of two .npy files needs them on one grid (the same "
                 "dims, origin and voxel size), got " +
-                oclvox::to_string(a.grid()) + " and " + oclvox::to_string(b.grid()));
-        record.grid = a.grid();
-        oclvox::Grid layer_grid = a.grid();
+                oclvox::to_string(a->grid()) + " and " + oclvox::to_string(b->grid()));
+        record.grid = a->grid();
+        oclvox::Grid layer_grid = a->grid();
         layer_grid.dims[2] = 1;
         const size_t per_layer = size_t(layer_grid.dims[0]) * size_t(layer_grid.dims[1]);
         oclvox::ScalarField layer_a{layer_grid, std::vector<float>(per_layer)},
@@ -116,37 +151,19 @@ int run(const FieldArgs& args) {
         streamed = true;
         timed(record.seconds.write, [&] {
             StreamedField field = stream_field(
-                mesh_out ? std::string() : output.path(), mesh_out, a.grid(),
+                mesh_out ? std::string() : output.path(), mesh_out, a->grid(),
                 [&](int64_t k, float* out) {
-                    a.read_layer(layer_a.values.data());
-                    b.read_layer(layer_b.values.data());
+                    a->next_layer(layer_a.values.data());
+                    b->next_layer(layer_b.values.data());
                     const oclvox::ScalarField layer = oclvox::csg(layer_a, layer_b, op);
                     std::copy(layer.values.begin(), layer.values.end(), out);
-                    progress(uint64_t(k + 1), uint64_t(a.grid().dims[2]));
+                    progress(uint64_t(k + 1), uint64_t(a->grid().dims[2]));
                     stop_if_interrupted();
                 });
             record.border_inside = field.border_inside;
             sparse = std::move(field.meshing_view);
             return 0;
         });
-    } else if (fields_in) {
-        record.inputs.resize(2);
-        std::optional<oclvox::ScalarField> a, b;
-        timed(record.seconds.load, [&] {
-            a = read_field_input(args.input, record.inputs[0]);
-            b = read_field_input(args.input_b, record.inputs[1]);
-            return 0;
-        });
-        // occupancy_to_field's values step by +-0.5 across the surface; they are not distances.
-        if ((record.inputs[0].kind == "occupancy" || record.inputs[1].kind == "occupancy") &&
-            !mesh_out)
-            throw UsageError(
-                "csg of an occupancy .npy writes a mesh (.obj, .ply, .stl), not a "
-                "distance field");
-        record.grid = a->grid;
-        combined = oclvox::csg(*a, *b, op);
-        stop_if_interrupted();
-        if (mesh_out) device = open_device(args.device, record.seconds.device_open);
     } else {
         const MeshInput input_a(args.input, args.input == "-" ? args.files.input_format : "");
         const MeshInput input_b(args.input_b, args.input_b == "-" ? args.files.input_format : "");
@@ -194,10 +211,7 @@ int run(const FieldArgs& args) {
     // Phase 3: mesh if the output is a mesh.
     std::optional<oclvox::Mesh> surface;
     if (mesh_out) {
-        surface = timed(record.seconds.mesh, [&] {
-            return sparse ? extract_surface(*sparse, args, 0.0f)
-                          : extract_surface(device, combined, args, 0.0f);
-        });
+        surface = timed(record.seconds.mesh, [&] { return extract_surface(*sparse, args, 0.0f); });
         stop_if_interrupted();
     }
 
@@ -205,10 +219,8 @@ int run(const FieldArgs& args) {
     timed(record.seconds.write, [&] {
         if (surface)
             write_mesh_output(output.path(), *surface, args);
-        else if (sparse && !streamed)
-            write_field_output(output.path(), *sparse, args);
         else if (!streamed)
-            write_field_output(output.path(), combined, 0.0, args);
+            write_field_output(output.path(), *sparse, args);
         output.finish();
         return 0;
     });
@@ -218,9 +230,7 @@ int run(const FieldArgs& args) {
     if (device) record.device = device->info();
     record_field_settings(record, args);
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
-    if (!streamed)
-        record.border_inside = sparse ? oclvox::border_samples_inside(*sparse)
-                                      : oclvox::border_samples_inside(combined);
+    if (!streamed) record.border_inside = oclvox::border_samples_inside(*sparse);
     report_run(record, args.reporting, output.is_stdout());
     return 0;
 }

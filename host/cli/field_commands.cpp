@@ -216,20 +216,6 @@ StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
     });
 }
 
-oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
-                             const oclvox::ScalarField& field, const FieldArgs& args, float iso) {
-    // On a CPU (an OpenCL CPU device or none) the host meshers, which visit only the blocks
-    // that change side, are several times faster than the kernels; the mesh is the same.
-    ProgressBar bar("meshing", "", args.reporting);
-    const oclvox::ProgressCallback progress = bar.callback();
-    const bool host = !device || device->info().type == "CPU";
-    if (args.mesher == "marching-cubes")
-        return host ? oclvox::marching_cubes(field, iso, progress)
-                    : oclvox::marching_cubes(*device, field, iso, progress);
-    return host ? oclvox::surface_nets(field, iso, progress)
-                : oclvox::surface_nets(*device, field, iso, progress);
-}
-
 oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& args, float iso) {
     ProgressBar bar("meshing", "", args.reporting);
     return args.mesher == "marching-cubes" ? oclvox::marching_cubes(field, iso, bar.callback())
@@ -241,26 +227,10 @@ void write_mesh_output(const std::string& path, const oclvox::Mesh& mesh, const 
     oclvox::write_mesh(path, mesh, bar.callback());
 }
 
-void write_field_output(const std::string& path, const oclvox::ScalarField& field,
-                        double band_voxels, const FieldArgs& args) {
-    ProgressBar bar("writing", "", args.reporting);
-    oclvox::write_field(path, field, band_voxels, bar.callback());
-}
-
 void write_field_output(const std::string& path, const oclvox::SparseField& field,
                         const FieldArgs& args) {
     ProgressBar bar("writing", "", args.reporting);
     oclvox::write_field(path, field, bar.callback());
-}
-
-oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record) {
-    if (path == "-")
-        throw UsageError("a .npy field has a .json sidecar file, so it cannot be read from stdin");
-    std::variant<oclvox::ScalarField, oclvox::SparseVoxels> data = oclvox::read_npy(path);
-    const bool occupancy = std::holds_alternative<oclvox::SparseVoxels>(data);
-    record = {path, occupancy ? "occupancy" : "field", 0};
-    if (occupancy) return oclvox::occupancy_to_field(std::get<oclvox::SparseVoxels>(data));
-    return std::get<oclvox::ScalarField>(std::move(data));
 }
 
 oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record,

@@ -81,25 +81,18 @@ StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
                                   const FieldArgs& args, const SlabField& compute,
                                   oclvox::VoxelizeStats& stats, double& seconds_compute);
 
-// The iso-surface by --mesher, with a progress bar, stopping on Ctrl-C.
-oclvox::Mesh extract_surface(std::optional<oclvox::Device>& device,
-                             const oclvox::ScalarField& field, const FieldArgs& args, float iso);
-// The same of a sparse field, on the host, without a dense copy (the same mesh as its dense copy
-// gives).
+// The iso-surface by --mesher of a sparse field (a narrow band, a level set, or a meshing view),
+// on the host's cores without a dense copy (the mesh its dense copy gives), with a progress bar,
+// stopping on Ctrl-C.
 oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& args, float iso);
 
 // write_mesh with a "writing" progress bar (and Ctrl-C checked through it).
 void write_mesh_output(const std::string& path, const oclvox::Mesh& mesh, const FieldArgs& args);
 
 // write_field with a "writing" progress bar (and Ctrl-C checked through it).
-void write_field_output(const std::string& path, const oclvox::ScalarField& field,
-                        double band_voxels, const FieldArgs& args);
 void write_field_output(const std::string& path, const oclvox::SparseField& field,
                         const FieldArgs& args);
 
-// A .npy input as a field. An occupancy (what `voxelize` writes) becomes a field through
-// occupancy_to_field, as a mesh input's voxels do in `mesh`; the record says which it was.
-oclvox::ScalarField read_field_input(const std::string& path, InputRecord& record);
 // A .vdb level set as a sparse field (read_sparse_field); the record's kind is "level set". With
 // `onto`, on its voxel lattice with its band (rebuilt there if it is not).
 oclvox::SparseField read_sparse_field_input(const std::string& path, InputRecord& record,
