@@ -184,21 +184,15 @@ int run(const FieldArgs& args) {
         // comes, or gathered into its meshing view for a mesh.
         if (args.full) {
             streamed = true;
-            timed(record.seconds.write, [&] {
-                StreamedField field = full_field_in_slabs(
-                    mesh_out ? std::string() : output.path(), mesh_out, *record.grid, device, args,
-                    [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
-                        return device ? oclvox::csg(*device, mesh_a, mesh_b, op, *record.grid,
-                                                    options, slab_stats)
-                                      : oclvox::csg_reference(mesh_a, mesh_b, op, *record.grid,
-                                                              options, slab_stats);
-                    },
-                    stats, record.seconds.compute);
-                record.border_inside = field.border_inside;
-                sparse = std::move(field.meshing_view);
-                return 0;
-            });
-            record.seconds.write -= record.seconds.compute;
+            sparse = full_field_in_slabs(
+                mesh_out ? std::string() : output.path(), mesh_out, *record.grid, device, args,
+                [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
+                    return device ? oclvox::csg(*device, mesh_a, mesh_b, op, *record.grid, options,
+                                                slab_stats)
+                                  : oclvox::csg_reference(mesh_a, mesh_b, op, *record.grid, options,
+                                                          slab_stats);
+                },
+                stats, record);
         } else {
             sparse = timed(record.seconds.compute, [&] {
                 return csg_sparse(device, mesh_a, mesh_b, op, *record.grid, args, &stats);

@@ -99,21 +99,13 @@ int run(const SdfArgs& args) {
     oclvox::VoxelizeStats stats;
     std::optional<oclvox::SparseField> sparse;
     if (args.full) {
-        timed(record.seconds.write, [&] {
-            StreamedField field = full_field_in_slabs(
-                output.path(), !args.mesh_output.empty() || !args.preview.empty(), grid, device,
-                args,
-                [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
-                    return device
-                               ? oclvox::signed_distance(*device, mesh, grid, options, slab_stats)
-                               : oclvox::signed_distance_reference(mesh, grid, options, slab_stats);
-                },
-                stats, record.seconds.compute);
-            record.border_inside = field.border_inside;
-            sparse = std::move(field.meshing_view);
-            return 0;
-        });
-        record.seconds.write -= record.seconds.compute;
+        sparse = full_field_in_slabs(
+            output.path(), !args.mesh_output.empty() || !args.preview.empty(), grid, device, args,
+            [&](const oclvox::SdfOptions& options, oclvox::VoxelizeStats* slab_stats) {
+                return device ? oclvox::signed_distance(*device, mesh, grid, options, slab_stats)
+                              : oclvox::signed_distance_reference(mesh, grid, options, slab_stats);
+            },
+            stats, record);
     } else {
         sparse = timed(record.seconds.compute,
                        [&] { return signed_distance_sparse(device, mesh, grid, args, &stats); });

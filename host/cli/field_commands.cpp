@@ -176,11 +176,12 @@ StreamedField stream_field(const std::string& path, bool meshing_view, const ocl
     return result;
 }
 
-StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
-                                  const oclvox::Grid& grid,
-                                  const std::optional<oclvox::Device>& device,
-                                  const FieldArgs& args, const SlabField& compute,
-                                  oclvox::VoxelizeStats& stats, double& seconds_compute) {
+std::optional<oclvox::SparseField> full_field_in_slabs(
+    const std::string& path, bool meshing_view, const oclvox::Grid& grid,
+    const std::optional<oclvox::Device>& device, const FieldArgs& args, const SlabField& compute,
+    oclvox::VoxelizeStats& stats, RunRecord& record) {
+    const Clock::time_point start = Clock::now();
+    double seconds_compute = 0;
     const int64_t nz = grid.dims[2];
     const oclvox::SdfOptions defaults = sdf_options(args);
     const int64_t thickness = slab_layers(grid, device, defaults.brick_size);
@@ -191,9 +192,9 @@ StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
     int64_t slab_first = 0;
     // Each slab is computed when its first layer is asked for; its progress is its share of the
     // layers.
-    return stream_field(path, meshing_view, grid, [&](int64_t k, float* out) {
+    StreamedField field = stream_field(path, meshing_view, grid, [&](int64_t k, float* out) {
         if (k == slab_first + slab.grid.dims[2] || slab.values.empty()) {
-            const Clock::time_point start = Clock::now();
+            const Clock::time_point slab_start = Clock::now();
             slab_first = k;
             oclvox::SdfOptions options = defaults;
             options.first_layer = k;
@@ -210,10 +211,14 @@ StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
             oclvox::VoxelizeStats slab_stats;
             slab = compute(options, &slab_stats);
             add_slab_stats(stats, slab_stats);
-            seconds_compute += seconds_since(start);
+            seconds_compute += seconds_since(slab_start);
         }
         std::copy_n(&slab.values[size_t(k - slab_first) * per_layer], per_layer, out);
     });
+    record.border_inside = field.border_inside;
+    record.seconds.compute += seconds_compute;
+    record.seconds.write += seconds_since(start) - seconds_compute;
+    return std::move(field.meshing_view);
 }
 
 oclvox::Mesh extract_surface(const oclvox::SparseField& field, const FieldArgs& args, float iso) {

@@ -72,14 +72,14 @@ StreamedField stream_field(const std::string& path, bool meshing_view, const ocl
 // compute(options, stats) is the field of options' layers (signed_distance or csg with those
 // options), which equals the whole field there bit for bit, so the file is the one the whole
 // field gives. One progress bar runs over the slabs; Ctrl-C stops between them and leaves no
-// file. The slabs' stats are summed into `stats` and their compute time into `seconds_compute`.
+// file. The slabs' stats are summed into `stats`; the record gets their compute time, the rest as
+// writing time, and the field's border_samples_inside. Returns the meshing view if asked for.
 using SlabField = std::function<oclvox::ScalarField(const oclvox::SdfOptions& options,
                                                     oclvox::VoxelizeStats* stats)>;
-StreamedField full_field_in_slabs(const std::string& path, bool meshing_view,
-                                  const oclvox::Grid& grid,
-                                  const std::optional<oclvox::Device>& device,
-                                  const FieldArgs& args, const SlabField& compute,
-                                  oclvox::VoxelizeStats& stats, double& seconds_compute);
+std::optional<oclvox::SparseField> full_field_in_slabs(
+    const std::string& path, bool meshing_view, const oclvox::Grid& grid,
+    const std::optional<oclvox::Device>& device, const FieldArgs& args, const SlabField& compute,
+    oclvox::VoxelizeStats& stats, RunRecord& record);
 
 // The iso-surface by --mesher of a sparse field (a narrow band, a level set, or a meshing view),
 // on the host's cores without a dense copy (the mesh its dense copy gives), with a progress bar,
