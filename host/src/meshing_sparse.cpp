@@ -633,7 +633,7 @@ struct MeshingViewBuilder::Impl {
     size_t per_layer = 0, leaves_per_layer = 0;
     int64_t layers_in = 0;
     std::vector<float> below, filling;  // the leaf layers' samples, x fastest, 8 layers each
-    std::vector<LeafSides> sides_before, sides_below, sides_filling;
+    std::vector<LeafSides> sides_before, sides_below;  // of the two leaf layers below `filling`
     SparseVoxels inside;
     std::vector<uint64_t> kept_keys;
     std::vector<float> kept_samples;
@@ -668,7 +668,7 @@ struct MeshingViewBuilder::Impl {
         ++layers_in;
         if (layers_in % kBlock != 0 && layers_in != n[2]) return;
         const int64_t lz = (layers_in - 1) / kBlock;
-        sides_filling = take_sides(lz);
+        std::vector<LeafSides> sides_filling = take_sides(lz);
         if (lz > 0) keep_leaves(lz - 1, below, sides_before, sides_below, &sides_filling);
         std::swap(below, filling);
         sides_before = std::move(sides_below);
