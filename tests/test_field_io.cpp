@@ -16,6 +16,7 @@
 
 #include "atomic_file.hpp"
 #include "oclvox/sdf.hpp"
+#include "test_support.hpp"
 
 namespace oclvox {
 namespace {
@@ -300,6 +301,50 @@ TEST_F(FieldIo, LayersReadOneAtATimeAreTheFilesSamplesInEitherOrder) {
     EXPECT_FALSE(npy_holds_field(file));
     EXPECT_THROW(FieldLayerReader{file}, InputError);
     EXPECT_THROW(FieldLayerReader{path("missing.npy")}, InputError);
+}
+
+// A C-order file larger than the host memory budget is read in slabs of a quarter of the budget,
+// the file once per slab: within 1 MiB a layer of 70 x 48 samples makes slabs of 16 layers, so 90
+// layers take six passes, the last a partial slab (and the 70 planes of constant x are read 16 at a
+// time, the last 6). Every layer is the samples hand-written at C
+// index k + nz (j + ny i), value(i, j, k) = i + 100 j + 10000 k, in both float widths.
+TEST_F(FieldIo, COrderFieldOverTheBudgetIsReadInSlabsLayerForLayer) {
+    const int nx = 70, ny = 48, nz = 90;
+    auto value = [](int i, int j, int k) { return float(i + 100 * j + 10000 * k); };
+    for (const bool doubles : {false, true}) {
+        SCOPED_TRACE(doubles ? "f8" : "f4");
+        const size_t item = doubles ? 8 : 4;
+        std::string data(size_t(nx) * ny * nz * item, '\0');
+        for (int i = 0; i < nx; ++i)
+            for (int j = 0; j < ny; ++j)
+                for (int k = 0; k < nz; ++k) {
+                    const size_t at = size_t(k + nz * (j + ny * i)) * item;
+                    if (doubles) {
+                        const double v = value(i, j, k);
+                        std::memcpy(&data[at], &v, 8);
+                    } else {
+                        const float v = value(i, j, k);
+                        std::memcpy(&data[at], &v, 4);
+                    }
+                }
+        const std::string file = path("c_order_slabs.npy");
+        write_bytes(file, npy_header(std::string("{'descr': '<f") + (doubles ? "8" : "4") +
+                                     "', 'fortran_order': False, 'shape': (70, 48, 90), }") +
+                              data);
+        write_bytes(file + ".json", kSidecar);
+        test::ScopedBudget budget("1");
+        EXPECT_THROW(read_field(file), InputError);  // whole, it is over the budget
+        FieldLayerReader reader(file);
+        std::vector<float> layer(size_t(nx) * ny);
+        for (int k = 0; k < nz; ++k) {
+            reader.read_layer(layer.data());
+            int wrong = 0;
+            for (int j = 0; j < ny; ++j)
+                for (int i = 0; i < nx; ++i) wrong += layer[size_t(i + nx * j)] != value(i, j, k);
+            EXPECT_EQ(wrong, 0) << "layer " << k;
+        }
+        EXPECT_THROW(reader.read_layer(layer.data()), InputError);
+    }
 }
 
 TEST_F(FieldIo, OutputPathIsCheckedBeforeWork) {

@@ -23,29 +23,6 @@ namespace {
 
 constexpr uint64_t kMiB = uint64_t(1) << 20;
 
-// $OCLVOX_HOST_MEMORY_MIB set (or unset, for nullptr) for one scope.
-class ScopedBudget {
-  public:
-    explicit ScopedBudget(const char* mib) {
-        if (const char* old = std::getenv(kName)) saved_ = old, had_ = true;
-        if (mib)
-            setenv(kName, mib, 1);
-        else
-            unsetenv(kName);
-    }
-    ~ScopedBudget() {
-        if (had_)
-            setenv(kName, saved_.c_str(), 1);
-        else
-            unsetenv(kName);
-    }
-
-  private:
-    static constexpr const char* kName = "OCLVOX_HOST_MEMORY_MIB";
-    std::string saved_;
-    bool had_ = false;
-};
-
 // The process's peak resident memory (VmHWM), in MiB, after resetting it to the current
 // resident memory, so that what follows is measured alone.
 long reset_peak_mib() {

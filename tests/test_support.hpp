@@ -32,6 +32,29 @@ inline Device& device() {
     return d;
 }
 
+// $OCLVOX_HOST_MEMORY_MIB set (or unset, for nullptr) for one scope.
+class ScopedBudget {
+  public:
+    explicit ScopedBudget(const char* mib) {
+        if (const char* old = std::getenv(kName)) saved_ = old, had_ = true;
+        if (mib)
+            setenv(kName, mib, 1);
+        else
+            unsetenv(kName);
+    }
+    ~ScopedBudget() {
+        if (had_)
+            setenv(kName, saved_.c_str(), 1);
+        else
+            unsetenv(kName);
+    }
+
+  private:
+    static constexpr const char* kName = "OCLVOX_HOST_MEMORY_MIB";
+    std::string saved_;
+    bool had_ = false;
+};
+
 inline Grid unit_grid(int64_t nx, int64_t ny, int64_t nz) {
     Grid g;
     g.dims = {nx, ny, nz};

@@ -273,16 +273,19 @@ NpyHeader read_npy_header(const std::string& path, std::ifstream& in) {
     return header;
 }
 
-// What the samples will take in memory, against the default host memory budget (the voxelizer's
-// when none is given), before anything is allocated. An InputError naming the file, as every
-// failure of read_npy is.
-void check_memory_budget(const std::string& path, uint64_t bytes, const char* what) {
-    uint64_t budget = 0;
+// The default host memory budget (the voxelizer's when none is given); an invalid
+// $OCLVOX_HOST_MEMORY_MIB is an InputError naming the file, as every failure of read_npy is.
+uint64_t memory_budget(const std::string& path) {
     try {
-        budget = detail::default_host_budget();
+        return detail::default_host_budget();
     } catch (const GridError& e) {
         bad_npy(path, e.what());
     }
+}
+
+// What the samples will take in memory, against that budget, before anything is allocated.
+void check_memory_budget(const std::string& path, uint64_t bytes, const char* what) {
+    const uint64_t budget = memory_budget(path);
     if (bytes > budget)
         bad_npy(path, std::string(what) + " would need " + detail::mib_text(bytes) +
                           ", over the memory budget of " + detail::mib_text(budget) +
@@ -341,44 +344,69 @@ Grid read_sidecar(const std::string& path, const std::array<int64_t, 3>& shape) 
     return grid;
 }
 
-// Phase 3 of every read: the samples, a chunk at a time (no second copy of the file), each passed
-// to `take(v, bytes)` with its x-fastest index v; C order (z fastest) is transposed on the way.
+// Planes of constant i a C-order file is read in: up to 16, so that the layers' samples are
+// written 16 consecutive x at a time (a whole cache line of floats, where one sample per line made
+// one thick slab twice as slow as many thin ones), within 16 MiB unless one plane is larger.
+uint64_t c_order_planes_per_read(const NpyHeader& header) {
+    const uint64_t plane =
+        uint64_t(header.shape[1]) * uint64_t(header.shape[2]) * item_size(header.type);
+    return std::clamp<uint64_t>((uint64_t(16) << 20) / std::max<uint64_t>(plane, 1), 1, 16);
+}
+
+// Bytes read_layers holds for its reading.
+uint64_t read_buffer_bytes(const NpyHeader& header) {
+    if (header.fortran_order) return uint64_t(1) << 20;
+    return c_order_planes_per_read(header) * uint64_t(header.shape[1]) * uint64_t(header.shape[2]) *
+           item_size(header.type);
+}
+
+// Phase 3 of every read: the samples of layers [k0, k1), a buffer at a time (no second copy of
+// the file), each passed to `take(v, bytes)` with its x-fastest index v within those layers.
+// Fortran order holds the layers one after another, so only theirs are read. C order (z fastest)
+// spreads every layer over the whole file: all its planes of constant i are read, and the layers'
+// part of each of their rows picked out.
 template <class Take>
-void read_samples(const std::string& path, std::ifstream& in, const NpyHeader& header, Take take) {
-    const size_t item = item_size(header.type);
-    const uint64_t count = header.data_bytes / item;
-    const int64_t nx = header.shape[0], ny = header.shape[1], nz = header.shape[2];
-    std::vector<unsigned char> chunk(size_t(1) << 20);
-    const uint64_t per_chunk = chunk.size() / item;
-    for (uint64_t first = 0; first < count; first += per_chunk) {
-        const uint64_t n = std::min(per_chunk, count - first);
-        if (!in.read(reinterpret_cast<char*>(chunk.data()), std::streamsize(n * item)))
+void read_layers(const std::string& path, std::ifstream& in, const NpyHeader& header, int64_t k0,
+                 int64_t k1, Take take) {
+    const uint64_t item = item_size(header.type);
+    const auto nx = uint64_t(header.shape[0]), ny = uint64_t(header.shape[1]),
+               nz = uint64_t(header.shape[2]);
+    const uint64_t per_layer = nx * ny, first = uint64_t(k0), last = uint64_t(k1);
+    std::vector<unsigned char> buffer(read_buffer_bytes(header));
+    auto read = [&](uint64_t bytes) {
+        if (!in.read(reinterpret_cast<char*>(buffer.data()), std::streamsize(bytes)))
             bad_npy(path, "the data is shorter than its shape says");
-        for (uint64_t s = first; s < first + n; ++s) {
-            uint64_t v = s;
-            if (!header.fortran_order) {  // s = k + nz * (j + ny * i)
-                const int64_t k = int64_t(s) % nz, j = int64_t(s) / nz % ny,
-                              i = int64_t(s) / (nz * ny);
-                v = uint64_t(i + nx * (j + ny * k));
-            }
-            take(v, chunk.data() + (s - first) * item);
+    };
+    in.clear();
+    if (header.fortran_order) {
+        in.seekg(std::streamoff(header.data_offset + first * per_layer * item));
+        const uint64_t count = (last - first) * per_layer, per_read = buffer.size() / item;
+        for (uint64_t done = 0; done < count; done += per_read) {
+            const uint64_t n = std::min(per_read, count - done);
+            read(n * item);
+            for (uint64_t s = 0; s < n; ++s) take(done + s, &buffer[s * item]);
         }
+        return;
+    }
+    in.seekg(std::streamoff(header.data_offset));
+    const uint64_t planes = c_order_planes_per_read(header), plane = ny * nz;
+    for (uint64_t i0 = 0; i0 < nx; i0 += planes) {
+        const uint64_t n = std::min(planes, nx - i0);
+        read(n * plane * item);
+        for (uint64_t j = 0; j < ny; ++j)
+            for (uint64_t z = first; z < last; ++z) {
+                const uint64_t v = (z - first) * per_layer + i0 + nx * j;
+                const unsigned char* sample = &buffer[(j * nz + z) * item];
+                for (uint64_t i = 0; i < n; ++i) take(v + i, sample + i * plane * item);
+            }
     }
 }
 
 // Little-endian float32 or float64 bytes as a float.
 float float_sample(NpyType type, const unsigned char* bytes) {
-    uint64_t bits = 0;
-    for (size_t b = 0; b < item_size(type); ++b) bits |= uint64_t(bytes[b]) << (8 * b);
-    if (type == NpyType::Float64) {
-        double d;
-        std::memcpy(&d, &bits, 8);
-        return float(d);
-    }
-    const auto b32 = uint32_t(bits);
-    float value;
-    std::memcpy(&value, &b32, 4);
-    return value;
+    const auto* b = reinterpret_cast<const char*>(bytes);
+    return type == NpyType::Float64 ? float(detail::load_scalar<double>(b, false))
+                                    : detail::load_scalar<float>(b, false);
 }
 
 ScalarField read_float_samples(const std::string& path, std::ifstream& in, const NpyHeader& header,
@@ -386,7 +414,7 @@ ScalarField read_float_samples(const std::string& path, std::ifstream& in, const
     ScalarField field;
     field.grid = grid;
     field.values.resize(size_t(grid.voxel_count()));
-    read_samples(path, in, header, [&](uint64_t v, const unsigned char* bytes) {
+    read_layers(path, in, header, 0, grid.dims[2], [&](uint64_t v, const unsigned char* bytes) {
         field.values[size_t(v)] = float_sample(header.type, bytes);
     });
     return field;
@@ -396,7 +424,7 @@ SparseVoxels read_occupancy_samples(const std::string& path, std::ifstream& in,
                                     const NpyHeader& header, const Grid& grid) {
     SparseVoxels voxels(grid, VoxelizeOptions{}.brick_size);
     const int64_t nx = grid.dims[0], ny = grid.dims[1];
-    read_samples(path, in, header, [&](uint64_t v, const unsigned char* bytes) {
+    read_layers(path, in, header, 0, grid.dims[2], [&](uint64_t v, const unsigned char* bytes) {
         if (bytes[0] > 1)
             bad_npy(path, "occupancy value " + std::to_string(bytes[0]) + " at voxel index " +
                               std::to_string(v) + " is neither 0 nor 1");
@@ -451,8 +479,9 @@ struct FieldLayerReader::Impl {
     Grid grid;
     size_t per_layer = 0;
     int64_t next_layer = 0;
-    std::optional<ScalarField> whole;  // a C-order file's samples
-    std::vector<unsigned char> bytes;  // a Fortran-order file's next layer
+    int64_t thickness = 1;                 // layers a slab holds
+    int64_t slab_first = 0, slab_end = 0;  // the layers in `slab`
+    std::vector<float> slab;
 };
 
 FieldLayerReader::FieldLayerReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
@@ -465,14 +494,16 @@ FieldLayerReader::FieldLayerReader(const std::string& path) : impl_(std::make_un
             bad_npy(path, "it holds an occupancy (uint8 0/1), not float samples");
         r.grid = read_sidecar(path, r.header.shape);
         r.per_layer = size_t(r.grid.dims[0]) * size_t(r.grid.dims[1]);
-        if (r.header.fortran_order) {
-            check_memory_budget(path, r.per_layer * item_size(r.header.type), "a layer");
-            r.bytes.resize(r.per_layer * item_size(r.header.type));
-        } else {
-            check_memory_budget(path, r.grid.voxel_count() * sizeof(float),
-                                "its samples (C order: a layer is spread over the whole file)");
-            r.whole = read_float_samples(path, r.in, r.header, r.grid);
-        }
+        const uint64_t layer_bytes = r.per_layer * sizeof(float);
+        check_memory_budget(path, layer_bytes + read_buffer_bytes(r.header),
+                            "a layer and the reading buffer");
+        // A C-order file is read whole for every slab, so its slabs are as thick as a quarter of
+        // the budget allows (a file of up to that size is read once); a Fortran-order file's
+        // layers lie together, so one at a time costs nothing.
+        if (!r.header.fortran_order)
+            r.thickness =
+                detail::slab_thickness(layer_bytes, r.grid.dims[2], memory_budget(path) / 4);
+        r.slab.resize(size_t(r.thickness) * r.per_layer);
         return 0;
     });
 }
@@ -490,16 +521,15 @@ void FieldLayerReader::read_layer(float* samples) {
     if (r.next_layer == r.grid.dims[2])
         bad_npy(r.path, "it has no layer " + std::to_string(r.next_layer) + " (it has " +
                             std::to_string(r.grid.dims[2]) + ")");
-    if (r.whole) {
-        std::copy_n(&r.whole->values[size_t(r.next_layer++) * r.per_layer], r.per_layer, samples);
-        return;
+    if (r.next_layer == r.slab_end) {
+        r.slab_first = r.next_layer;
+        r.slab_end = std::min(r.slab_first + r.thickness, r.grid.dims[2]);
+        read_layers(r.path, r.in, r.header, r.slab_first, r.slab_end,
+                    [&](uint64_t v, const unsigned char* bytes) {
+                        r.slab[v] = float_sample(r.header.type, bytes);
+                    });
     }
-    if (!r.in.read(reinterpret_cast<char*>(r.bytes.data()), std::streamsize(r.bytes.size())))
-        bad_npy(r.path, "the data is shorter than its shape says");
-    const size_t item = item_size(r.header.type);
-    for (size_t s = 0; s < r.per_layer; ++s)
-        samples[s] = float_sample(r.header.type, &r.bytes[s * item]);
-    ++r.next_layer;
+    std::copy_n(&r.slab[size_t(r.next_layer++ - r.slab_first) * r.per_layer], r.per_layer, samples);
 }
 
 SparseField read_meshing_view(const std::string& path, float iso,

@@ -1,5 +1,5 @@
-// Binary formats (npy, ply, stl, vox) are little-endian on disk whatever the host's byte order.
-// Values go through their bit patterns, so floats keep every bit.
+// Binary formats (npy, ply, stl, vox) are little-endian on disk whatever the host's byte order
+// (PLY may also be big-endian). Values go through their bit patterns, so floats keep every bit.
 #pragma once
 
 #include <cstdint>
@@ -28,6 +28,18 @@ inline void write_le(std::ostream& out, T value) {
     char bytes[sizeof(T)];
     store_le(bytes, value);
     out.write(bytes, sizeof bytes);
+}
+
+// A value of type T stored in `bytes` with the given byte order (IEEE 754 for floating point).
+template <class T>
+T load_scalar(const char* bytes, bool big_endian) {
+    unsigned char ordered[sizeof(T)];
+    for (size_t b = 0; b < sizeof(T); ++b)
+        ordered[b] = static_cast<unsigned char>(bytes[big_endian ? sizeof(T) - 1 - b : b]);
+    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the byte order above is the host's");
+    T value;
+    std::memcpy(&value, ordered, sizeof(T));
+    return value;
 }
 
 }  // namespace oclvox::detail

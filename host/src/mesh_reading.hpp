@@ -11,6 +11,7 @@
 #include <string_view>
 #include <vector>
 
+#include "little_endian.hpp"
 #include "oclvox/oclvox.hpp"
 
 namespace oclvox::mesh_reading {
@@ -127,16 +128,6 @@ class TextCursor {
     size_t at_ = 0;
 };
 
-// A value of type T stored in `bytes` with the given byte order (IEEE 754 for floating point).
-template <class T>
-T load_scalar(const char* bytes, bool big_endian) {
-    unsigned char ordered[sizeof(T)];
-    for (size_t b = 0; b < sizeof(T); ++b)
-        ordered[b] = static_cast<unsigned char>(bytes[big_endian ? sizeof(T) - 1 - b : b]);
-    static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the byte order above is the host's");
-    T value;
-    std::memcpy(&value, ordered, sizeof(T));
-    return value;
-}
+using detail::load_scalar;
 
 }  // namespace oclvox::mesh_reading

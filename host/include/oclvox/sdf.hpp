@@ -200,8 +200,10 @@ ScalarField read_field(const std::string& path);
 // fastest), so that a field larger than memory can be meshed (MeshingViewBuilder) or combined
 // and written (write_field with a FieldLayer). Opening checks the header, the data length and the
 // sidecar as read_npy does. Fortran-order files (as write_field writes them) hold each layer's
-// samples together and are streamed, one layer in memory; C-order files spread a layer over the
-// whole file, so they are read whole on opening, within the host memory budget.
+// samples together and are streamed, one layer in memory. C-order files (numpy's default) spread
+// a layer over the whole file, so they are read in slabs of layers of up to a quarter of the host
+// memory budget, the whole file read once per slab: a file of up to that size is read once, a
+// larger one several times, with one slab in memory.
 class FieldLayerReader {
   public:
     // Throws InputError naming the file and the problem, also for an occupancy .npy.
