@@ -15,6 +15,7 @@ typedef struct {
     int brick[3];
     OvPairWork work;
     int block_first, block_end;  // this item's blocks, numbered within the pair x fastest
+    int one_voxel;               // the triangle's whole range is one voxel (ov_range_is_one_voxel)
 } Item;
 
 // Returns 0 for the padding items past the end of the launch.
@@ -35,6 +36,7 @@ static int decode_item(__global const OvTriangle* triangles, int half_open,
                               &it->work);
     it->block_first = (int)(item - pair_first_item[p]) * OV_BLOCKS_PER_ITEM;
     it->block_end = min(it->block_first + OV_BLOCKS_PER_ITEM, blocks);
+    it->one_voxel = ov_range_is_one_voxel(r);
     return 1;
 }
 
@@ -60,8 +62,9 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
 
 // One voxelize kernel per predicate, written once: SETUP is the per-triangle struct made by
 // SETUP_FN, OVERLAPS4 its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside
-// the pair's voxel range are dropped.
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, OVERLAPS4)                                      \
+// the pair's voxel range are dropped. CONSERVATIVE (1 for SAT and PEF) sets the voxel of a
+// triangle whose range is one voxel without testing it (ov_range_is_one_voxel).
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, OVERLAPS4, CONSERVATIVE)                        \
     __kernel void NAME(__global const OvTriangle* triangles, int half_open,                       \
                        __global const uint* pair_triangle, __global const uint* pair_slot,        \
                        __global const uint* pair_first_item, __global const uint* item_pair,      \
@@ -73,6 +76,14 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
                          item_pair, slot_brick, item_base, item_end, brick_size, nx, ny, nz, &it, \
                          &t))                                                                     \
             return;                                                                               \
+        if (CONSERVATIVE && it.one_voxel) {                                                       \
+            const int* v = it.work.voxel_lo;                                                      \
+            int block[3] = {v[0] / 4, v[1] / 4, v[2] / 4};                                        \
+            int bit = ov_block_bit(v[0] & 3, v[1] & 3, v[2] & 3);                                 \
+            store_block(bits, &it, block, brick_size, bit < 32 ? 1u << bit : 0u,                  \
+                        bit < 32 ? 0u : 1u << (bit - 32));                                        \
+            return;                                                                               \
+        }                                                                                         \
         SETUP s = SETUP_FN(t, half_open);                                                         \
         for (int b = it.block_first; b < it.block_end; ++b) {                                     \
             int block[3];                                                                         \
@@ -106,6 +117,6 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
         }                                                                                         \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_overlaps4)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_overlaps4)
-OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_setup_thin, ov_thin_overlaps4)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_overlaps4, 1)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_overlaps4, 1)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_setup_thin, ov_thin_overlaps4, 0)

@@ -161,6 +161,47 @@ TEST(DeviceMatchesReferenceForModes, LongRowsNearlyParallelToX) {
     }
 }
 
+// A triangle within one voxel's box meets that voxel and no other: its range is one voxel, and the
+// conservative tests set it without testing (ov_range_is_one_voxel). Hand-worked on 3000 such
+// triangles at dyadic coordinates (exact in float): strictly inside their voxel for closed boxes,
+// and for half-open ones also with vertices on the voxel's lower faces, which belong to it alone.
+// Device and reference must set exactly those voxels, for every brick size; among larger
+// triangles, device == reference.
+TEST(DeviceMatchesReferenceForModes, TrianglesWithinOneVoxelSetThatVoxelAlone) {
+    const Grid g = unit_grid(40, 33, 47);
+    for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
+        std::mt19937 rng(boundary == Boundary::Closed ? 3 : 4);
+        std::uniform_int_distribution<int> fraction(boundary == Boundary::Closed ? 1 : 0, 63);
+        Mesh m;
+        SparseVoxels expected(g, 16);
+        for (int t = 0; t < 3000; ++t) {
+            const int64_t v[3] = {int64_t(rng() % 40), int64_t(rng() % 33), int64_t(rng() % 47)};
+            Vec3d corner[3];
+            for (Vec3d& p : corner)
+                for (int k = 0; k < 3; ++k) p[k] = double(v[k]) + fraction(rng) / 64.0;
+            add_triangle(m, corner[0], corner[1], corner[2]);
+            expected.set(v[0], v[1], v[2]);
+        }
+        for (OverlapTest test : kTests) {
+            SCOPED_TRACE(std::string(to_string(test)) +
+                         (boundary == Boundary::Closed ? " closed" : " half-open"));
+            for (int brick : {8, 16, 48}) {
+                VoxelizeOptions o = options(test, brick);
+                o.boundary = boundary;
+                expect_same(device().voxelize(m, g, o), expected);
+                expect_same(voxelize_reference(m, g, o), expected);
+            }
+            // Mixed with triangles of every size, the one-voxel ones still take their own path.
+            Mesh mixed = random_triangles(300, -3, 45, 8, 5);
+            for (const auto& t : m.triangles)
+                add_triangle(mixed, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
+            VoxelizeOptions o = options(test, 16);
+            o.boundary = boundary;
+            expect_same(device().voxelize(mixed, g, o), voxelize_reference(mixed, g, o));
+        }
+    }
+}
+
 // A grid whose dense bit array is 64x the device budget still works, in many batches, and the
 // bunny's surface is exact up to rounding against the double-precision test.
 TEST(Tiling, GridLargerThanDeviceBudget) {

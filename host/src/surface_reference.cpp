@@ -39,18 +39,24 @@ void refuse_absurd_work(const detail::PreparedTriangles& prepared, const Grid& g
     }
 }
 
+// `conservative`: the test is SAT or PEF, which set the voxel of a triangle whose range is one
+// voxel without testing it, as the kernels do (ov_range_is_one_voxel).
 template <typename Setup, typename Overlaps>
 void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels& out, Setup setup,
-                        Overlaps overlaps) {
+                        Overlaps overlaps, bool conservative) {
     const Grid& grid = out.grid();
     for (size_t t = 0; t < prepared.triangles.size(); ++t) {
-        const auto s = setup(prepared.triangles[t]);
         const detail::OvRange& r = prepared.ranges[t];
         int lo[3], hi[3];
         for (int k = 0; k < 3; ++k) {
             lo[k] = std::max<int>(r.lo[k], 0);
             hi[k] = int(std::min<int64_t>(r.hi[k], grid.dims[k] - 1));
         }
+        if (conservative && detail::ov_range_is_one_voxel(r)) {
+            if (lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2]) out.set(lo[0], lo[1], lo[2]);
+            continue;
+        }
+        const auto s = setup(prepared.triangles[t]);
         for (int z = lo[2]; z <= hi[2]; ++z)
             for (int y = lo[1]; y <= hi[1]; ++y)
                 for (int x = lo[0]; x <= hi[0]; ++x)
@@ -87,7 +93,7 @@ SparseVoxels voxelize_reference(const Mesh& mesh, const Grid& grid, const Voxeli
         detail::prepare_triangles(mesh, grid, options.boundary);
     refuse_absurd_work(prepared, grid);
     detail::with_host_surface_test(test, options.boundary, [&](auto setup, auto overlaps) {
-        voxelize_triangles(prepared, out, setup, overlaps);
+        voxelize_triangles(prepared, out, setup, overlaps, test != detail::SurfaceTest::Thin);
     });
     selection.restrict(out);
     if (stats) {
