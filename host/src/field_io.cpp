@@ -360,19 +360,19 @@ uint64_t read_buffer_bytes(const NpyHeader& header) {
            item_size(header.type);
 }
 
-// Phase 3 of every read: the samples of layers [k0, k1), a buffer at a time (no second copy of
-// the file), each passed to `take(v, bytes)` with its x-fastest index v within those layers.
-// Fortran order holds the layers one after another, so only theirs are read. C order (z fastest)
-// spreads every layer over the whole file: all its planes of constant i are read, and the layers'
-// part of each of their rows picked out.
+// Phase 3 of every read: the samples of layers [k0, k1), read through `buffer` (resized to
+// read_buffer_bytes; no second copy of the file), each passed to `take(v, bytes)` with its
+// x-fastest index v within those layers. Fortran order holds the layers one after another, so
+// only theirs are read. C order (z fastest) spreads every layer over the whole file: all its
+// planes of constant i are read, and the layers' part of each of their rows picked out.
 template <class Take>
 void read_layers(const std::string& path, std::ifstream& in, const NpyHeader& header, int64_t k0,
-                 int64_t k1, Take take) {
+                 int64_t k1, std::vector<unsigned char>& buffer, Take take) {
     const uint64_t item = item_size(header.type);
     const auto nx = uint64_t(header.shape[0]), ny = uint64_t(header.shape[1]),
                nz = uint64_t(header.shape[2]);
     const uint64_t per_layer = nx * ny, first = uint64_t(k0), last = uint64_t(k1);
-    std::vector<unsigned char> buffer(read_buffer_bytes(header));
+    buffer.resize(read_buffer_bytes(header));
     auto read = [&](uint64_t bytes) {
         if (!in.read(reinterpret_cast<char*>(buffer.data()), std::streamsize(bytes)))
             bad_npy(path, "the data is shorter than its shape says");
@@ -414,9 +414,11 @@ ScalarField read_float_samples(const std::string& path, std::ifstream& in, const
     ScalarField field;
     field.grid = grid;
     field.values.resize(size_t(grid.voxel_count()));
-    read_layers(path, in, header, 0, grid.dims[2], [&](uint64_t v, const unsigned char* bytes) {
-        field.values[size_t(v)] = float_sample(header.type, bytes);
-    });
+    std::vector<unsigned char> buffer;
+    read_layers(path, in, header, 0, grid.dims[2], buffer,
+                [&](uint64_t v, const unsigned char* bytes) {
+                    field.values[size_t(v)] = float_sample(header.type, bytes);
+                });
     return field;
 }
 
@@ -424,12 +426,14 @@ SparseVoxels read_occupancy_samples(const std::string& path, std::ifstream& in,
                                     const NpyHeader& header, const Grid& grid) {
     SparseVoxels voxels(grid, VoxelizeOptions{}.brick_size);
     const int64_t nx = grid.dims[0], ny = grid.dims[1];
-    read_layers(path, in, header, 0, grid.dims[2], [&](uint64_t v, const unsigned char* bytes) {
-        if (bytes[0] > 1)
-            bad_npy(path, "occupancy value " + std::to_string(bytes[0]) + " at voxel index " +
-                              std::to_string(v) + " is neither 0 nor 1");
-        if (bytes[0]) voxels.set(int64_t(v) % nx, int64_t(v) / nx % ny, int64_t(v) / (nx * ny));
-    });
+    std::vector<unsigned char> buffer;
+    read_layers(
+        path, in, header, 0, grid.dims[2], buffer, [&](uint64_t v, const unsigned char* bytes) {
+            if (bytes[0] > 1)
+                bad_npy(path, "occupancy value " + std::to_string(bytes[0]) + " at voxel index " +
+                                  std::to_string(v) + " is neither 0 nor 1");
+            if (bytes[0]) voxels.set(int64_t(v) % nx, int64_t(v) / nx % ny, int64_t(v) / (nx * ny));
+        });
     return voxels;
 }
 
@@ -482,6 +486,7 @@ struct FieldLayerReader::Impl {
     int64_t thickness = 1;                 // layers a slab holds
     int64_t slab_first = 0, slab_end = 0;  // the layers in `slab`
     std::vector<float> slab;
+    std::vector<unsigned char> buffer;  // read_layers' reading buffer, kept between slabs
 };
 
 FieldLayerReader::FieldLayerReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
@@ -524,7 +529,7 @@ void FieldLayerReader::read_layer(float* samples) {
     if (r.next_layer == r.slab_end) {
         r.slab_first = r.next_layer;
         r.slab_end = std::min(r.slab_first + r.thickness, r.grid.dims[2]);
-        read_layers(r.path, r.in, r.header, r.slab_first, r.slab_end,
+        read_layers(r.path, r.in, r.header, r.slab_first, r.slab_end, r.buffer,
                     [&](uint64_t v, const unsigned char* bytes) {
                         r.slab[v] = float_sample(r.header.type, bytes);
                     });
