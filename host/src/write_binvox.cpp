@@ -11,18 +11,17 @@
 // D = max(nx, ny, nz) voxels with ours in the low corner and the rest empty. Every reader then
 // agrees on every voxel, and the runs of padding cost two bytes per 255 voxels.
 //
-// Streaming: the file order is x slowest, so the grid is read from the bricks an x-slab at a
-// time into a buffer laid out in file order (y fastest, then z) and run-length encoded from
-// there; the largest buffer is one slab. Only row pieces inside stored bricks are scanned, runs
-// are found a machine word at a time, and scanned set bytes are cleared as they are encoded, so
-// the cost follows the stored bricks, not the grid volume.
+// Streaming: the file order is x slowest, then z, with y fastest, so each row (x, z) is gathered
+// from the bit words of the stored bricks it crosses into a bit mask along y (a 4x4x4 block gives
+// four of its voxels at once) and its runs are found a machine word at a time; a row through no
+// stored brick is one run of empty voxels. Nothing dense is made, and the cost follows the rows
+// of the stored bricks, not the grid volume.
 //
 // Placement: binvox maps voxel (i,j,k) to the point translate + scale * (i,j,k) / D (plus half a
 // voxel for centres), so translate = grid origin and scale = D * voxel_size reproduce our grid.
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <cstring>
 #include <iomanip>
 #include <limits>
 #include <vector>
@@ -49,44 +48,78 @@ class Runs {
         else
             runs_.emplace_back(value, count);
     }
-    // Adds the voxels bytes[0, n) (each 0 or 1), run by run, and zeroes them: the caller's
-    // buffer is all zero again afterwards at a cost proportional to the set voxels, not to the
-    // buffer.
-    void take_bytes(uint8_t* bytes, size_t n) {
-        for (size_t start = 0; start < n;) {
-            const uint8_t value = bytes[start];
-            const size_t length = run_length(bytes + start, n - start, value);
-            add(value, length);
-            if (value) std::memset(bytes + start, 0, length);
-            start += length;
+    // Adds the voxels of bits [0, n) of `words` (bit i of words[i / 64]), run by run.
+    void take_bits(const uint64_t* words, uint64_t n) {
+        for (uint64_t i = 0; i < n;) {
+            const bool value = words[i / 64] >> (i % 64) & 1;
+            const uint64_t end = run_end(words, i, n, value);
+            add(uint8_t(value), end - i);
+            i = end;
         }
     }
     const std::vector<std::pair<uint8_t, uint64_t>>& runs() const { return runs_; }
 
   private:
-    // Length of the run of `value` at the start of bytes[0, n). Empty space, most of a surface
-    // grid, is skipped 64 bytes at a time, set runs 8 at a time.
-    static size_t run_length(const uint8_t* bytes, size_t n, uint8_t value) {
-        size_t i = 0;
-        if (value == 0) {
-            for (; i + 64 <= n; i += 64) {
-                uint64_t words[8], any = 0;
-                std::memcpy(words, bytes + i, 64);
-                for (uint64_t word : words) any |= word;
-                if (any) break;
-            }
+    // The end of the run of `value` that starts at bit i, at most n: a word at a time.
+    static uint64_t run_end(const uint64_t* words, uint64_t i, uint64_t n, bool value) {
+        while (i < n) {
+            // Set bits where the run stops; the shift brings in zeros, which continue it.
+            const uint64_t stops = (value ? ~words[i / 64] : words[i / 64]) >> (i % 64);
+            if (stops) return std::min(n, i + uint64_t(__builtin_ctzll(stops)));
+            i = (i / 64 + 1) * 64;
         }
-        const uint64_t same = value ? 0x0101010101010101u : 0;
-        for (uint64_t word; i + 8 <= n; i += 8) {
-            std::memcpy(&word, bytes + i, 8);
-            if (word != same) break;
-        }
-        while (i < n && bytes[i] == value) ++i;
-        return i;
+        return n;
     }
 
     std::vector<std::pair<uint8_t, uint64_t>> runs_;
 };
+
+// The runs of `count` (1 to 4) planes from x, which lie in one column of 4x4x4 blocks, in file
+// order (y fastest, then z), each row padded to the cube's `dim` and each plane to dim rows. A
+// block word of the bricks at (x, ., z) is read once for its 4 x 4 rows along y: bits
+// x % 4 + 16 (z % 4) + {0, 4, 8, 12} are the row's voxels y % 4 = 0..3, moved next to each other
+// by one multiplication (the products' bits land on distinct positions, so nothing carries).
+void encode_planes(const SparseVoxels& voxels, int64_t x, int64_t count, int64_t dim, Runs* runs) {
+    const Grid& grid = voxels.grid();
+    const int64_t ny = grid.dims[1], nz = grid.dims[2];
+    const int64_t b = voxels.brick_size(), per_axis = voxels.blocks_per_brick_axis();
+    const auto nbricks = voxels.brick_dims();
+    const int64_t wx = x % b / 4, words_per_row = (nbricks[1] * b + 63) / 64;
+    // The bricks along y at (x, z), and the bits along y of rows (x + i, z + j), row 4j + i.
+    std::vector<const uint64_t*> bricks(static_cast<size_t>(nbricks[1]));
+    std::vector<uint64_t> rows(static_cast<size_t>(16 * words_per_row));
+    for (int64_t z = 0; z < nz; z += 4) {
+        const int64_t rows_z = std::min<int64_t>(4, nz - z);
+        if (z % b == 0) {  // the next layer of bricks
+            for (int64_t by = 0; by < nbricks[1]; ++by)
+                bricks[size_t(by)] =
+                    voxels.brick_blocks(uint64_t(x / b + nbricks[0] * (by + nbricks[1] * (z / b))));
+        }
+        std::fill(rows.begin(), rows.end(), 0);
+        const int64_t wz = z % b / 4;
+        for (int64_t by = 0; by < nbricks[1]; ++by) {
+            const uint64_t* blocks = bricks[size_t(by)];
+            if (!blocks) continue;
+            for (int64_t wy = 0; wy < per_axis; ++wy) {
+                const uint64_t word = blocks[wx + per_axis * (wy + per_axis * wz)];
+                if (!word) continue;
+                const int64_t y = by * b + 4 * wy;  // a multiple of 4: the 4 bits share a word
+                for (int64_t j = 0; j < rows_z; ++j)
+                    for (int64_t i = 0; i < count; ++i) {
+                        const uint64_t bits = word >> ((x + i) % 4 + 16 * j) & 0x1111;
+                        rows[size_t((4 * j + i) * words_per_row + y / 64)] |=
+                            (bits * 0x1248 >> 12 & 0xF) << (y % 64);
+                    }
+            }
+        }
+        for (int64_t i = 0; i < count; ++i)
+            for (int64_t j = 0; j < rows_z; ++j) {
+                runs[i].take_bits(&rows[size_t((4 * j + i) * words_per_row)], uint64_t(ny));
+                runs[i].add(0, uint64_t(dim - ny));
+            }
+    }
+    for (int64_t i = 0; i < count; ++i) runs[i].add(0, uint64_t(dim - nz) * uint64_t(dim));
+}
 
 // Joins runs into maximal ones and writes them as (value, count) pairs, count <= 255, in large
 // pieces.
@@ -168,55 +201,25 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, ProgressP
         out << "scale " << double(dim) * grid.voxel_size << '\n';
         out << "data\n";
 
-        // Phase 2: x-slabs of the grid in file order (plane x, then y fastest, then z), each
-        // followed by its padding up to the cube; then the padding planes beyond nx. Only the
-        // row pieces that lie in a stored brick are scanned: the rest is known to be empty.
-        const int64_t nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
-        const int64_t plane = ny * nz;
-        const int64_t thickness = slab_thickness(uint64_t(plane), nx, slab_bytes);
-        const int64_t b = voxels.brick_size();
-        const auto nbricks = voxels.brick_dims();
-        std::vector<uint8_t> slab(size_t(plane * thickness), 0);  // all zero between slabs
-        // Per brick row bz: the y ranges [begin, end) of the stored bricks in the slab, merged.
-        std::vector<std::vector<std::pair<int64_t, int64_t>>> stored(
-            static_cast<size_t>(nbricks[2]));
+        // Phase 2: the planes x in file order, each padded to the cube, then the padding planes
+        // beyond nx. A slab of planes (as many as `slab_bytes` of dense bytes would hold) is
+        // encoded in parallel, each plane into its own runs, written in plane order: the runs are
+        // the same as one pass's.
+        const int64_t nx = grid.dims[0];
+        const int64_t thickness =
+            slab_thickness(uint64_t(grid.dims[1] * grid.dims[2]), nx, slab_bytes);
         RunWriter runs(out);
         std::vector<Runs> plane_runs;
         for (int64_t x0 = 0; x0 < nx; x0 += thickness) {
             const int64_t depth = std::min(thickness, nx - x0);
-            voxels.mark_box({x0, 0, 0}, {x0 + depth, ny, nz}, {plane, 1, ny}, slab.data());
-            for (int64_t bz = 0; bz < nbricks[2]; ++bz) {
-                auto& ranges = stored[size_t(bz)];
-                ranges.clear();
-                for (int64_t by = 0; by < nbricks[1]; ++by) {
-                    bool any = false;
-                    for (int64_t bx = x0 / b; bx <= (x0 + depth - 1) / b && !any; ++bx)
-                        any = voxels.brick_blocks(
-                                  uint64_t(bx + nbricks[0] * (by + nbricks[1] * bz))) != nullptr;
-                    if (!any) continue;
-                    const int64_t end = std::min((by + 1) * b, ny);
-                    if (!ranges.empty() && ranges.back().second == by * b)
-                        ranges.back().second = end;
-                    else
-                        ranges.push_back({by * b, end});
-                }
-            }
-            // The slab's planes are encoded in parallel, each into its own runs, which are then
-            // written in plane order: the runs are the same as one pass's.
             plane_runs.assign(size_t(depth), Runs());
-            tbb::parallel_for(int64_t(0), depth, [&](int64_t x) {
-                Runs& plane_run = plane_runs[size_t(x)];
-                uint8_t* rows = slab.data() + x * plane;
-                for (int64_t z = 0; z < nz; ++z) {
-                    int64_t y = 0;  // the row is encoded up to here
-                    for (const auto& [begin, end] : stored[size_t(z / b)]) {
-                        plane_run.add(0, uint64_t(begin - y));
-                        plane_run.take_bytes(rows + z * ny + begin, size_t(end - begin));
-                        y = end;
-                    }
-                    plane_run.add(0, uint64_t(dim - y));
-                }
-                plane_run.add(0, uint64_t(dim - nz) * uint64_t(dim));
+            // One task per column of blocks the slab's planes meet (up to 4 planes of it).
+            std::vector<int64_t> firsts;
+            for (int64_t x = x0; x < x0 + depth; x = (x / 4 + 1) * 4) firsts.push_back(x);
+            tbb::parallel_for(size_t(0), firsts.size(), [&](size_t group) {
+                const int64_t first = firsts[group];
+                const int64_t count = std::min((first / 4 + 1) * 4, x0 + depth) - first;
+                encode_planes(voxels, first, count, dim, &plane_runs[size_t(first - x0)]);
             });
             for (const Runs& plane_run : plane_runs) runs.add(plane_run);
             progress.report(planes, uint64_t(x0 + depth), uint64_t(nx));
