@@ -344,20 +344,23 @@ Grid read_sidecar(const std::string& path, const std::array<int64_t, 3>& shape) 
     return grid;
 }
 
+// Bytes of a C-order file's plane of constant i (ny rows of nz samples).
+uint64_t c_order_plane_bytes(const NpyHeader& header) {
+    return uint64_t(header.shape[1]) * uint64_t(header.shape[2]) * item_size(header.type);
+}
+
 // Planes of constant i a C-order file is read in: up to 16, so that the layers' samples are
 // written 16 consecutive x at a time (a whole cache line of floats, where one sample per line made
 // one thick slab twice as slow as many thin ones), within 16 MiB unless one plane is larger.
 uint64_t c_order_planes_per_read(const NpyHeader& header) {
-    const uint64_t plane =
-        uint64_t(header.shape[1]) * uint64_t(header.shape[2]) * item_size(header.type);
-    return std::clamp<uint64_t>((uint64_t(16) << 20) / std::max<uint64_t>(plane, 1), 1, 16);
+    return std::clamp<uint64_t>(
+        (uint64_t(16) << 20) / std::max<uint64_t>(c_order_plane_bytes(header), 1), 1, 16);
 }
 
 // Bytes read_layers holds for its reading.
 uint64_t read_buffer_bytes(const NpyHeader& header) {
     if (header.fortran_order) return uint64_t(1) << 20;
-    return c_order_planes_per_read(header) * uint64_t(header.shape[1]) * uint64_t(header.shape[2]) *
-           item_size(header.type);
+    return c_order_planes_per_read(header) * c_order_plane_bytes(header);
 }
 
 // Phase 3 of every read: the samples of layers [k0, k1), read through `buffer` (resized to
