@@ -1173,6 +1173,64 @@ TEST(SparseVoxelBoxes, CountAndSetAgreeWithVoxelByVoxelReadsOnRandomBoxes) {
     }
 }
 
+// merge_bricks fills bricks on several threads and puts them in place as merge_brick would one
+// after another: units naming the same brick OR together, all-zero units store nothing. Checked
+// voxel by voxel against a dense copy of the random voxels each unit was given; a unit outside
+// the grid is refused before anything is merged.
+TEST(SparseVoxelMerges, ManyBricksAtOnceHoldTheVoxelsOfEveryUnit) {
+    std::mt19937 rng(11);
+    Grid g;
+    g.dims = {37, 29, 41};
+    SparseVoxels merged(g, 8);
+    const size_t blocks = merged.blocks_per_brick();
+    const auto nb = merged.brick_dims();
+    const uint64_t bricks = uint64_t(nb[0] * nb[1] * nb[2]);
+    std::vector<uint8_t> expected(size_t(g.dims[0] * g.dims[1] * g.dims[2]), 0);
+    // 300 units over the grid's 120 bricks (so most bricks come several times), each with a few
+    // random voxels of its brick that lie in the grid, and every fifth unit empty.
+    std::vector<uint64_t> unit_brick(300);
+    std::vector<std::vector<uint64_t>> unit_blocks(300, std::vector<uint64_t>(blocks, 0));
+    for (size_t u = 0; u < unit_brick.size(); ++u) {
+        const uint64_t brick = rng() % bricks;
+        unit_brick[u] = brick;
+        if (u % 5 == 0) continue;
+        const int64_t b[3] = {int64_t(brick % uint64_t(nb[0])),
+                              int64_t(brick / uint64_t(nb[0]) % uint64_t(nb[1])),
+                              int64_t(brick / uint64_t(nb[0] * nb[1]))};
+        for (int n = 0; n < 20; ++n) {
+            int64_t local[3], v[3];
+            for (int a = 0; a < 3; ++a) {
+                local[a] = int64_t(rng() % 8);
+                v[a] = 8 * b[a] + local[a];
+            }
+            if (v[0] >= g.dims[0] || v[1] >= g.dims[1] || v[2] >= g.dims[2]) continue;
+            unit_blocks[u][size_t(local[0] / 4 + 2 * (local[1] / 4 + 2 * (local[2] / 4)))] |=
+                uint64_t(1) << (local[0] % 4 + 4 * (local[1] % 4 + 4 * (local[2] % 4)));
+            expected[size_t(v[0] + g.dims[0] * (v[1] + g.dims[1] * v[2]))] = 1;
+        }
+    }
+    merged.merge_bricks(
+        unit_brick.size(), [&](size_t u) { return unit_brick[u]; },
+        [&](size_t u, uint64_t* out) { std::copy_n(unit_blocks[u].data(), blocks, out); });
+    for (int64_t k = 0; k < g.dims[2]; ++k)
+        for (int64_t j = 0; j < g.dims[1]; ++j)
+            for (int64_t i = 0; i < g.dims[0]; ++i)
+                ASSERT_EQ(merged.get(i, j, k),
+                          expected[size_t(i + g.dims[0] * (j + g.dims[1] * k))] != 0)
+                    << i << " " << j << " " << k;
+    for (const uint64_t brick : merged.brick_indices()) {
+        const uint64_t* words = merged.brick_blocks(brick);
+        EXPECT_TRUE(std::any_of(words, words + blocks, [](uint64_t w) { return w != 0; }));
+    }
+
+    const SparseVoxels before = merged;
+    EXPECT_THROW(merged.merge_bricks(
+                     2, [&](size_t u) { return u == 0 ? uint64_t(0) : bricks; },
+                     [&](size_t, uint64_t* out) { out[0] = 1; }),
+                 oclvox::GridError);
+    EXPECT_TRUE(merged.same_voxels(before));
+}
+
 // mark_box writes a window of any orientation: each axis contiguous in turn (a block's row of 4
 // then goes as one word where it lies inside the box) and none. Checked voxel by voxel against
 // get(), with bytes outside the marks (and a guard before the window) left as they were.

@@ -11,40 +11,23 @@
 
 namespace oclvox::detail {
 
-namespace {
-
 constexpr size_t kGroupBlocks = 64;  // OV_GROUP_BLOCKS of blocks.cl
-
-// Calls merge(unit, blocks) for each unit with a set block; block(i) gives block i of the batch.
-template <typename Block>
-void merge_units(size_t units, size_t blocks_per_unit, std::vector<uint64_t>& blocks,
-                 const std::function<void(size_t, const uint64_t*)>& merge, Block&& block) {
-    for (size_t unit = 0; unit < units; ++unit) {
-        bool any = false;
-        for (size_t b = 0; b < blocks_per_unit; ++b) {
-            blocks[b] = block(unit * blocks_per_unit + b);
-            any = any || blocks[b] != 0;
-        }
-        if (any) merge(unit, blocks.data());
-    }
-}
-
-}  // namespace
 
 void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, size_t blocks_per_unit,
                      Download mode, VoxelizeStats& stats,
-                     const std::function<void(size_t unit, const uint64_t* blocks)>& merge) {
+                     const std::function<uint64_t(size_t unit)>& brick_of, SparseVoxels& result) {
     const auto start = Clock::now();
     const uint64_t block_count = uint64_t(units) * blocks_per_unit;
-    std::vector<uint64_t> blocks(blocks_per_unit);
     // Block indices are 32-bit on the device.
     const bool compact = block_count < (uint64_t(1) << 32) &&
                          (mode == Download::NonEmptyBlocks ||
                           (mode == Download::Auto && !cl.info.host_unified_memory));
     if (!compact) {
         read_mapped<cl_uint>(cl.queue, bits, 2 * block_count, [&](const cl_uint* words) {
-            merge_units(units, blocks_per_unit, blocks, merge, [&](uint64_t i) {
-                return uint64_t(words[2 * i]) | uint64_t(words[2 * i + 1]) << 32;
+            result.merge_bricks(units, brick_of, [&](size_t unit, uint64_t* blocks) {
+                const cl_uint* unit_words = words + 2 * unit * blocks_per_unit;
+                for (size_t b = 0; b < blocks_per_unit; ++b)
+                    blocks[b] = uint64_t(unit_words[2 * b]) | uint64_t(unit_words[2 * b + 1]) << 32;
             });
         });
         stats.bytes_downloaded += 2 * block_count * sizeof(cl_uint);
@@ -103,14 +86,19 @@ void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, siz
             throw DeviceError("the device's compacted blocks are out of order or range (block " +
                               std::to_string(index_back[i]) + " at " + std::to_string(i) + " of " +
                               std::to_string(total) + ")");
-    for (size_t i = 0; i < total;) {
-        const size_t unit = index_back[i] / blocks_per_unit;
-        std::fill(blocks.begin(), blocks.end(), 0);
-        for (; i < total && index_back[i] / blocks_per_unit == unit; ++i)
-            blocks[index_back[i] % blocks_per_unit] =
-                uint64_t(words_back[2 * i]) | uint64_t(words_back[2 * i + 1]) << 32;
-        merge(unit, blocks.data());
-    }
+    std::vector<size_t> unit_first;  // where each unit with blocks starts in the compact list
+    for (size_t i = 0; i < total; ++i)
+        if (i == 0 || index_back[i] / blocks_per_unit != index_back[i - 1] / blocks_per_unit)
+            unit_first.push_back(i);
+    unit_first.push_back(total);
+    result.merge_bricks(
+        unit_first.size() - 1,
+        [&](size_t u) { return brick_of(index_back[unit_first[u]] / blocks_per_unit); },
+        [&](size_t u, uint64_t* blocks) {
+            for (size_t i = unit_first[u]; i < unit_first[u + 1]; ++i)
+                blocks[index_back[i] % blocks_per_unit] =
+                    uint64_t(words_back[2 * i]) | uint64_t(words_back[2 * i + 1]) << 32;
+        });
     stats.seconds_download += seconds_since(start);
 }
 

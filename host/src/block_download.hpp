@@ -11,12 +11,12 @@ namespace oclvox::detail {
 
 // A batch's `units` bricks in `bits` (each blocks_per_unit 4^3 blocks of two 32-bit words, low
 // word first, one brick after another) come back whole or as their non-empty blocks, as `mode`
-// says (Download::Auto: non-empty blocks unless the device works in host memory).
-// merge(unit, blocks) then gets the 64-bit blocks of every unit that has a voxel set, in unit
-// order. Adds to stats.seconds_download and stats.bytes_downloaded. Device allocation failures
-// propagate before anything is merged, so run_batches can retry the batch smaller.
+// says (Download::Auto: non-empty blocks unless the device works in host memory), and are merged
+// into `result` as bricks brick_of(unit), in parallel (SparseVoxels::merge_bricks). Adds to
+// stats.seconds_download and stats.bytes_downloaded. Device allocation failures propagate before
+// anything is merged, so run_batches can retry the batch smaller.
 void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, size_t blocks_per_unit,
                      Download mode, VoxelizeStats& stats,
-                     const std::function<void(size_t unit, const uint64_t* blocks)>& merge);
+                     const std::function<uint64_t(size_t unit)>& brick_of, SparseVoxels& result);
 
 }  // namespace oclvox::detail

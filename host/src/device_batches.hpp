@@ -76,6 +76,22 @@ class SlotBuffer {
     size_t slots_ = 0;
 };
 
+// A SlotBuffer whose first `used` units are zero bytes whenever get returns it: the bits that work
+// items OR into. On a device working in the host's memory it is zeroed through a map on every
+// core, where the device's fill runs on one thread (through PoCL the fill took 12 ms of
+// motorBike's 17 MiB at 1024^3, most of it faulting in fresh pages; zeroed on two cores, 5 ms).
+// Elsewhere the device fills it.
+class ZeroedSlotBuffer {
+  public:
+    explicit ZeroedSlotBuffer(size_t bytes_per_slot)
+        : buffer_(CL_MEM_READ_WRITE, bytes_per_slot), bytes_per_slot_(bytes_per_slot) {}
+    const cl::Buffer& get(const Device::Impl& cl, size_t slots, size_t used);
+
+  private:
+    SlotBuffer buffer_;
+    size_t bytes_per_slot_;
+};
+
 // Work items of one batch are numbered with 32-bit offsets.
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 

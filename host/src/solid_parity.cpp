@@ -193,7 +193,7 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
     const cl::Buffer tri_buffer = read_in_place(cl, triangles);
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
-    SlotBuffer bits(CL_MEM_READ_WRITE, column_words * sizeof(cl_uint));
+    ZeroedSlotBuffer bits(column_words * sizeof(cl_uint));
     SlotBuffer blocks(CL_MEM_READ_WRITE, block_words * sizeof(cl_uint));
 
     cl::Kernel flip(program, "parity_flip"), prefix(program, "parity_prefix"),
@@ -206,9 +206,9 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
     // batch has been merged).
     auto run_batch = [&](size_t done, size_t max_columns) {
         t = Clock::now();
-        const cl::Buffer& bit_buffer = bits.get(cl.context, max_columns);
-        const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
         const PairBatch batch = make_batch(bins, triangles, l, done, max_columns);
+        const cl::Buffer& bit_buffer = bits.get(cl, max_columns, batch.unit_count);
+        const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
         std::vector<cl_int> slot_coordinates;  // each slot's brick column (bx, by)
         for (size_t slot = 0; slot < batch.unit_count; ++slot)
             for (const int k : column_coordinates(l, bins.columns[done + slot]))
@@ -218,8 +218,6 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
         const cl::Buffer pair_first = read_in_place(cl, batch.pair_first_item);
         const cl::Buffer item_pair = read_in_place(cl, batch.item_pair);
         const cl::Buffer slot_column = read_in_place(cl, slot_coordinates);
-        cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0,
-                                   batch.unit_count * column_words * sizeof(cl_uint));
         cl.queue.finish();
         stats.seconds_upload += seconds_since(t);
 
@@ -251,10 +249,12 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
         // Each slot's bricks, bottom to top, are units of the download.
         download_bricks(
             cl, block_buffer, batch.unit_count * size_t(l.nbz), l.blocks_per_brick,
-            options.download, stats, [&](size_t unit, const uint64_t* blocks) {
+            options.download, stats,
+            [&](size_t unit) {
                 const uint64_t column = bins.columns[batch.first_unit + unit / size_t(l.nbz)];
-                result.merge_brick(column_brick(l, column, unit % size_t(l.nbz)), blocks);
-            });
+                return column_brick(l, column, unit % size_t(l.nbz));
+            },
+            result);
         ++stats.batches;
         const size_t finished = done + batch.unit_count;
         report_progress(options, finished * uint64_t(l.nbz), bins.columns.size() * uint64_t(l.nbz));

@@ -107,6 +107,32 @@ void SparseVoxels::merge_brick(uint64_t brick_index, const uint64_t* blocks) {
     for (size_t w = 0; w < n; ++w) brick[w] |= blocks[w];
 }
 
+void SparseVoxels::merge_bricks(size_t count, const std::function<uint64_t(size_t)>& brick_index,
+                                const std::function<void(size_t, uint64_t*)>& fill) {
+    const auto nb = brick_dims();
+    const uint64_t bricks = uint64_t(nb[0]) * uint64_t(nb[1]) * uint64_t(nb[2]);
+    std::vector<uint64_t> indices(count);
+    for (size_t i = 0; i < count; ++i) {
+        indices[i] = brick_index(i);
+        if (indices[i] >= bricks)
+            throw GridError("brick index " + std::to_string(indices[i]) + " is outside the grid");
+    }
+    const size_t n = blocks_per_brick();
+    std::vector<std::vector<uint64_t>> filled(count);
+    tbb::parallel_for(size_t(0), count, [&](size_t i) {
+        std::vector<uint64_t> blocks(n, 0);
+        fill(i, blocks.data());
+        if (std::any_of(blocks.begin(), blocks.end(), [](uint64_t w) { return w != 0; }))
+            filled[i] = std::move(blocks);
+    });
+    for (size_t i = 0; i < count; ++i) {
+        if (filled[i].empty()) continue;
+        const auto [it, fresh] = bricks_.try_emplace(indices[i], std::move(filled[i]));
+        if (!fresh)
+            for (size_t w = 0; w < n; ++w) it->second[w] |= filled[i][w];
+    }
+}
+
 void SparseVoxels::for_each(const std::function<void(int64_t, int64_t, int64_t)>& f) const {
     const auto nbricks = brick_dims();
     const int64_t b = brick_size_, nb = blocks_per_brick_axis();

@@ -123,26 +123,24 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
             size_t slots = std::min(max_slots, binning.bricks.size());
-            detail::SlotBuffer bits(CL_MEM_READ_WRITE, words_per_brick * sizeof(cl_uint));
+            detail::ZeroedSlotBuffer bits(words_per_brick * sizeof(cl_uint));
 
             // Phase 4: batches of bricks, smaller after a device allocation failure (nothing of
             // a failed batch has been merged).
             auto run_batch = [&](size_t done, size_t max_bricks) {
                 t = Clock::now();
-                const cl::Buffer& bit_buffer = bits.get(cl.context, max_bricks);
                 const detail::PairBatch batch =
                     make_batch(binning, prepared, grid, brick_size, done, max_bricks);
+                const cl::Buffer& bit_buffer = bits.get(cl, max_bricks, batch.unit_count);
                 std::vector<cl_int> slot_coordinates;  // each slot's brick
                 for (size_t slot = 0; slot < batch.unit_count; ++slot)
                     for (const int k : brick_coordinates(binning, grid, brick_size, done + slot))
                         slot_coordinates.push_back(k);
-                const size_t bit_words = batch.unit_count * words_per_brick;
                 const cl::Buffer pair_triangle = detail::read_in_place(cl, batch.pair_triangle);
                 const cl::Buffer pair_slot = detail::read_in_place(cl, batch.pair_slot);
                 const cl::Buffer pair_first = detail::read_in_place(cl, batch.pair_first_item);
                 const cl::Buffer item_pair = detail::read_in_place(cl, batch.item_pair);
                 const cl::Buffer slot_brick = detail::read_in_place(cl, slot_coordinates);
-                cl.queue.enqueueFillBuffer(bit_buffer, cl_uint(0), 0, bit_words * sizeof(cl_uint));
                 cl.queue.finish();
                 stats.seconds_upload += seconds_since(t);
 
@@ -164,9 +162,8 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
 
                 detail::download_bricks(
                     cl, bit_buffer, batch.unit_count, result.blocks_per_brick(), options.download,
-                    stats, [&](size_t slot, const uint64_t* blocks) {
-                        result.merge_brick(binning.bricks[batch.first_unit + slot], blocks);
-                    });
+                    stats, [&](size_t slot) { return binning.bricks[batch.first_unit + slot]; },
+                    result);
                 ++stats.batches;
 
                 const size_t finished = done + batch.unit_count;

@@ -165,6 +165,12 @@ class SparseVoxels {
     // Adds (ORs) a brick's blocks; all-zero bricks are dropped. Throws GridError for a brick
     // index outside the grid.
     void merge_brick(uint64_t brick_index, const uint64_t* blocks);
+    // Merges `count` bricks as merge_brick would one after another: brick i is brick_index(i),
+    // and fill(i, blocks) writes its blocks_per_brick() words into `blocks` (zeroed). fill runs on
+    // several threads at once, so the bricks' storage is allocated and written in parallel (its
+    // fresh pages are most of the cost); only putting them in place is serial.
+    void merge_bricks(size_t count, const std::function<uint64_t(size_t)>& brick_index,
+                      const std::function<void(size_t, uint64_t*)>& fill);
 
     // Calls f(i, j, k) for every set voxel, brick by brick (order unspecified across bricks).
     void for_each(const std::function<void(int64_t, int64_t, int64_t)>& f) const;
