@@ -36,19 +36,19 @@ std::string position_text(const Position& p) {
 // Merges vertices at equal coordinates and drops those no triangle uses. STL stores three
 // corners per facet and a scene's meshes are merged side by side, so this is what gives them a
 // shared topology. Positions are unchanged, so the geometry is too. Welded vertices are numbered
-// in the order the triangles meet them, corner by corner.
-Mesh welded(const Mesh& raw) {
+// in the order the triangles meet them, corner by corner. The triangles are renumbered in place:
+// a copy would fault in as many fresh pages again.
+Mesh welded(Mesh raw) {
     constexpr uint32_t kUnnumbered = std::numeric_limits<uint32_t>::max();
     std::vector<uint32_t> new_index(raw.positions.size(), kUnnumbered);
     detail::PositionNumbering numbering(raw.positions.size());
-    Mesh mesh;
-    mesh.triangles.resize(raw.triangles.size());
-    for (size_t t = 0; t < raw.triangles.size(); ++t)
-        for (int c = 0; c < 3; ++c) {
-            const uint32_t v = raw.triangles[t][c];
+    for (auto& triangle : raw.triangles)
+        for (uint32_t& v : triangle) {
             if (new_index[v] == kUnnumbered) new_index[v] = numbering.number(raw.positions[v]);
-            mesh.triangles[t][c] = new_index[v];
+            v = new_index[v];
         }
+    Mesh mesh;
+    mesh.triangles = std::move(raw.triangles);
     mesh.positions = numbering.take_positions();
     return mesh;
 }
@@ -151,7 +151,7 @@ Mesh load_mesh(const std::string& path, const ProgressCallback& callback) {
 
     // Phase 2: triangulate (checking every index), check, then weld.
     progress.report(triangulate, 0, 1);
-    const Mesh raw = mesh_reading::triangulated(path, std::move(polygons));
+    Mesh raw = mesh_reading::triangulated(path, std::move(polygons));
     if (raw.triangles.empty()) fail(path, "the file contains no triangles");
     try {
         validate_mesh(raw);
@@ -159,7 +159,7 @@ Mesh load_mesh(const std::string& path, const ProgressCallback& callback) {
         fail(path, error.what());
     }
     progress.report(weld, 0, 1);
-    Mesh mesh = welded(raw);
+    Mesh mesh = welded(std::move(raw));
     progress.finish();
     return mesh;
 }

@@ -286,6 +286,9 @@ Mesh triangulated(const std::string& path, Polygons polygons) {
 
     Mesh mesh;
     mesh.positions = std::move(polygons.positions);
+    size_t triangles = 0;
+    for (const uint32_t count : polygons.corner_counts) triangles += count >= 3 ? count - 2 : 0;
+    mesh.triangles.reserve(triangles);
     PolygonTriangulator triangulator;
     std::vector<uint32_t> corners;
     size_t first = 0;

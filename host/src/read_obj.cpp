@@ -143,6 +143,13 @@ Polygons read_obj(const std::string& path, const ParseReport& report) {
     for (size_t first = 0; first < parts.size(); first += kPartsPerWave) {
         const size_t end = std::min(parts.size(), first + kPartsPerWave);
         tbb::parallel_for(first, end, [&](size_t i) {
+            // Room for as many vertices and corners as the part's bytes could hold (a vertex
+            // line takes at least 7, a corner 2, a face 6): pages of it that stay unused are
+            // never touched, where growing the vectors would copy and fault in each again.
+            const size_t bytes = parts[i].text.size();
+            parts[i].polygons.positions.reserve(bytes / 7 + 1);
+            parts[i].polygons.corners.reserve(bytes / 2 + 1);
+            parts[i].polygons.corner_counts.reserve(bytes / 6 + 1);
             try {
                 parse_lines(path, parts[i].text, parts[i].polygons, &parts[i].relative, nullptr);
             } catch (const InputError&) {
