@@ -9,6 +9,9 @@
 // 130 stopped by SIGINT (Ctrl-C), 143 stopped by SIGTERM.
 #include <CLI/CLI.hpp>
 #include <iostream>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 #include <new>
 #include <vector>
 
@@ -28,7 +31,22 @@ const char* const kExitCodesText =
     "Exit codes: 0 success, 1 error, 2 usage error, 130 SIGINT (Ctrl-C), 143 SIGTERM.\n";
 }  // namespace oclvox_cli
 
+// A run allocates and frees buffers of megabytes phase after phase (the file's text, the parsed
+// parts, the prepared triangles, the batches). glibc maps each of over 128 KiB (more once one is
+// freed) afresh and unmaps it when freed, so the next phase faults in new pages again, at about
+// 2.4 us a page on a VM. Kept in the heap (below 32 MiB, the largest this setting allows) and not
+// trimmed below 512 MiB, they are reused: 20% fewer page faults and 10-20 ms less a run at 1024^3
+// (buildings, motorBike, stanford-bunny), for a peak RSS 2-15% higher. The library leaves the
+// process's allocator to its host; this program is its own host.
+static void keep_freed_memory_for_reuse() {
+#if defined(__GLIBC__)
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 512 << 20);
+#endif
+}
+
 int main(int argc, char** argv) {
+    keep_freed_memory_for_reuse();
     using namespace oclvox_cli;
     CLI::App app{"oclvox: conservative mesh voxelization on OpenCL devices", "oclvox"};
     app.set_version_flag("--version", std::string("oclvox ") + OCLVOX_VERSION);
