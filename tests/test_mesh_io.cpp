@@ -591,6 +591,24 @@ TEST_F(MeshFiles, ObjFaceIndexOutOfRangeFails) {
     input_error_of(write("zero.obj", vertices + "f 0 1 2\n"));
 }
 
+// Face indices are read as a strict whole-number parse reads them, whichever way they are
+// written: a sign, leading zeros, up to 18 digits (read inline) and more (read by from_chars),
+// relative or not; anything else in the word fails. Worked out by hand from the file.
+TEST_F(MeshFiles, ObjFaceIndicesReadAsWholeNumbersWhateverTheirDigits) {
+    const std::string vertices = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n";
+    const oclvox::Mesh mesh = oclvox::load_mesh(
+        write("digits.obj", vertices + "f +1 002 000000000000000003\n"
+                                       "f 0000000000000000001 -1 -000000000000000002\n"
+                                       "f 4/1/1 +3//2 -4/+1\n"));
+    const std::vector<std::array<uint32_t, 3>> expected{{0, 1, 2}, {0, 3, 2}, {3, 2, 0}};
+    EXPECT_EQ(mesh.triangles, expected);
+    for (const char* word : {"3x", "+", "-", "3.0", "1e0", "++3", "-+3", "0x3", "3/a", "3//b"})
+        EXPECT_TRUE(contains(
+            input_error_of(write("bad.obj", vertices + "f 1 2 " + std::string(word) + "\n")),
+            "line 5: "))
+            << word;
+}
+
 TEST_F(MeshFiles, OffAndPlyFaceIndexOutOfRangeFails) {
     EXPECT_TRUE(
         contains(input_error_of(write("index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n")),

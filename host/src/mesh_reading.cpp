@@ -85,31 +85,12 @@ std::string quoted(std::string_view word) {
 
 namespace {
 
-bool is_blank(char c) {
-    return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
-}
-
 // Where a strict parser takes no leading '+', which writers may emit.
 const char* skip_plus(const char* first, const char* last) {
     return (*first == '+' && last - first > 1) ? first + 1 : first;
 }
 
 }  // namespace
-
-void TextCursor::skip_blanks() {
-    while (at_ < text_.size() && is_blank(text_[at_])) ++at_;
-    if (comment_ != 0 && at_ < text_.size() && text_[at_] == comment_)
-        while (at_ < text_.size() && text_[at_] != '\n') ++at_;
-}
-
-std::string_view TextCursor::word_on_line() {
-    skip_blanks();
-    const size_t first = at_;
-    while (at_ < text_.size() && text_[at_] != '\n' && !is_blank(text_[at_]) &&
-           text_[at_] != comment_)
-        ++at_;
-    return text_.substr(first, at_ - first);
-}
 
 std::string_view TextCursor::word() {
     for (;;) {
@@ -162,7 +143,7 @@ double TextCursor::to_double(std::string_view word, std::string_view what) const
     return value;
 }
 
-int64_t TextCursor::to_integer(std::string_view word, std::string_view what) const {
+int64_t TextCursor::to_integer_strictly(std::string_view word, std::string_view what) const {
     if (word.empty()) fail("the " + std::string(what) + " is missing");
     const char* const last = word.data() + word.size();
     int64_t value = 0;

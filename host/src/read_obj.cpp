@@ -35,7 +35,8 @@ int64_t corner_index(const TextCursor& line, std::string_view corner, size_t ver
                      size_t face_number, bool* relative) {
     int64_t vertex = 0;
     for (size_t at = 0, part = 0; at <= corner.size(); ++part) {
-        const size_t slash = std::min(corner.find('/', at), corner.size());
+        size_t slash = at;  // (a plain scan: find calls memchr, costly on words this short)
+        while (slash < corner.size() && corner[slash] != '/') ++slash;
         const std::string_view index = corner.substr(at, slash - at);
         if (part == 0 || !index.empty()) {
             const int64_t value = line.to_integer(index, "face index");
@@ -72,8 +73,10 @@ void parse_lines(const std::string& path, std::string_view text, Polygons& out,
         while (line_end < text.size() && text[line_end] != '\n' && text[line_end] != '\r')
             ++line_end;
         TextCursor line(path, text.substr(at, line_end - at), '#', line_number);
+        // Keywords compared as characters: == on a string_view calls memcmp.
         const std::string_view keyword = line.word_on_line();
-        if (keyword == "v") {
+        const char key = keyword.size() == 1 ? keyword[0] : '\0';
+        if (key == 'v') {
             // x y z, read strictly and correctly rounded; a w or a vertex colour may follow.
             Position p;
             for (double& coordinate : p) {
@@ -82,7 +85,7 @@ void parse_lines(const std::string& path, std::string_view text, Polygons& out,
                 coordinate = line.to_double(word, "vertex coordinate");
             }
             out.positions.push_back(p);
-        } else if (keyword == "f") {
+        } else if (key == 'f') {
             ++face_number;
             uint32_t corners = 0;
             for (std::string_view corner = line.word_on_line(); !corner.empty();
