@@ -6,11 +6,14 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <map>
 #include <optional>
 #include <random>
+#include <utility>
 
 #include "opencl_runtime.hpp"
+#include "position_numbering.hpp"
 #include "solid.hpp"
 #include "solid_internal.hpp"
 #include "solid_math.h"
@@ -690,6 +693,52 @@ TEST(Solid, AutoPicksParityOnlyForClosedMeshes) {
     EXPECT_EQ(detail::mesh_edge_report(load("stanford-bunny.obj")).boundary, 223u);
     // STL stores every triangle's vertices separately: closed only after welding.
     EXPECT_TRUE(detail::mesh_edge_report(load("TR12J_OCC.stl")).closed());
+}
+
+// number_positions numbers the offered positions as a std::map keyed by their bits (-0.0 made
+// 0.0) numbers them in offering order: on 100,000 offers of 20,000 places (so many partitions,
+// and most places offered several times), with zeros of both signs and NaNs among them, in
+// index order and through a shuffled order that offers some positions twice and others never.
+TEST(Solid, PositionNumberingEqualsAMapOfThePositionsBits) {
+    std::mt19937 rng(7);
+    std::vector<std::array<double, 3>> places(20000);
+    for (auto& p : places)
+        for (double& c : p) c = double(int(rng() % 9) - 4) * 0.25;  // many repeated coordinates
+    places[1] = {std::nan(""), 0.0, 1.0};
+    std::vector<std::array<double, 3>> positions(100000);
+    for (auto& p : positions) {
+        p = places[rng() % places.size()];
+        for (double& c : p)
+            if (c == 0.0 && rng() % 2) c = -0.0;
+    }
+    std::vector<uint32_t> order(150000);
+    for (uint32_t& i : order) i = uint32_t(rng() % 60000);  // repeats, and 40,000 never offered
+
+    const std::vector<uint32_t>* const in_index_order = nullptr;
+    for (const std::vector<uint32_t>* offer : {in_index_order, &std::as_const(order)}) {
+        const detail::NumberedPositions numbered = detail::number_positions(positions, offer);
+        std::map<std::array<uint64_t, 3>, uint32_t> number_of;
+        std::vector<std::array<double, 3>> expected_positions;
+        const size_t offers = offer ? offer->size() : positions.size();
+        ASSERT_EQ(numbered.numbers.size(), offers);
+        for (size_t i = 0; i < offers; ++i) {
+            const auto& p = positions[offer ? (*offer)[i] : i];
+            std::array<uint64_t, 3> bits;
+            for (int k = 0; k < 3; ++k) {
+                const double value = p[k] == 0.0 ? 0.0 : p[k];
+                std::memcpy(&bits[k], &value, sizeof value);
+            }
+            const auto [it, fresh] = number_of.emplace(bits, uint32_t(expected_positions.size()));
+            if (fresh) expected_positions.push_back(p);
+            ASSERT_EQ(numbered.numbers[i], it->second) << i;
+        }
+        ASSERT_EQ(numbered.positions.size(), expected_positions.size());
+        for (size_t v = 0; v < expected_positions.size(); ++v)
+            ASSERT_EQ(std::memcmp(&numbered.positions[v], &expected_positions[v],
+                                  sizeof(expected_positions[v])),
+                      0)
+                << v;
+    }
 }
 
 // The edge report of a triangle soup (every triangle with its own three vertices, as STL stores

@@ -39,17 +39,28 @@ std::string position_text(const Position& p) {
 // in the order the triangles meet them, corner by corner. The triangles are renumbered in place:
 // a copy would fault in as many fresh pages again.
 Mesh welded(Mesh raw) {
-    constexpr uint32_t kUnnumbered = std::numeric_limits<uint32_t>::max();
-    std::vector<uint32_t> new_index(raw.positions.size(), kUnnumbered);
-    detail::PositionNumbering numbering(raw.positions.size());
-    for (auto& triangle : raw.triangles)
-        for (uint32_t& v : triangle) {
-            if (new_index[v] == kUnnumbered) new_index[v] = numbering.number(raw.positions[v]);
-            v = new_index[v];
-        }
+    // Phase 1: the vertices in the order the triangles first meet them.
+    constexpr uint32_t kUnmet = std::numeric_limits<uint32_t>::max();
+    std::vector<uint32_t> met_as(raw.positions.size(), kUnmet);  // a vertex's place in `order`
+    std::vector<uint32_t> order;
+    order.reserve(raw.positions.size());
+    for (const auto& triangle : raw.triangles)
+        for (const uint32_t v : triangle)
+            if (met_as[v] == kUnmet) {
+                met_as[v] = uint32_t(order.size());
+                order.push_back(v);
+            }
+
+    // Phase 2: their positions numbered in that order, equal ones alike.
+    detail::NumberedPositions numbered = detail::number_positions(raw.positions, &order);
+
+    // Phase 3: the triangles renumbered, in parallel.
+    tbb::parallel_for(size_t(0), raw.triangles.size(), [&](size_t t) {
+        for (uint32_t& v : raw.triangles[t]) v = numbered.numbers[met_as[v]];
+    });
     Mesh mesh;
     mesh.triangles = std::move(raw.triangles);
-    mesh.positions = numbering.take_positions();
+    mesh.positions = std::move(numbered.positions);
     return mesh;
 }
 

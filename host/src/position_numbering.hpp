@@ -2,77 +2,117 @@
 // check (and the winding number's boundary fans).
 #pragma once
 
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <cstring>
-#include <utility>
 #include <vector>
 
 namespace oclvox::detail {
 
-// Numbers the distinct positions offered to it, in the order they are first offered; positions
-// are equal when their coordinates' bits are, after -0.0 becomes 0.0 (so equal numbers weld, and
-// a NaN of an unused vertex welds only with its own bits). An open-addressing hash table sized
-// once for the most positions it will be offered: a pass over a mesh's vertices is linear, where
-// sorting them was most of the closed-mesh check.
-class PositionNumbering {
-  public:
-    using Position = std::array<double, 3>;
+struct NumberedPositions {
+    std::vector<uint32_t> numbers;                 // of each offered position, in offering order
+    std::vector<std::array<double, 3>> positions;  // by number, each as first offered
+};
 
-    explicit PositionNumbering(size_t most_positions) {
-        size_t capacity = 16;
-        while (capacity < 2 * most_positions) capacity *= 2;
-        slots_.assign(capacity, kEmpty);
-        keys_.reserve(most_positions);
-        positions_.reserve(most_positions);
-    }
-
-    // The number of p: that of the equal position offered before, else the next free one.
-    uint32_t number(const Position& p) {
-        const Key key = key_of(p);
-        const size_t mask = slots_.size() - 1;
-        for (size_t slot = size_t(hash(key)) & mask;; slot = (slot + 1) & mask) {
-            uint32_t& id = slots_[slot];
-            if (id == kEmpty) {
-                id = uint32_t(positions_.size());
-                keys_.push_back(key);
-                positions_.push_back(p);
-                return id;
-            }
-            if (keys_[id] == key) return id;
-        }
-    }
-
-    // The positions by number, each as it was first offered (the numbering is done with them).
-    std::vector<Position> take_positions() { return std::move(positions_); }
-
-  private:
+// Numbers the positions offered, positions[order[i]] for i = 0, 1, ... (positions[i] without an
+// order), in the order they are first offered; positions are equal when their coordinates' bits
+// are, after -0.0 becomes 0.0 (so equal numbers weld, and a NaN of an unused vertex welds only
+// with its own bits). Linear, with the hashing in parallel: the offers are split by the high bits
+// of their hash into partitions of a few thousand, each partition finds every offer's first equal
+// offer in a hash table of its own (small enough to stay in cache, where one table for a whole
+// mesh missed the cache at every probe), and a last pass in offering order hands out the numbers.
+inline NumberedPositions number_positions(const std::vector<std::array<double, 3>>& positions,
+                                          const std::vector<uint32_t>* order = nullptr) {
     using Key = std::array<uint64_t, 3>;
-    static constexpr uint32_t kEmpty = ~uint32_t(0);
-
-    static Key key_of(const Position& p) {
+    const size_t n = order ? order->size() : positions.size();
+    auto offered = [&](size_t i) -> const std::array<double, 3>& {
+        return positions[order ? (*order)[i] : i];
+    };
+    auto key_of = [&](size_t i) {
         Key key;
         for (int k = 0; k < 3; ++k) {
-            const double value = p[k] + 0.0;  // -0.0 and 0.0 are the same place
+            const double value = offered(i)[k] + 0.0;  // -0.0 and 0.0 are the same place
             std::memcpy(&key[k], &value, sizeof value);
         }
         return key;
-    }
-    // Mixes every bit of the three coordinates into the low bits the table uses (coordinates on
-    // a regular lattice differ only in a few high mantissa bits).
-    static uint64_t hash(const Key& key) {
-        uint64_t h = 0x9e3779b97f4a7c15ull;
-        for (const uint64_t bits : key) {
-            h = (h ^ bits) * 0xbf58476d1ce4e5b9ull;
-            h ^= h >> 31;
+    };
+    constexpr size_t kChunk = 16384;
+    const size_t chunks = (n + kChunk - 1) / kChunk;
+
+    // Phase 1: every offer's hash, mixing every bit of the three coordinates into the bits used
+    // (coordinates on a regular lattice differ only in a few high mantissa bits).
+    std::vector<uint64_t> hashes(n);
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        for (size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
+            uint64_t h = 0x9e3779b97f4a7c15ull;
+            for (const uint64_t bits : key_of(i)) {
+                h = (h ^ bits) * 0xbf58476d1ce4e5b9ull;
+                h ^= h >> 31;
+            }
+            h *= 0x94d049bb133111ebull;
+            hashes[i] = h ^ (h >> 29);
         }
-        h *= 0x94d049bb133111ebull;
-        return h ^ (h >> 29);
+    });
+
+    // Phase 2: the offers grouped by partition (the hash's top bits), ascending within each: a
+    // counting sort.
+    int partition_bits = 0;
+    while (partition_bits < 16 && (n >> partition_bits) > 4096) ++partition_bits;
+    const size_t partitions = size_t(1) << partition_bits;
+    auto partition_of = [&](size_t i) {
+        return partition_bits ? size_t(hashes[i] >> (64 - partition_bits)) : size_t(0);
+    };
+    std::vector<uint32_t> first_offer(partitions + 1, 0);
+    for (size_t i = 0; i < n; ++i) ++first_offer[partition_of(i) + 1];
+    for (size_t p = 0; p < partitions; ++p) first_offer[p + 1] += first_offer[p];
+    std::vector<uint32_t> grouped(n);
+    {
+        std::vector<uint32_t> next(first_offer.begin(), first_offer.end() - 1);
+        for (size_t i = 0; i < n; ++i) grouped[next[partition_of(i)]++] = uint32_t(i);
     }
 
-    std::vector<uint32_t> slots_;  // a position's number, or kEmpty
-    std::vector<Key> keys_;        // by number
-    std::vector<Position> positions_;
-};
+    // Phase 3: per partition, in parallel, each offer's first equal offer.
+    std::vector<uint32_t> first_equal(n);
+    constexpr uint32_t kEmpty = ~uint32_t(0);
+    tbb::parallel_for(size_t(0), partitions, [&](size_t p) {
+        const uint32_t begin = first_offer[p], end = first_offer[p + 1];
+        size_t capacity = 16;
+        while (capacity < 2 * size_t(end - begin)) capacity *= 2;
+        std::vector<uint32_t> slots(capacity, kEmpty);  // the first offer of a key
+        const size_t mask = capacity - 1;
+        for (uint32_t g = begin; g < end; ++g) {
+            const uint32_t i = grouped[g];
+            const Key key = key_of(i);
+            for (size_t slot = size_t(hashes[i]) & mask;; slot = (slot + 1) & mask) {
+                if (slots[slot] == kEmpty) {
+                    slots[slot] = i;
+                    first_equal[i] = i;
+                    break;
+                }
+                const uint32_t j = slots[slot];
+                if (hashes[j] == hashes[i] && key_of(j) == key) {
+                    first_equal[i] = j;
+                    break;
+                }
+            }
+        }
+    });
+
+    // Phase 4: numbers in offering order; an offer's first equal offer comes no later.
+    NumberedPositions out;
+    out.numbers.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        if (first_equal[i] == i) {
+            out.numbers[i] = uint32_t(out.positions.size());
+            out.positions.push_back(offered(i));
+        } else {
+            out.numbers[i] = out.numbers[first_equal[i]];
+        }
+    }
+    return out;
+}
 
 }  // namespace oclvox::detail

@@ -676,12 +676,10 @@ struct Tile {
 
 WeldedEdges weld_edges(const Mesh& mesh) {
     // Phase 1: equal positions numbered alike, in the order their first vertex comes.
-    const auto& p = mesh.positions;
-    PositionNumbering numbering(p.size());
-    std::vector<uint32_t> welded(p.size());
-    for (size_t v = 0; v < p.size(); ++v) welded[v] = numbering.number(p[v]);
+    NumberedPositions numbered = number_positions(mesh.positions);
+    const std::vector<uint32_t>& welded = numbered.numbers;
     WeldedEdges out;
-    out.positions = numbering.take_positions();
+    out.positions = std::move(numbered.positions);
 
     // Phase 2: every triangle's edges, bucketed by their lower end (a counting sort: linear, where
     // sorting all edges was most of the closed-mesh check), then each bucket (a few edges) sorted
