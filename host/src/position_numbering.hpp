@@ -74,8 +74,10 @@ inline NumberedPositions number_positions(const std::vector<std::array<double, 3
         for (size_t i = 0; i < n; ++i) grouped[next[partition_of(i)]++] = uint32_t(i);
     }
 
-    // Phase 3: per partition, in parallel, each offer's first equal offer.
+    // Phase 3: per partition, in parallel, each offer's first equal offer, and how many offers
+    // are the first of their position.
     std::vector<uint32_t> first_equal(n);
+    std::vector<size_t> distinct(partitions, 0);
     constexpr uint32_t kEmpty = ~uint32_t(0);
     tbb::parallel_for(size_t(0), partitions, [&](size_t p) {
         const uint32_t begin = first_offer[p], end = first_offer[p + 1];
@@ -90,6 +92,7 @@ inline NumberedPositions number_positions(const std::vector<std::array<double, 3
                 if (slots[slot] == kEmpty) {
                     slots[slot] = i;
                     first_equal[i] = i;
+                    ++distinct[p];
                     break;
                 }
                 const uint32_t j = slots[slot];
@@ -104,6 +107,9 @@ inline NumberedPositions number_positions(const std::vector<std::array<double, 3
     // Phase 4: numbers in offering order; an offer's first equal offer comes no later.
     NumberedPositions out;
     out.numbers.resize(n);
+    size_t positions_out = 0;
+    for (const size_t count : distinct) positions_out += count;
+    out.positions.reserve(positions_out);  // (growing would copy and fault in each size again)
     for (size_t i = 0; i < n; ++i) {
         if (first_equal[i] == i) {
             out.numbers[i] = uint32_t(out.positions.size());
