@@ -11,6 +11,7 @@
 #include <string_view>
 #include <vector>
 
+#include "host_memory.hpp"
 #include "little_endian.hpp"
 #include "oclvox/oclvox.hpp"
 
@@ -23,9 +24,11 @@ using Position = std::array<double, 3>;
 // them in the file's terms.
 struct Polygons {
     std::vector<Position> positions;
-    std::vector<int64_t> corners;         // vertex indices, polygon after polygon
-    std::vector<uint32_t> corner_counts;  // corners of each polygon, in file order
-    int first_index = 0;                  // how the format numbers its first vertex (OBJ: 1)
+    // Vertex indices, polygon after polygon, and the corners of each polygon in file order (left
+    // unzeroed by resize, so parts of a file can be joined into them on all cores).
+    detail::FilledLaterVector<int64_t> corners;
+    detail::FilledLaterVector<uint32_t> corner_counts;
+    int first_index = 0;  // how the format numbers its first vertex (OBJ: 1)
 
     void add_triangle(int64_t a, int64_t b, int64_t c) {
         corners.insert(corners.end(), {a, b, c});

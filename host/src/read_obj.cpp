@@ -182,16 +182,25 @@ Polygons read_obj(const std::string& path, const ParseReport& report) {
         parse_lines(path, text, again, nullptr, nullptr);
         return again;  // (the plain parse fails where a part did)
     }
+    // The corners and counts (most of the bytes) are copied to their places on all cores: fresh
+    // pages fault in at a few microseconds each, so a serial join took a sixth of the load.
     out.positions.reserve(vertices);
-    out.corners.reserve(corners);
-    out.corner_counts.reserve(polygons);
-    for (const Part& part : parts) {
-        const Polygons& p = part.polygons;
-        out.positions.insert(out.positions.end(), p.positions.begin(), p.positions.end());
-        out.corners.insert(out.corners.end(), p.corners.begin(), p.corners.end());
-        out.corner_counts.insert(out.corner_counts.end(), p.corner_counts.begin(),
-                                 p.corner_counts.end());
+    for (const Part& part : parts)
+        out.positions.insert(out.positions.end(), part.polygons.positions.begin(),
+                             part.polygons.positions.end());
+    out.corners.resize(corners);
+    out.corner_counts.resize(polygons);
+    std::vector<size_t> first_corner(parts.size() + 1, 0), first_polygon(parts.size() + 1, 0);
+    for (size_t i = 0; i < parts.size(); ++i) {
+        first_corner[i + 1] = first_corner[i] + parts[i].polygons.corners.size();
+        first_polygon[i + 1] = first_polygon[i] + parts[i].polygons.corner_counts.size();
     }
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+        const Polygons& p = parts[i].polygons;
+        std::copy(p.corners.begin(), p.corners.end(), out.corners.begin() + first_corner[i]);
+        std::copy(p.corner_counts.begin(), p.corner_counts.end(),
+                  out.corner_counts.begin() + first_polygon[i]);
+    });
     return out;
 }
 

@@ -230,8 +230,8 @@ void write_all(int fd, const void* data, size_t bytes) {
     }
 }
 
-template <class T>
-void write_vector(int fd, const std::vector<T>& v) {
+template <class T, class Allocator>
+void write_vector(int fd, const std::vector<T, Allocator>& v) {
     const uint64_t n = v.size();
     write_all(fd, &n, sizeof n);
     write_all(fd, v.data(), n * sizeof(T));
@@ -300,8 +300,8 @@ class Answer {
         at_ += n;
         return true;
     }
-    template <class T>
-    bool take_vector(std::vector<T>& v) {
+    template <class T, class Allocator>
+    bool take_vector(std::vector<T, Allocator>& v) {
         uint64_t n = 0;
         if (!take(&n, sizeof n) || n > (bytes_.size() - at_) / sizeof(T)) return false;
         v.resize(size_t(n));
