@@ -1,7 +1,10 @@
 // Fitting a voxel grid to a mesh, and checking grids for sizes that cannot work.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "mesh_bounds.hpp"
 #include "oclvox/oclvox.hpp"
@@ -16,14 +19,29 @@ std::string dims_text(const std::array<int64_t, 3>& d) {
 }  // namespace
 
 void detail::used_bounds(const Mesh& mesh, std::array<double, 3>& lo, std::array<double, 3>& hi) {
-    lo.fill(std::numeric_limits<double>::infinity());
-    hi.fill(-std::numeric_limits<double>::infinity());
-    for (const auto& t : mesh.triangles)
-        for (uint32_t v : t)
-            for (int k = 0; k < 3; ++k) {
-                lo[k] = std::min(lo[k], mesh.positions[v][k]);
-                hi[k] = std::max(hi[k], mesh.positions[v][k]);
-            }
+    // Chunks of triangles on all cores, then the chunks' boxes: minima and maxima are the same in
+    // any order.
+    constexpr size_t kChunk = 65536;
+    const size_t chunks = (mesh.triangles.size() + kChunk - 1) / kChunk;
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    std::vector<std::array<double, 6>> boxes(chunks, {kInf, kInf, kInf, -kInf, -kInf, -kInf});
+    tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
+        std::array<double, 6>& box = boxes[c];
+        const size_t end = std::min(mesh.triangles.size(), (c + 1) * kChunk);
+        for (size_t t = c * kChunk; t < end; ++t)
+            for (const uint32_t v : mesh.triangles[t])
+                for (int k = 0; k < 3; ++k) {
+                    box[k] = std::min(box[k], mesh.positions[v][k]);
+                    box[3 + k] = std::max(box[3 + k], mesh.positions[v][k]);
+                }
+    });
+    lo.fill(kInf);
+    hi.fill(-kInf);
+    for (const auto& box : boxes)
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::min(lo[k], box[k]);
+            hi[k] = std::max(hi[k], box[3 + k]);
+        }
 }
 
 bool same_grid(const Grid& a, const Grid& b) {
