@@ -146,13 +146,16 @@ Polygons read_obj(const std::string& path, const ParseReport& report) {
     for (size_t first = 0; first < parts.size(); first += kPartsPerWave) {
         const size_t end = std::min(parts.size(), first + kPartsPerWave);
         tbb::parallel_for(first, end, [&](size_t i) {
-            // Room for as many vertices and corners as the part's bytes could hold (a vertex
-            // line takes at least 7, a corner 2, a face 6): pages of it that stay unused are
-            // never touched, where growing the vectors would copy and fault in each again.
+            // Room for the vertices and corners of a part made only of vertex lines of 16 bytes
+            // or more, or only of corners of 6 bytes or faces of 16 (real files' are longer):
+            // pages of it that stay unused are never touched, where growing the vectors would
+            // copy and fault in each size again. A denser part grows as it needs (the bounds a
+            // part's bytes set, 7 bytes a vertex and 2 a corner, would reserve address space of
+            // eight times the file).
             const size_t bytes = parts[i].text.size();
-            parts[i].polygons.positions.reserve(bytes / 7 + 1);
-            parts[i].polygons.corners.reserve(bytes / 2 + 1);
-            parts[i].polygons.corner_counts.reserve(bytes / 6 + 1);
+            parts[i].polygons.positions.reserve(bytes / 16 + 1);
+            parts[i].polygons.corners.reserve(bytes / 6 + 1);
+            parts[i].polygons.corner_counts.reserve(bytes / 16 + 1);
             try {
                 parse_lines(path, parts[i].text, parts[i].polygons, &parts[i].relative, nullptr);
             } catch (const InputError&) {
