@@ -167,6 +167,7 @@ int run(const FieldArgs& args) {
     } else {
         const MeshInput input_a(args.input, args.input == "-" ? args.files.input_format : "");
         const MeshInput input_b(args.input_b, args.input_b == "-" ? args.files.input_format : "");
+        DeviceOpening opening(args.device);
         oclvox::Mesh mesh_a, mesh_b;
         timed(record.seconds.load, [&] {
             mesh_a = load_mesh_input(input_a, args.reporting);
@@ -178,7 +179,7 @@ int run(const FieldArgs& args) {
         record.inputs = {{input_a.name(), "mesh", mesh_a.triangles.size()},
                          {input_b.name(), "mesh", mesh_b.triangles.size()}};
         stop_if_interrupted();
-        device = open_device(args.device, record.seconds.device_open);
+        device = opening.wait(record.seconds);
         oclvox::VoxelizeStats stats;
         // A full grid is computed a slab of layers at a time: written to a field file as it
         // comes, or gathered into its meshing view for a mesh.

@@ -94,6 +94,7 @@ int run(const FieldArgs& args) {
             return std::get<oclvox::SparseVoxels>(oclvox::read_npy(args.input));
         });
     } else {
+        DeviceOpening opening(args.device);
         const MeshInput input(args.input, args.files.input_format);
         const oclvox::Mesh mesh =
             timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
@@ -101,7 +102,7 @@ int run(const FieldArgs& args) {
             timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, args.fit); });
         record.inputs = {{input.name(), "mesh", mesh.triangles.size()}};
         stop_if_interrupted();
-        device = open_device(args.device, record.seconds.device_open);
+        device = opening.wait(record.seconds);
         oclvox::VoxelizeOptions options;
         options.mode = oclvox::VoxelizeMode::Solid;
         options.inside = oclvox::inside_test_from_string(args.inside);

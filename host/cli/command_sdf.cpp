@@ -83,14 +83,15 @@ int run(const SdfArgs& args) {
     check_reporting(args.reporting, {args.input}, {args.output, args.mesh_output, args.preview});
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the mesh, its grid, the device.
+    // Phase 2: the mesh and its grid while the device opens, then the device.
+    DeviceOpening opening(args.device);
     const MeshInput input(args.input, args.files.input_format);
     const oclvox::Mesh mesh =
         timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
     const oclvox::Grid grid =
         timed(record.seconds.fit, [&] { return oclvox::fit_grid(mesh, field_fit(args)); });
     stop_if_interrupted();
-    std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
+    std::optional<oclvox::Device> device = opening.wait(record.seconds);
 
     // Phase 3: the distances: a narrow band as a sparse field (memory follows the surface), a full
     // grid a slab of layers at a time, written as it is computed (memory holds a slab) and, for

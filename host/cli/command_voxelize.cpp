@@ -85,7 +85,8 @@ int run(const VoxelizeArgs& args) {
     check_reporting(args.reporting, {args.input}, {args.output, args.preview});
     const OutputTarget output(args.output, output_extension(args.output, args.files));
 
-    // Phase 2: the mesh and the grid around it.
+    // Phase 2: the mesh and the grid around it, while the device opens.
+    DeviceOpening opening(args.device);
     const MeshInput input(args.input, args.files.input_format);
     const oclvox::Mesh mesh =
         timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
@@ -94,7 +95,7 @@ int run(const VoxelizeArgs& args) {
     stop_if_interrupted();
 
     // Phase 3: the device.
-    std::optional<oclvox::Device> device = open_device(args.device, record.seconds.device_open);
+    std::optional<oclvox::Device> device = opening.wait(record.seconds);
 
     // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
     oclvox::VoxelizeOptions options;

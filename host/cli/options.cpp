@@ -219,10 +219,24 @@ void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& 
         ->group(group);
 }
 
-std::optional<oclvox::Device> open_device(const DeviceArgs& args, double& seconds) {
+DeviceOpening::DeviceOpening(const DeviceArgs& args) : reference_(args.reference) {
+    if (!reference_)
+        opening_ = std::async(std::launch::async, [selector = args.selector] {
+            const Clock::time_point start = Clock::now();
+            oclvox::Device device = oclvox::Device::open(selector);
+            return Opened{std::move(device), seconds_since(start)};
+        });
+}
+
+std::optional<oclvox::Device> DeviceOpening::wait(Timings& seconds) {
     std::optional<oclvox::Device> device;
-    if (!args.reference) {
-        device.emplace(timed(seconds, [&] { return oclvox::Device::open(args.selector); }));
+    if (!reference_) {
+        const Clock::time_point waiting = Clock::now();
+        Opened opened = opening_.get();
+        const double waited = seconds_since(waiting);
+        device.emplace(std::move(opened.device));
+        seconds.device_open += waited;
+        seconds.device_open_overlapped += std::max(0.0, opened.seconds - waited);
         device->on_kernel_compile([](const oclvox::Device::KernelCompile& c) {
             if (!c.finished)
                 std::fprintf(stderr,

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <future>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -50,10 +51,26 @@ struct DeviceArgs {
     bool reference = false;
 };
 void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& group);
-// The device, unless the CPU reference was asked for. Kernels are built (or loaded from the disk
-// cache) when first used; a build, which only the first run on a device pays, is announced on
-// stderr because it can take tens of seconds.
-std::optional<oclvox::Device> open_device(const DeviceArgs& args, double& seconds);
+// The device, unless the CPU reference was asked for, opened on a thread of its own from
+// construction on, so that an OpenCL platform's start (a quarter of a second on NVIDIA's driver,
+// 20 ms for PoCL) passes while the command loads its inputs. wait() hands it over, booking the
+// time it waited as the device-open phase and the rest of the open's time, spent beside the
+// caller's work, as `device_open_overlapped`, and rethrows the open's error (a DeviceError) there.
+// Kernels are built (or loaded from the disk cache) when first used; a build, which only the first
+// run on a device pays, is announced on stderr because it can take tens of seconds.
+class DeviceOpening {
+  public:
+    explicit DeviceOpening(const DeviceArgs& args);
+    std::optional<oclvox::Device> wait(Timings& seconds);
+
+  private:
+    struct Opened {
+        oclvox::Device device;
+        double seconds;  // the open's own wall time
+    };
+    bool reference_;
+    std::future<Opened> opening_;
+};
 
 // --brick-size, --device-memory, --host-memory, --download.
 struct TilingArgs {

@@ -39,6 +39,9 @@ struct InputRecord {
 // the field commands' is "field".
 struct Timings {
     double load = 0, fit = 0, device_open = 0, compute = 0, mesh = 0, write = 0, total = 0;
+    // The part of the device's opening that ran beside loading (DeviceOpening); device_open is
+    // only what the run waited for after it, so that the phases add up to the total.
+    double device_open_overlapped = 0;
 };
 
 struct RunRecord {
