@@ -444,74 +444,78 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
 }
 
 #ifdef __OPENCL_VERSION__
-// The three predicates for a row of 4 voxels along x, (qx + 0..3, qy, qz), in the lanes of an
-// int4 (-1 where the voxel overlaps): lane by lane the same operations in the same order as the
-// scalar functions above, so every lane is the scalar result (the kernels are tested against the
-// reference bit for bit). A CPU device then tests a row in one vector register, without the
-// branches of voxel-by-voxel early exits; the one exit left is a row the plane test rejects
-// whole. A strict bit of the setup becomes a lane mask.
+// The three predicates for a 4x4x4 block, factored. Each predicate is an AND of tests: a plane
+// test, which reads all three coordinates of a voxel, and nine tests of the three axis-aligned
+// projections, each of which reads only the two coordinates its projection keeps (SAT's nine
+// edge axes, PEF's and thin's nine edge functions). So a block's projection tests are taken once
+// per 4x4 face (4 rows of 4 lanes a projection) instead of once per voxel, and only the plane
+// test once per row. Every test is the same float expression, in the same order, as in the scalar
+// functions above, and an AND does not depend on the order of its terms: every voxel is the
+// scalar result (the kernels are tested against the reference bit for bit). The lanes are int4
+// masks (-1 where the test holds); a strict bit of the setup becomes a lane mask.
 OV_FN int4 ov_strict4(int strict, int bit) {
     return (int4)(-((strict >> bit) & 1));
 }
 
-// The anchor-relative x of the row's 4 voxels, from the first one's.
-OV_FN float4 ov_row4(int qx0) {
-    return convert_float4((int4)(qx0) + (int4)(0, 1, 2, 3));
+// The anchor-relative coordinates q0 .. q0 + 3 of a block's 4 voxels along one axis.
+OV_FN float4 ov_row4(int q0) {
+    return convert_float4((int4)(q0) + (int4)(0, 1, 2, 3));
 }
 
-// PEF's and thin's nine projected edge functions of a row: n . q' + offset >= 0 (> 0 where the
-// setup's strict bit says so), as the scalar functions evaluate them.
-OV_FN int4 ov_edge_functions4(const float edge_normal[3][3][2], const float edge_offset[3][3],
-                              int strict, const float4 q[3]) {
+// Projection k's tests (k = 0: the (y, z) plane, 1: (z, x), 2: (x, y); a1 and a2 as in the
+// setups) at coordinates c1 along a1 and c2 along a2.
+OV_FN int4 ov_sat_projection4(const OvSatTriangle* s, int k, float4 c1, float4 c2) {
     int4 m = (int4)(-1);
-    for (int k = 0; k < 3; ++k) {
-        int a1 = k == 2 ? 0 : k + 1;
-        int a2 = a1 == 2 ? 0 : a1 + 1;
-        for (int j = 0; j < 3; ++j) {
-            float4 e =
-                edge_normal[k][j][0] * q[a1] + edge_normal[k][j][1] * q[a2] + edge_offset[k][j];
-            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(strict, 3 * k + j)));
-        }
+    for (int j = 0; j < 3; ++j) {
+        int i = 3 * k + j;
+        float4 d = s->axis[i][0] * c1 + s->axis[i][1] * c2;
+        m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);
     }
     return m;
 }
 
-OV_FN int4 ov_sat_overlaps4(const OvSatTriangle* s, int qx0, float qy, float qz) {
-    float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
-    float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2];
-    int4 m = ~(dn < s->normal_lo) & ~(dn > s->normal_hi);
-    if (!any(m)) return m;
-    for (int k = 0; k < 3; ++k) {
-        int a1 = k == 2 ? 0 : k + 1;
-        int a2 = a1 == 2 ? 0 : a1 + 1;
-        for (int j = 0; j < 3; ++j) {
-            int i = 3 * k + j;
-            float4 d = s->axis[i][0] * q[a1] + s->axis[i][1] * q[a2];
-            m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);
-        }
+OV_FN int4 ov_edge_projection4(const float edge_normal[3][3][2], const float edge_offset[3][3],
+                               int strict, int k, float4 c1, float4 c2) {
+    int4 m = (int4)(-1);
+    for (int j = 0; j < 3; ++j) {
+        float4 e = edge_normal[k][j][0] * c1 + edge_normal[k][j][1] * c2 + edge_offset[k][j];
+        m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(strict, 3 * k + j)));
     }
     return m;
 }
 
-OV_FN int4 ov_pef_overlaps4(const OvPefTriangle* s, int qx0, float qy, float qz) {
-    float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
-    float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2];
+OV_FN int4 ov_pef_projection4(const OvPefTriangle* s, int k, float4 c1, float4 c2) {
+    return ov_edge_projection4(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);
+}
+
+OV_FN int4 ov_thin_projection4(const OvThinTriangle* s, int k, float4 c1, float4 c2) {
+    return ov_edge_projection4(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);
+}
+
+// The plane test of a row of 4 voxels along x at anchor-relative (qx, qy, qz).
+OV_FN int4 ov_sat_plane4(const OvSatTriangle* s, float4 qx, float qy, float qz) {
+    float4 dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
+    return ~(dn < s->normal_lo) & ~(dn > s->normal_hi);
+}
+
+OV_FN int4 ov_pef_plane4(const OvPefTriangle* s, float4 qx, float qy, float qz) {
+    float4 dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
     float4 e1 = dn + s->d1;
     float4 e2 = dn + s->d2;
     int4 m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict4(s->strict, 9)));
-    m &= ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict4(s->strict, 10)));
-    if (!any(m)) return m;
-    return m & ov_edge_functions4(s->edge_normal, s->edge_offset, s->strict, q);
+    return m & ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict4(s->strict, 10)));
 }
 
-OV_FN int4 ov_thin_overlaps4(const OvThinTriangle* s, int qx0, float qy, float qz) {
-    float4 q[3] = {ov_row4(qx0), (float4)(qy), (float4)(qz)};
-    float4 dn = s->normal[0] * q[0] + s->normal[1] * q[1] + s->normal[2] * q[2] + s->plane_offset;
+OV_FN int4 ov_thin_plane4(const OvThinTriangle* s, float4 qx, float qy, float qz) {
+    float4 dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset;
     int4 m = ~(dn > s->plane_half) & ~(dn < -s->plane_half);
-    m &= ~(((dn == -s->plane_half) & ov_strict4(s->strict, 9)) |
-           ((dn == s->plane_half) & ov_strict4(s->strict, 10)));
-    if (!any(m)) return m;
-    return m & ov_edge_functions4(s->edge_normal, s->edge_offset, s->strict, q);
+    return m & ~(((dn == -s->plane_half) & ov_strict4(s->strict, 9)) |
+                 ((dn == s->plane_half) & ov_strict4(s->strict, 10)));
+}
+
+// The 4 lanes of a mask as the low 4 bits of an int (lane i at bit i).
+OV_FN uint ov_lane_bits(int4 m) {
+    return (uint)((m.s0 & 1) | (m.s1 & 2) | (m.s2 & 4) | (m.s3 & 8));
 }
 #endif
 

@@ -1,8 +1,9 @@
 // Conservative (26-separating) surface voxelization, OpenCL C 1.2.
 //
 // One work item per (triangle, run of up to OV_BLOCKS_PER_ITEM 4x4x4 blocks): it computes its
-// triangle's overlap-test constants and voxel range, tests each block's voxels a row of 4 at a
-// time, gathers a 64-bit mask privately and ORs it into the brick's bits with at most two 32-bit
+// triangle's overlap-test constants and voxel range, tests each block's voxels (its three
+// projections a face at a time, then the plane a row of 4 at a time), gathers a 64-bit mask
+// privately and ORs it into the brick's bits with at most two 32-bit
 // atomics. The constants are computed by every item rather than once per triangle in a setup pass:
 // most triangles have one or two items, and a setup pass's buffer (up to 184 bytes a triangle,
 // written once and read once) cost more than the arithmetic, in fresh memory on CPU devices above
@@ -40,12 +41,21 @@ static int decode_item(__global const OvTriangle* triangles, int half_open,
     return 1;
 }
 
-// The global coordinates of block b of the item's pair.
+// The global coordinates of block b of the item's pair (x fastest), and the step to the next:
+// divisions once per item, an increment per block.
 static void item_block(const Item* it, int b, int block[3]) {
     int cx = it->work.block_count[0], cy = it->work.block_count[1];
     block[0] = it->work.block_lo[0] + b % cx;
     block[1] = it->work.block_lo[1] + b / cx % cy;
     block[2] = it->work.block_lo[2] + b / (cx * cy);
+}
+
+static void next_block(const Item* it, int block[3]) {
+    if (++block[0] < it->work.block_lo[0] + it->work.block_count[0]) return;
+    block[0] = it->work.block_lo[0];
+    if (++block[1] < it->work.block_lo[1] + it->work.block_count[1]) return;
+    block[1] = it->work.block_lo[1];
+    ++block[2];
 }
 
 static void store_block(__global uint* bits, const Item* it, const int block[3], int brick_size,
@@ -61,10 +71,14 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
 }
 
 // One voxelize kernel per predicate, written once: SETUP is the per-triangle struct made by
-// SETUP_FN, OVERLAPS4 its test of a row of 4 voxels along x (voxel_math.h), whose lanes outside
-// the pair's voxel range are dropped. CONSERVATIVE (1 for SAT and PEF) sets the voxel of a
-// triangle whose range is one voxel without testing it (ov_range_is_one_voxel).
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, OVERLAPS4, CONSERVATIVE)                        \
+// SETUP_FN, PLANE4 its plane test of a row of 4 voxels along x and PROJECTION4 the tests of one
+// of its three projections (voxel_math.h). A block's projection tests are taken first, a 4x4
+// face each: the (y, z) face as 4 layers of y lanes, (z, x) as 4 layers of x lanes, (x, y) as 4
+// rows of x lanes; then each row whose (y, z) test holds takes the plane test and the other two
+// faces' lanes. Lanes outside the pair's voxel range are dropped. CONSERVATIVE (1 for SAT and
+// PEF) sets the voxel of a triangle whose range is one voxel without testing it
+// (ov_range_is_one_voxel).
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, PLANE4, PROJECTION4, CONSERVATIVE)              \
     __kernel void NAME(__global const OvTriangle* triangles, int half_open,                       \
                        __global const uint* pair_triangle, __global const uint* pair_slot,        \
                        __global const uint* pair_first_item, __global const uint* item_pair,      \
@@ -85,28 +99,42 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
             return;                                                                               \
         }                                                                                         \
         SETUP s = SETUP_FN(t, half_open);                                                         \
-        for (int b = it.block_first; b < it.block_end; ++b) {                                     \
-            int block[3];                                                                         \
-            item_block(&it, b, block);                                                            \
+        int block[3];                                                                             \
+        item_block(&it, it.block_first, block);                                                   \
+        for (int b = it.block_first; b < it.block_end; ++b, next_block(&it, block)) {             \
             /* Skip the block if it lies entirely on one side of the triangle's plane. */         \
             float block_dn = s.normal[0] * (float)(block[0] * 4 - s.anchor[0]) +                  \
                              s.normal[1] * (float)(block[1] * 4 - s.anchor[1]) +                  \
                              s.normal[2] * (float)(block[2] * 4 - s.anchor[2]);                   \
             if (block_dn < s.block_lo || block_dn > s.block_hi) continue;                         \
-            uint mask_lo = 0, mask_hi = 0;                                                        \
             int lo[3], hi[3];                                                                     \
             for (int k = 0; k < 3; ++k) {                                                         \
                 lo[k] = max(it.work.voxel_lo[k], block[k] * 4);                                   \
                 hi[k] = min(it.work.voxel_hi[k], block[k] * 4 + 3);                               \
             }                                                                                     \
+            /* The three faces' tests of the rows in range: yz[z] holds y lanes, zx[z] and xy[y]  \
+               x lanes. */                                                                        \
+            float4 qx = ov_row4(block[0] * 4 - s.anchor[0]);                                      \
+            float4 qy = ov_row4(block[1] * 4 - s.anchor[1]);                                      \
+            uint yz[4];                                                                           \
+            int4 zx[4], xy[4];                                                                    \
+            for (int z = lo[2]; z <= hi[2]; ++z) {                                                \
+                float qz = (float)(z - s.anchor[2]);                                              \
+                yz[z & 3] = ov_lane_bits(PROJECTION4(&s, 0, qy, (float4)(qz)));                   \
+                zx[z & 3] = PROJECTION4(&s, 1, (float4)(qz), qx);                                 \
+            }                                                                                     \
+            for (int y = lo[1]; y <= hi[1]; ++y)                                                  \
+                xy[y & 3] = PROJECTION4(&s, 2, qx, (float4)((float)(y - s.anchor[1])));           \
             int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                   \
             int4 in_range = (x >= lo[0]) & (x <= hi[0]);                                          \
+            uint mask_lo = 0, mask_hi = 0;                                                        \
             for (int z = lo[2]; z <= hi[2]; ++z)                                                  \
                 for (int y = lo[1]; y <= hi[1]; ++y) {                                            \
-                    int4 m =                                                                      \
-                        in_range & OVERLAPS4(&s, block[0] * 4 - s.anchor[0],                      \
-                                             (float)(y - s.anchor[1]), (float)(z - s.anchor[2])); \
-                    uint row = (uint)((m.s0 & 1) | (m.s1 & 2) | (m.s2 & 4) | (m.s3 & 8));         \
+                    if (!(yz[z & 3] >> (y & 3) & 1)) continue;                                    \
+                    int4 m = in_range & zx[z & 3] & xy[y & 3];                                    \
+                    if (!any(m)) continue;                                                        \
+                    m &= PLANE4(&s, qx, (float)(y - s.anchor[1]), (float)(z - s.anchor[2]));      \
+                    uint row = ov_lane_bits(m);                                                   \
                     int bit = ov_block_bit(0, y & 3, z & 3);                                      \
                     if (bit < 32)                                                                 \
                         mask_lo |= row << bit;                                                    \
@@ -117,6 +145,7 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
         }                                                                                         \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_overlaps4, 1)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_overlaps4, 1)
-OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_setup_thin, ov_thin_overlaps4, 0)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_plane4, ov_sat_projection4, 1)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_plane4, ov_pef_projection4, 1)
+OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_setup_thin, ov_thin_plane4,
+                   ov_thin_projection4, 0)
