@@ -112,35 +112,32 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
                 lo[k] = max(it.work.voxel_lo[k], block[k] * 4);                                   \
                 hi[k] = min(it.work.voxel_hi[k], block[k] * 4 + 3);                               \
             }                                                                                     \
-            /* The three faces' tests of the rows in range: yz[z] holds y lanes, zx[z] and xy[y]  \
-               x lanes. */                                                                        \
+            /* The three faces' tests of the rows in range, as 16-bit masks of 4 rows of 4        \
+               lanes: yz bit y + 4z, zx bit x + 4z, xy bit x + 4y (block-local). */               \
             float4 qx = ov_row4(block[0] * 4 - s.anchor[0]);                                      \
             float4 qy = ov_row4(block[1] * 4 - s.anchor[1]);                                      \
-            uint yz[4];                                                                           \
-            int4 zx[4], xy[4];                                                                    \
+            uint yz = 0, zx = 0, xy = 0;                                                          \
             for (int z = lo[2]; z <= hi[2]; ++z) {                                                \
                 float qz = (float)(z - s.anchor[2]);                                              \
-                yz[z & 3] = ov_lane_bits(PROJECTION4(&s, 0, qy, (float4)(qz)));                   \
-                zx[z & 3] = PROJECTION4(&s, 1, (float4)(qz), qx);                                 \
+                yz |= ov_lane_bits(PROJECTION4(&s, 0, qy, (float4)(qz))) << 4 * (z & 3);          \
+                zx |= ov_lane_bits(PROJECTION4(&s, 1, (float4)(qz), qx)) << 4 * (z & 3);          \
             }                                                                                     \
             for (int y = lo[1]; y <= hi[1]; ++y)                                                  \
-                xy[y & 3] = PROJECTION4(&s, 2, qx, (float4)((float)(y - s.anchor[1])));           \
+                xy |= ov_lane_bits(PROJECTION4(&s, 2, qx, (float4)((float)(y - s.anchor[1]))))    \
+                      << 4 * (y & 3);                                                             \
             int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                   \
-            int4 in_range = (x >= lo[0]) & (x <= hi[0]);                                          \
-            uint mask_lo = 0, mask_hi = 0;                                                        \
+            uint xs = ov_lane_bits((x >= lo[0]) & (x <= hi[0]));                                  \
+            ulong mask = 0;                                                                       \
             for (int z = lo[2]; z <= hi[2]; ++z)                                                  \
                 for (int y = lo[1]; y <= hi[1]; ++y) {                                            \
-                    if (!(yz[z & 3] >> (y & 3) & 1)) continue;                                    \
-                    int4 m = in_range & zx[z & 3] & xy[y & 3];                                    \
-                    if (!any(m)) continue;                                                        \
-                    m &= PLANE4(&s, qx, (float)(y - s.anchor[1]), (float)(z - s.anchor[2]));      \
-                    uint row = ov_lane_bits(m);                                                   \
-                    int bit = ov_block_bit(0, y & 3, z & 3);                                      \
-                    if (bit < 32)                                                                 \
-                        mask_lo |= row << bit;                                                    \
-                    else                                                                          \
-                        mask_hi |= row << (bit - 32);                                             \
+                    if (!(yz >> ((y & 3) + 4 * (z & 3)) & 1)) continue;                           \
+                    uint lanes = zx >> 4 * (z & 3) & xy >> 4 * (y & 3) & xs & 0xFu;               \
+                    if (!lanes) continue;                                                         \
+                    lanes &= ov_lane_bits(                                                        \
+                        PLANE4(&s, qx, (float)(y - s.anchor[1]), (float)(z - s.anchor[2])));      \
+                    mask |= (ulong)lanes << ov_block_bit(0, y & 3, z & 3);                        \
                 }                                                                                 \
+            uint mask_lo = (uint)mask, mask_hi = (uint)(mask >> 32);                              \
             store_block(bits, &it, block, brick_size, mask_lo, mask_hi);                          \
         }                                                                                         \
     }
