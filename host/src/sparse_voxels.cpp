@@ -1,8 +1,10 @@
 // Sparse brick storage of a bit grid. See SparseVoxels in oclvox.hpp for the layout.
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cstring>
+#include <functional>
 
 #include "bit_count.hpp"
 #include "host_memory.hpp"
@@ -84,11 +86,20 @@ void SparseVoxels::set(int64_t i, int64_t j, int64_t k) {
 }
 
 uint64_t SparseVoxels::count() const {
-    uint64_t n = 0;
-    for (const auto& [index, blocks] : bricks_)
-        for (uint64_t w : blocks)
-            if (w) n += uint64_t(detail::popcount64(w));  // most words of a surface are 0
-    return n;
+    // The bricks in parallel: a large surface's bricks hold hundreds of MiB of words (a serial
+    // count of stanford-bunny's at 1024^3 took 7 ms of a 75 ms voxelize phase).
+    std::vector<const std::vector<uint64_t>*> all;
+    all.reserve(bricks_.size());
+    for (const auto& [index, blocks] : bricks_) all.push_back(&blocks);
+    return tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, all.size()), uint64_t(0),
+        [&](const tbb::blocked_range<size_t>& range, uint64_t n) {
+            for (size_t i = range.begin(); i < range.end(); ++i)
+                for (uint64_t w : *all[i])
+                    if (w) n += uint64_t(detail::popcount64(w));  // most words of a surface are 0
+            return n;
+        },
+        std::plus<uint64_t>());
 }
 
 void SparseVoxels::merge_brick(uint64_t brick_index, const uint64_t* blocks) {
