@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The checks a session with a lent GPU machine should run, prepared as one call (device time is
+# short: every start, wait and rerun counts). Here, first:
+#   bash scripts/build.sh -DOCLVOX_BUILD_TESTS=ON
+#   PACK_MESHES="bunny00.off spot.obj stanford-bunny.obj buildings.obj motorBike.obj TR12J_OCC.stl \
+#     flange.stl horse.ply mug.obj spot_quadrangulated.obj double-torus-example.off" \
+#     bash ../shared/tools/gpu/pack.sh build
+# Then with the device tool, from the repository root:
+#   run(command="source .gpu/env.sh && bash scripts/gpu_check.sh", carry=[".gpu"], timeout_s=540)
+# It writes under $OUT (the device tool brings it back):
+#   tests.txt    each C++ test binary on the GPU (OCLVOX_DEVICE as env.sh set it): exit status and
+#                gtest's summary; the whole output in tests/NAME.log
+#   same.txt     surface, thin and parity voxels of a few meshes on the GPU and through PoCL
+#                (`OCLVOX_DEVICE=Portable`, the same machine's 16 cores): "same" where the two
+#                .binvox files are byte-identical, as the kernels promise
+#   GPU.md       bench/targets.py --set gpu: the whole-process targets of issues 8 and 9
+# Each part has a time limit of its own, so one that hangs leaves the others their time.
+set -uo pipefail
+out=${OUT:-/tmp/oclvox-gpu-check}
+mkdir -p "$out/tests"
+meshes=$(dirname "$B")/meshes
+
+# Part 1: the C++ test binaries (the CLI's shell tests assume PoCL's timing; not run here).
+: > "$out/tests.txt"
+for test in "$B"/test_*; do
+    name=$(basename "$test")
+    timeout 150 "$test" --gtest_brief=1 > "$out/tests/$name.log" 2>&1
+    status=$?
+    echo "$name exit $status: $(grep -E '^\[  (PASSED|FAILED)  \]' "$out/tests/$name.log" | tr '\n' ' ')" |
+        tee -a "$out/tests.txt"
+done
+
+# Part 2: the GPU's voxels against PoCL's, byte for byte.
+: > "$out/same.txt"
+work=$(mktemp -d)
+for mesh in stanford-bunny.obj buildings.obj TR12J_OCC.stl bunny00.off; do
+    [[ -f $meshes/$mesh ]] || continue
+    for mode in "--test sat" "--test pef" "--mode thin" "--test sat --boundary half-open" \
+        "--mode solid --inside parity"; do
+        [[ $mode == *solid* && $mesh != bunny00.off ]] && continue  # parity needs a closed mesh
+        # shellcheck disable=SC2086  # $mode is several words
+        timeout 60 "$B/oclvox" voxelize "$meshes/$mesh" -r 700 $mode -o "$work/gpu.binvox" --quiet &&
+            OCLVOX_DEVICE=Portable timeout 120 "$B/oclvox" voxelize "$meshes/$mesh" -r 700 $mode \
+                -o "$work/pocl.binvox" --quiet &&
+            cmp -s "$work/gpu.binvox" "$work/pocl.binvox"
+        status=$?
+        echo "$mesh 700 $mode: $([[ $status == 0 ]] && echo same || echo DIFFERENT)" |
+            tee -a "$out/same.txt"
+    done
+done
+rm -rf "$work"
+
+# Part 3: issue 8's and 9's GPU targets, whole processes.
+timeout 300 python3 bench/targets.py --oclvox "$B/oclvox" --meshes "$meshes" --set gpu --repeat 3 \
+    --out "$out/GPU.md"
