@@ -41,8 +41,8 @@ static int decode_item(__global const OvTriangle* triangles, int half_open,
     return 1;
 }
 
-// The global coordinates of block b of the item's pair (x fastest), and the step to the next:
-// divisions once per item, an increment per block.
+// The global coordinates of block b of the item's pair (x fastest), found once per item, and the
+// step to the next block (an increment, not three divisions per block).
 static void item_block(const Item* it, int b, int block[3]) {
     int cx = it->work.block_count[0], cy = it->work.block_count[1];
     block[0] = it->work.block_lo[0] + b % cx;
@@ -130,8 +130,8 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
             ulong mask = 0;                                                                       \
             for (int z = lo[2]; z <= hi[2]; ++z)                                                  \
                 for (int y = lo[1]; y <= hi[1]; ++y) {                                            \
-                    if (!(yz >> ((y & 3) + 4 * (z & 3)) & 1)) continue;                           \
-                    uint lanes = zx >> 4 * (z & 3) & xy >> 4 * (y & 3) & xs & 0xFu;               \
+                    if (!((yz >> ((y & 3) + 4 * (z & 3))) & 1)) continue;                         \
+                    uint lanes = (zx >> 4 * (z & 3)) & (xy >> 4 * (y & 3)) & xs & 0xFu;           \
                     if (!lanes) continue;                                                         \
                     lanes &= ov_lane_bits(                                                        \
                         PLANE4(&s, qx, (float)(y - s.anchor[1]), (float)(z - s.anchor[2])));      \

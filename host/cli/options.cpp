@@ -219,8 +219,8 @@ void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& 
         ->group(group);
 }
 
-DeviceOpening::DeviceOpening(const DeviceArgs& args) : reference_(args.reference) {
-    if (!reference_)
+DeviceOpening::DeviceOpening(const DeviceArgs& args) {
+    if (!args.reference)
         opening_ = std::async(std::launch::async, [selector = args.selector] {
             const Clock::time_point start = Clock::now();
             oclvox::Device device = oclvox::Device::open(selector);
@@ -230,7 +230,7 @@ DeviceOpening::DeviceOpening(const DeviceArgs& args) : reference_(args.reference
 
 std::optional<oclvox::Device> DeviceOpening::wait(Timings& seconds) {
     std::optional<oclvox::Device> device;
-    if (!reference_) {
+    if (opening_.valid()) {
         const Clock::time_point waiting = Clock::now();
         Opened opened = opening_.get();
         const double waited = seconds_since(waiting);

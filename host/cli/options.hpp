@@ -68,8 +68,7 @@ class DeviceOpening {
         oclvox::Device device;
         double seconds;  // the open's own wall time
     };
-    bool reference_;
-    std::future<Opened> opening_;
+    std::future<Opened> opening_;  // not valid for the CPU reference
 };
 
 // --brick-size, --device-memory, --host-memory, --download.
