@@ -106,14 +106,18 @@ OV_FN float ov_max3(float a, float b, float c) {
     return fmax(fmax(a, b), c);
 }
 
+// The range along one axis, from the anchor and the three vertices' coordinates on that axis.
+OV_FN void ov_axis_range(int anchor, float a, float b, float c, int half_open, int* lo, int* hi) {
+    float low = ov_min3(a, b, c);
+    float high = ov_max3(a, b, c);
+    *lo = anchor + (half_open ? ov_floor_int(low) : ov_ceil_int(low) - 1);
+    *hi = anchor + ov_floor_int(high);
+}
+
 OV_FN OvRange ov_triangle_range(OvTriangle t, int half_open) {
     OvRange r;
-    for (int k = 0; k < 3; ++k) {
-        float lo = ov_min3(t.u[k], t.u[3 + k], t.u[6 + k]);
-        float hi = ov_max3(t.u[k], t.u[3 + k], t.u[6 + k]);
-        r.lo[k] = t.anchor[k] + (half_open ? ov_floor_int(lo) : ov_ceil_int(lo) - 1);
-        r.hi[k] = t.anchor[k] + ov_floor_int(hi);
-    }
+    for (int k = 0; k < 3; ++k)
+        ov_axis_range(t.anchor[k], t.u[k], t.u[3 + k], t.u[6 + k], half_open, &r.lo[k], &r.hi[k]);
     return r;
 }
 

@@ -7,6 +7,7 @@
 
 #include "binning.hpp"
 #include "device_batches.hpp"
+#include "overlap_double.hpp"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -293,6 +294,57 @@ TEST(Binning, EveryPointOfATriangleIsInOneOfItsBricks) {
                            << ", which it is not binned to";
             }
     EXPECT_GT(checked, 3000u);
+}
+
+// Exact: every brick a triangle is binned to meets it. A triangle whose bricks form a row along
+// one axis, inside the grid across the other two, is binned to the whole row without the cull's
+// test, which must lose nothing: each brick of such a row meets the triangle (the double-precision
+// test on the closed brick box grown by 1e-9), as does the one brick of a triangle within it.
+// Other multi-brick triangles keep the bricks their cull keeps, which may be up to its margin
+// (1e-3 and more) away; a triangle reaching out of the grid beside its one brick is not tested.
+// Small triangles cross brick faces; others lie in a brick face, or touch one with a vertex, or
+// reach out of the grid.
+TEST(Binning, EveryBrickOfATriangleMeetsIt) {
+    Mesh m = random_triangles(20000, -2, 66, 3, 13);
+    std::mt19937 rng(17);
+    std::uniform_int_distribution<int> face(0, 8), axis(0, 2);
+    for (int t = 0; t < 4000; ++t) {  // in a brick face, or touching one with a vertex
+        const auto tri = m.triangles[size_t(t)];
+        const int k = axis(rng);
+        const double plane = 8.0 * face(rng);
+        for (int c = t % 2 ? 0 : 2; c < 3; ++c) m.positions[tri[size_t(c)]][size_t(k)] = plane;
+    }
+    const Grid g = unit_grid(64, 64, 64);
+    const detail::PreparedTriangles prepared = detail::prepare_triangles(m, g);
+    const detail::Binning binning =
+        detail::bin_triangles(prepared, g, 8, detail::BrickSelection({}, SparseVoxels(g, 8)));
+    uint64_t row_pairs = 0;
+    for (const auto& [brick, piece] : binned_pairs(binning)) {
+        const detail::OvTriangle& tri = prepared.triangles[piece];
+        const detail::OvRange& r = prepared.ranges[piece];
+        Vec3d v[3];
+        int spanning = 0;
+        bool within = true;
+        for (int k = 0; k < 3; ++k) {
+            for (int i = 0; i < 3; ++i) v[i][k] = double(tri.anchor[k]) + double(tri.u[3 * i + k]);
+            const int64_t lo = std::max<int64_t>(r.lo[k], 0) / 8, hi = std::min(r.hi[k], 63) / 8;
+            if (lo != hi)
+                ++spanning;
+            else
+                within = within && r.lo[k] >= 0 && r.hi[k] <= 63;
+        }
+        if (spanning == 0 && !within) continue;
+        const bool row = spanning == 1 && within;
+        row_pairs += row;
+        const double margin = row || spanning == 0 ? 1e-9 : 2e-3 + 1e-5 * 70;
+        const int64_t b[3] = {int64_t(brick % 8), int64_t(brick / 8 % 8), int64_t(brick / 64)};
+        const Vec3d lo{8.0 * b[0] - margin, 8.0 * b[1] - margin, 8.0 * b[2] - margin};
+        const Vec3d hi{8.0 * b[0] + 8 + margin, 8.0 * b[1] + 8 + margin, 8.0 * b[2] + 8 + margin};
+        if (!detail::triangle_box_overlap_double(v[0], v[1], v[2], lo, hi))
+            FAIL() << "piece " << piece << (row ? " (a row)" : "") << " is binned to brick "
+                   << brick << ", which it does not meet";
+    }
+    EXPECT_GT(row_pairs, 5000u);
 }
 
 // ---- selection_triangles ----

@@ -46,9 +46,28 @@ double cull_margin(const OvTriangle& t) {
     return 1e-3 + 1e-5 * double(largest);
 }
 
+// Whether the triangle of voxel range r, whose bricks b span several bricks along one axis only,
+// meets every one of them, so that the cull would keep them all. It does when its voxel range
+// along the other two axes lies within the grid (unclipped): then the triangle lies within that
+// row of bricks across those axes (a voxel range starts at or below the triangle's minimum and
+// ends less than one voxel below its maximum), and, being connected, it meets every slab of the
+// row along the spanning axis that its range reaches. Most multi-brick triangles just cross one
+// brick face, and the cull was half of binning them.
+bool meets_every_brick_of_row(const OvRange& r, const BrickRange& b, const Grid& grid) {
+    int spanning = 0;
+    bool within = true;
+    for (int k = 0; k < 3; ++k) {
+        if (b.lo[k] != b.hi[k])
+            ++spanning;
+        else
+            within = within && r.lo[k] >= 0 && r.hi[k] <= grid.dims[k] - 1;
+    }
+    return spanning == 1 && within;
+}
+
 // Calls f(brick index) for every brick triangle t may touch: those its voxel range overlaps, less
-// (for a triangle spanning several bricks) those the double-precision test on the brick box
-// grown by cull_margin proves it misses.
+// (for a triangle spanning several bricks, unless it spans a row that it meets every brick of)
+// those the double-precision test on the brick box grown by cull_margin proves it misses.
 template <class F>
 void for_each_brick_of(const PreparedTriangles& prepared, size_t t, const Grid& grid,
                        int brick_size, const BrickDivider& divider, F&& f) {
@@ -58,6 +77,13 @@ void for_each_brick_of(const PreparedTriangles& prepared, size_t t, const Grid& 
     const int64_t nby = (grid.dims[1] + brick_size - 1) / brick_size;
     if (b.count() == 1) {  // most triangles: nothing to cull
         f(uint64_t(b.lo[0] + nbx * (b.lo[1] + nby * b.lo[2])));
+        return;
+    }
+    if (meets_every_brick_of_row(prepared.ranges[t], b, grid)) {
+        for (int64_t bz = b.lo[2]; bz <= b.hi[2]; ++bz)
+            for (int64_t by = b.lo[1]; by <= b.hi[1]; ++by)
+                for (int64_t bx = b.lo[0]; bx <= b.hi[0]; ++bx)
+                    f(uint64_t(bx + nbx * (by + nby * bz)));
         return;
     }
     const OvTriangle& tri = prepared.triangles[t];
