@@ -124,8 +124,9 @@ OV_FN OvRange ov_triangle_range(OvTriangle t, int half_open) {
 // Whether the range is a single voxel. Then the triangle lies in that voxel's box (closed: every
 // coordinate strictly between its faces; half-open: within [i, i+1)), so a conservative test
 // overlaps it and no other voxel, exactly, whatever the rounding of the per-voxel test: SAT and PEF
-// set it without their setup or tests. That is most triangles of a finely tessellated mesh at a
-// coarse grid (85% of buildings' at 256³, 59% at 1024³). Thin voxels must still be tested.
+// set it without their setup or tests (on a device, through set_direct_bits in voxelize.cl). That
+// is most triangles of a finely tessellated mesh at a coarse grid (85% of buildings' at 256³, 59%
+// at 1024³). Thin voxels must still be tested.
 OV_FN int ov_range_is_one_voxel(OvRange r) {
     return r.lo[0] == r.hi[0] && r.lo[1] == r.hi[1] && r.lo[2] == r.hi[2];
 }
@@ -526,6 +527,15 @@ OV_FN uint ov_lane_bits(int4 m) {
 // Bit of voxel (x, y, z) (local to its 4x4x4 block) in the block's 64-bit mask.
 OV_FN int ov_block_bit(int x, int y, int z) {
     return x + 4 * (y + 4 * z);
+}
+
+// Index of block `block` (global block coordinates) among the blocks of brick `brick` (x
+// fastest): a brick's result is its blocks' 64-bit masks in this order, each as two 32-bit words
+// (bits 0-31, then 32-63), so the block's bits are bits 64 * index ... 64 * index + 63 of it.
+OV_FN int ov_brick_block(const int block[3], const int brick[3], int brick_size) {
+    int nb = brick_size / 4;
+    return (block[0] - brick[0] * nb) +
+           nb * ((block[1] - brick[1] * nb) + nb * (block[2] - brick[2] * nb));
 }
 
 // The work of one (triangle, brick) pair: the voxels of the triangle's range inside both the

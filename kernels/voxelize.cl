@@ -3,12 +3,16 @@
 // One work item per (triangle, run of up to OV_BLOCKS_PER_ITEM 4x4x4 blocks): it computes its
 // triangle's overlap-test constants and voxel range, tests each block's voxels (its three
 // projections a face at a time, then the plane a row of 4 at a time), gathers a 64-bit mask
-// privately and ORs it into the brick's bits with at most two 32-bit
-// atomics. The constants are computed by every item rather than once per triangle in a setup pass:
-// most triangles have one or two items, and a setup pass's buffer (up to 184 bytes a triangle,
-// written once and read once) cost more than the arithmetic, in fresh memory on CPU devices above
-// all. Each item is given its (triangle, brick) pair's index, so a huge triangle spreads over
-// many items instead of serialising on one.
+// privately and ORs it into the brick's bits with at most two 32-bit atomics. The constants are
+// computed by every item rather than once per triangle in a setup pass: most triangles have one
+// or two items, and a setup pass's buffer (up to 184 bytes a triangle, written once and read
+// once) cost more than the arithmetic, in fresh memory on CPU devices above all. Each item is
+// given its (triangle, brick) pair's index, so a huge triangle spreads over many items instead of
+// serialising on one.
+//
+// For SAT and PEF a triangle whose range is one voxel sets that voxel untested
+// (ov_range_is_one_voxel): the host sends those voxels to set_direct_bits instead, a work item
+// each that decodes no pair and reads no triangle.
 #include "voxel_math.h"
 
 typedef struct {
@@ -16,7 +20,6 @@ typedef struct {
     int brick[3];
     OvPairWork work;
     int block_first, block_end;  // this item's blocks, numbered within the pair x fastest
-    int one_voxel;               // the triangle's whole range is one voxel (ov_range_is_one_voxel)
 } Item;
 
 // Returns 0 for the padding items past the end of the launch.
@@ -37,7 +40,6 @@ static int decode_item(__global const OvTriangle* triangles, int half_open,
                               &it->work);
     it->block_first = (int)(item - pair_first_item[p]) * OV_BLOCKS_PER_ITEM;
     it->block_end = min(it->block_first + OV_BLOCKS_PER_ITEM, blocks);
-    it->one_voxel = ov_range_is_one_voxel(r);
     return 1;
 }
 
@@ -61,11 +63,9 @@ static void next_block(const Item* it, int block[3]) {
 static void store_block(__global uint* bits, const Item* it, const int block[3], int brick_size,
                         uint mask_lo, uint mask_hi) {
     int nb = brick_size / 4;
-    int bx = block[0] - it->brick[0] * nb;
-    int by = block[1] - it->brick[1] * nb;
-    int bz = block[2] - it->brick[2] * nb;
     size_t words_per_brick = 2 * (size_t)nb * nb * nb;
-    size_t word = it->slot * words_per_brick + 2 * (size_t)(bx + nb * (by + nb * bz));
+    size_t word =
+        it->slot * words_per_brick + 2 * (size_t)ov_brick_block(block, it->brick, brick_size);
     if (mask_lo) atomic_or(&bits[word], mask_lo);
     if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
 }
@@ -75,10 +75,8 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
 // of its three projections (voxel_math.h). A block's projection tests are taken first, a 4x4
 // face each: the (y, z) face as 4 layers of y lanes, (z, x) as 4 layers of x lanes, (x, y) as 4
 // rows of x lanes; then each row whose (y, z) test holds takes the plane test and the other two
-// faces' lanes. Lanes outside the pair's voxel range are dropped. CONSERVATIVE (1 for SAT and
-// PEF) sets the voxel of a triangle whose range is one voxel without testing it
-// (ov_range_is_one_voxel).
-#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, PLANE4, PROJECTION4, CONSERVATIVE)              \
+// faces' lanes. Lanes outside the pair's voxel range are dropped.
+#define OV_VOXELIZE_KERNEL(NAME, SETUP, SETUP_FN, PLANE4, PROJECTION4)                            \
     __kernel void NAME(__global const OvTriangle* triangles, int half_open,                       \
                        __global const uint* pair_triangle, __global const uint* pair_slot,        \
                        __global const uint* pair_first_item, __global const uint* item_pair,      \
@@ -90,14 +88,6 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
                          item_pair, slot_brick, item_base, item_end, brick_size, nx, ny, nz, &it, \
                          &t))                                                                     \
             return;                                                                               \
-        if (CONSERVATIVE && it.one_voxel) {                                                       \
-            const int* v = it.work.voxel_lo;                                                      \
-            int block[3] = {v[0] / 4, v[1] / 4, v[2] / 4};                                        \
-            int bit = ov_block_bit(v[0] & 3, v[1] & 3, v[2] & 3);                                 \
-            store_block(bits, &it, block, brick_size, bit < 32 ? 1u << bit : 0u,                  \
-                        bit < 32 ? 0u : 1u << (bit - 32));                                        \
-            return;                                                                               \
-        }                                                                                         \
         SETUP s = SETUP_FN(t, half_open);                                                         \
         int block[3];                                                                             \
         item_block(&it, it.block_first, block);                                                   \
@@ -142,7 +132,17 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
         }                                                                                         \
     }
 
-OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_plane4, ov_sat_projection4, 1)
-OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_plane4, ov_pef_projection4, 1)
+OV_VOXELIZE_KERNEL(voxelize_sat, OvSatTriangle, ov_setup_sat, ov_sat_plane4, ov_sat_projection4)
+OV_VOXELIZE_KERNEL(voxelize_pef, OvPefTriangle, ov_setup_pef, ov_pef_plane4, ov_pef_projection4)
 OV_VOXELIZE_KERNEL(voxelize_thin, OvThinTriangle, ov_setup_thin, ov_thin_plane4,
-                   ov_thin_projection4, 0)
+                   ov_thin_projection4)
+
+// Sets bits [first, end) of the list: each is a bit's index among the batch's brick bits (the
+// voxel of a one-voxel (triangle, brick) pair, for SAT and PEF: see ov_range_is_one_voxel).
+__kernel void set_direct_bits(__global const ulong* bit_index, uint first, uint end,
+                              __global uint* bits) {
+    uint i = first + (uint)get_global_id(0);
+    if (i >= end) return;
+    ulong bit = bit_index[i];
+    atomic_or(&bits[bit >> 5], 1u << (uint)(bit & 31));
+}

@@ -475,7 +475,7 @@ struct HandBinning {
     std::vector<uint32_t> pair_triangle{7, 8, 9, 10, 11};
     detail::PairBatch batch(size_t first, size_t max_slots, uint64_t max_items) const {
         return detail::make_pair_batch(
-            units, first_pair, pair_triangle, first, max_slots, "brick",
+            units, first_pair, pair_triangle, first, max_slots, "brick", 0,
             [](size_t) { return [](uint32_t triangle) { return cl_uint(triangle % 3); }; },
             max_items);
     }
@@ -495,6 +495,34 @@ TEST(PairBatches, HoldThePairsWithWorkAndEachItemsPair) {
     EXPECT_EQ(values(b.pair_slot), (std::vector<cl_uint>{0, 0, 2, 2}));
     EXPECT_EQ(values(b.pair_first_item), (std::vector<cl_uint>{0, 1, 3, 4}));
     EXPECT_EQ(values(b.item_pair), (std::vector<cl_uint>{0, 1, 1, 2, 3, 3}));
+}
+
+// Direct pairs (a bit of their unit's 1000, here triangle t's bit 10 * t in unit u) become bits
+// of the batch (slot * 1000 + bit), in unit order, and neither pairs nor work items; worked by
+// hand for units {7 (2 items), 8 (direct)}, {9 (direct)}, {10 (none), 11 (direct)}.
+TEST(PairBatches, DirectPairsAreTheirUnitsBitsInTheBatch) {
+    const HandBinning h;
+    auto batch = [&](size_t first) {
+        return detail::make_pair_batch(h.units, h.first_pair, h.pair_triangle, first, 3, "brick",
+                                       1000, [](size_t) {
+                                           return [](uint32_t t) {
+                                               return t == 7    ? cl_uint(2)
+                                                      : t == 10 ? cl_uint(0)
+                                                                : detail::kDirectBit | (10 * t);
+                                           };
+                                       });
+    };
+    const detail::PairBatch all = batch(0);
+    EXPECT_EQ(all.items, 2u);
+    EXPECT_EQ(values(all.pair_triangle), (std::vector<cl_uint>{7}));
+    EXPECT_EQ(values(all.item_pair), (std::vector<cl_uint>{0, 0}));
+    EXPECT_EQ(std::vector<cl_ulong>(all.direct_bits.begin(), all.direct_bits.end()),
+              (std::vector<cl_ulong>{80, 1090, 2110}));
+    const detail::PairBatch later = batch(1);  // slots count from the first unit
+    EXPECT_EQ(later.items, 0u);
+    EXPECT_TRUE(later.pair_triangle.empty());
+    EXPECT_EQ(std::vector<cl_ulong>(later.direct_bits.begin(), later.direct_bits.end()),
+              (std::vector<cl_ulong>{90, 1110}));
 }
 
 TEST(PairBatches, StopAtTheSlotsOrTheWorkItemsAndStartWhereAsked) {

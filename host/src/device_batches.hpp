@@ -95,87 +95,105 @@ class ZeroedSlotBuffer {
 // Work items of one batch are numbered with 32-bit offsets.
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 
+// What a unit counter returns for a pair whose whole work is one bit of its unit's result, set
+// without a kernel's tests: kDirectBit | that bit's index among the unit's bits (below 2^31).
+constexpr cl_uint kDirectBit = cl_uint(1) << 31;
+
 // One batch of a binning's units (bricks, brick columns) for a kernel with a work item per piece
 // of a (triangle, unit) pair: units [first_unit, first_unit + unit_count), the pairs that have
 // work (their triangle, their unit's slot in the batch, their first work item) and each work
-// item's pair.
+// item's pair; and the bits that direct pairs set, as indices among the batch's bits (slot *
+// unit_bits + the bit's index in its unit).
 struct PairBatch {
     size_t first_unit = 0, unit_count = 0;
     FilledLaterVector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
+    FilledLaterVector<cl_ulong> direct_bits;
     uint64_t items = 0;
 };
 
 // Gathers units [first, ...) of a binning (unit u's triangles are
 // pair_triangle[first_pair[u] .. first_pair[u + 1]), its name units[u]) into one batch of at
 // most max_slots units and max_items work items. unit_counter(u) gives a function of a triangle
-// that returns its work items in unit u (0: none). Units are independent, so their pairs
+// that returns its work items in unit u (0: none), or kDirectBit | a bit of the unit's result
+// (unit_bits bits a unit) that is the pair's whole work. Units are independent, so their pairs
 // are counted and then written in parallel; only the cut and the prefix sums are serial, a step a
 // unit. Throws GridError, naming `unit_name`, if one unit alone has too many work items.
 template <class UnitCounter>
 PairBatch make_pair_batch(const std::vector<uint64_t>& units,
                           const std::vector<uint64_t>& first_pair,
                           const std::vector<uint32_t>& pair_triangle, size_t first,
-                          size_t max_slots, const char* unit_name, UnitCounter&& unit_counter,
-                          uint64_t max_items = kMaxItemsPerBatch) {
+                          size_t max_slots, const char* unit_name, uint64_t unit_bits,
+                          UnitCounter&& unit_counter, uint64_t max_items = kMaxItemsPerBatch) {
     const size_t last = std::min(units.size(), first + max_slots);
     const uint64_t pair_base = first_pair[first];
 
-    // Phase 1: the work items of every pair of the candidate units, and per unit its items and
-    // the pairs that have any.
-    FilledLaterVector<cl_uint> pair_items(first_pair[last] - pair_base);
-    std::vector<uint64_t> unit_items(last - first), unit_pairs(last - first);
+    // Phase 1: the work of every pair of the candidate units, and per unit its items, the pairs
+    // that have any and its direct pairs.
+    struct UnitCounts {
+        uint64_t items, pairs, directs;
+    };
+    FilledLaterVector<cl_uint> pair_work(first_pair[last] - pair_base);
+    std::vector<UnitCounts> unit(last - first);
     tbb::parallel_for(first, last, [&](size_t u) {
-        const auto items_of = unit_counter(u);
-        uint64_t items = 0, pairs = 0;
+        const auto work_of = unit_counter(u);
+        UnitCounts counts{0, 0, 0};
         for (uint64_t p = first_pair[u]; p < first_pair[u + 1]; ++p) {
-            const cl_uint n = items_of(pair_triangle[p]);
-            pair_items[p - pair_base] = n;
-            items += n;
-            pairs += n > 0;
+            const cl_uint n = work_of(pair_triangle[p]);
+            pair_work[p - pair_base] = n;
+            if (n & kDirectBit) {
+                ++counts.directs;
+            } else {
+                counts.items += n;
+                counts.pairs += n > 0;
+            }
         }
-        unit_items[u - first] = items;
-        unit_pairs[u - first] = pairs;
+        unit[u - first] = counts;
     });
 
-    // Phase 2: as many units as fit the batch's work items, and where each one's pairs and items
-    // start (prefix sums, in place).
+    // Phase 2: as many units as fit the batch's work items, and where each one's pairs, items and
+    // direct bits start (prefix sums, in place).
     PairBatch batch;
     batch.first_unit = first;
-    uint64_t pairs = 0;
+    UnitCounts total{0, 0, 0};
     for (size_t u = first; u < last; ++u) {
-        const uint64_t items = unit_items[u - first];
-        if (batch.items + items > max_items) {
+        const UnitCounts counts = unit[u - first];
+        if (total.items + counts.items > max_items) {
             if (u == first)
                 throw GridError(std::string(unit_name) + " " + std::to_string(units[u]) +
-                                " needs " + std::to_string(items) +
+                                " needs " + std::to_string(counts.items) +
                                 " work items, more than one batch can hold: use smaller bricks");
             break;
         }
-        unit_items[u - first] = batch.items;
-        batch.items += items;
-        const uint64_t unit_pair_count = unit_pairs[u - first];
-        unit_pairs[u - first] = pairs;
-        pairs += unit_pair_count;
+        unit[u - first] = total;
+        total.items += counts.items;
+        total.pairs += counts.pairs;
+        total.directs += counts.directs;
         ++batch.unit_count;
     }
+    batch.items = total.items;
 
-    // Phase 3: the batch's pairs and each work item's pair, units in parallel.
-    batch.pair_triangle.resize(pairs);
-    batch.pair_slot.resize(pairs);
-    batch.pair_first_item.resize(pairs);
-    batch.item_pair.resize(batch.items);
+    // Phase 3: the batch's pairs, each work item's pair and the direct bits, units in parallel.
+    batch.pair_triangle.resize(total.pairs);
+    batch.pair_slot.resize(total.pairs);
+    batch.pair_first_item.resize(total.pairs);
+    batch.item_pair.resize(total.items);
+    batch.direct_bits.resize(total.directs);
     tbb::parallel_for(size_t(0), batch.unit_count, [&](size_t slot) {
         const size_t u = first + slot;
-        uint64_t pair = unit_pairs[slot], item = unit_items[slot];
+        UnitCounts next = unit[slot];
         for (uint64_t p = first_pair[u]; p < first_pair[u + 1]; ++p) {
-            const cl_uint n = pair_items[p - pair_base];
+            const cl_uint n = pair_work[p - pair_base];
+            if (n & kDirectBit) {
+                batch.direct_bits[next.directs++] = slot * unit_bits + (n & ~kDirectBit);
+                continue;
+            }
             if (n == 0) continue;
-            batch.pair_triangle[pair] = pair_triangle[p];
-            batch.pair_slot[pair] = cl_uint(slot);
-            batch.pair_first_item[pair] = cl_uint(item);
-            std::fill_n(batch.item_pair.begin() + ptrdiff_t(item), n, cl_uint(pair));
-            ++pair;
-            item += n;
+            batch.pair_triangle[next.pairs] = pair_triangle[p];
+            batch.pair_slot[next.pairs] = cl_uint(slot);
+            batch.pair_first_item[next.pairs] = cl_uint(next.items);
+            std::fill_n(batch.item_pair.begin() + ptrdiff_t(next.items), n, cl_uint(next.pairs));
+            ++next.pairs;
+            next.items += n;
         }
     });
     return batch;

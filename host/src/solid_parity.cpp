@@ -115,7 +115,7 @@ std::array<int, 2> column_coordinates(const Layout& l, uint64_t column) {
 PairBatch make_batch(const ColumnBins& bins, const ParityTriangles& triangles, const Layout& l,
                      size_t first, size_t max_slots) {
     return make_pair_batch(bins.columns, bins.first_pair, bins.pair_triangle, first, max_slots,
-                           "brick column", [&](size_t c) {
+                           "brick column", /* no direct pairs */ 0, [&](size_t c) {
                                const auto [bx, by] = column_coordinates(l, bins.columns[c]);
                                return [&, bx = bx, by = by](uint32_t triangle) {
                                    OvColumnRange r;

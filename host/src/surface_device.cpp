@@ -39,19 +39,30 @@ std::array<int, 3> brick_coordinates(const detail::Binning& binning, const Grid&
 }
 
 // Bricks [first, ...) as one batch: a work item per run of up to OV_BLOCKS_PER_ITEM blocks of a
-// triangle's blocks in a brick.
+// triangle's blocks in a brick; for a conservative test (SAT, PEF), a triangle whose range is one
+// voxel is a direct bit instead (ov_range_is_one_voxel).
 detail::PairBatch make_batch(const detail::Binning& binning,
                              const detail::PreparedTriangles& prepared, const Grid& grid,
-                             int brick_size, size_t first, size_t max_slots) {
+                             int brick_size, bool conservative, size_t first, size_t max_slots) {
+    const uint64_t brick_bits = uint64_t(brick_size) * uint64_t(brick_size) * uint64_t(brick_size);
     return detail::make_pair_batch(
         binning.bricks, binning.brick_first_pair, binning.pair_triangle, first, max_slots, "brick",
-        [&](size_t b) {
+        brick_bits, [&](size_t b) {
             const std::array<int, 3> brick = brick_coordinates(binning, grid, brick_size, b);
             return [&, brick](uint32_t triangle) {
+                const detail::OvRange& range = prepared.ranges[triangle];
                 detail::OvPairWork work;
-                return cl_uint(detail::ov_pair_items(detail::ov_pair_work(
-                    prepared.ranges[triangle], brick[0], brick[1], brick[2], brick_size,
-                    int(grid.dims[0]), int(grid.dims[1]), int(grid.dims[2]), &work)));
+                const int blocks = detail::ov_pair_work(
+                    range, brick[0], brick[1], brick[2], brick_size, int(grid.dims[0]),
+                    int(grid.dims[1]), int(grid.dims[2]), &work);
+                if (conservative && blocks > 0 && detail::ov_range_is_one_voxel(range)) {
+                    const int* v = work.voxel_lo;
+                    const int block[3] = {v[0] / 4, v[1] / 4, v[2] / 4};
+                    return detail::kDirectBit |
+                           cl_uint(64 * detail::ov_brick_block(block, brick.data(), brick_size) +
+                                   detail::ov_block_bit(v[0] & 3, v[1] & 3, v[2] & 3));
+                }
+                return cl_uint(detail::ov_pair_items(blocks));
             };
         });
 }
@@ -119,8 +130,11 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             cl.queue.finish();
             stats.seconds_upload += seconds_since(t);
 
-            cl::Kernel voxelize(program, detail::surface_kernel(detail::surface_test_for(options)));
+            const detail::SurfaceTest test = detail::surface_test_for(options);
+            cl::Kernel voxelize(program, detail::surface_kernel(test));
             const size_t voxelize_group = detail::work_group_size(voxelize, cl.device);
+            cl::Kernel set_direct(program, "set_direct_bits");
+            const size_t set_direct_group = detail::work_group_size(set_direct, cl.device);
             const size_t words_per_brick = 2 * result.blocks_per_brick();
             size_t slots = std::min(max_slots, binning.bricks.size());
             detail::ZeroedSlotBuffer bits(words_per_brick * sizeof(cl_uint));
@@ -130,7 +144,8 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             auto run_batch = [&](size_t done, size_t max_bricks) {
                 t = Clock::now();
                 const detail::PairBatch batch =
-                    make_batch(binning, prepared, grid, brick_size, done, max_bricks);
+                    make_batch(binning, prepared, grid, brick_size,
+                               test != detail::SurfaceTest::Thin, done, max_bricks);
                 const cl::Buffer& bit_buffer = bits.get(cl, max_bricks, batch.unit_count);
                 std::vector<cl_int> slot_coordinates;  // each slot's brick
                 for (size_t slot = 0; slot < batch.unit_count; ++slot)
@@ -141,6 +156,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 const cl::Buffer pair_first = detail::read_in_place(cl, batch.pair_first_item);
                 const cl::Buffer item_pair = detail::read_in_place(cl, batch.item_pair);
                 const cl::Buffer slot_brick = detail::read_in_place(cl, slot_coordinates);
+                const cl::Buffer direct_bits = detail::read_in_place(cl, batch.direct_bits);
                 cl.queue.finish();
                 stats.seconds_upload += seconds_since(t);
 
@@ -156,9 +172,19 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                                        detail::launch(cl.queue, voxelize, count, voxelize_group);
                                    },
                                    {});
+                const uint64_t directs = batch.direct_bits.size();
+                detail::set_args(set_direct, 0, direct_bits, cl_uint(0), cl_uint(directs),
+                                 bit_buffer);
+                detail::run_sliced(cl.queue, directs, set_direct_group,
+                                   [&](uint64_t first, uint64_t count) {
+                                       set_direct.setArg(1, cl_uint(first));
+                                       detail::launch(cl.queue, set_direct, count,
+                                                      set_direct_group);
+                                   },
+                                   {});
                 cl.queue.finish();
                 stats.seconds_kernels += seconds_since(t);
-                stats.work_items += batch.items;
+                stats.work_items += batch.items + directs;
 
                 detail::download_bricks(
                     cl, bit_buffer, batch.unit_count, result.blocks_per_brick(), options.download,
