@@ -696,6 +696,35 @@ TEST_F(WriterTest, MeshFileDoesNotDependOnBrickSize) {
     EXPECT_EQ(read_bytes(path("a.obj")), read_bytes(path("b.obj")));
 }
 
+// Rows of several words and a partial last word (bricks of 100 and 200 voxels), bricks
+// narrower than a word and a grid edge inside a brick: each brick size's mesh has exactly the
+// exposed faces, and all are the same file. And voxels of consecutive layers at consecutive x in
+// the same row, whose corners must not carry from one layer to the next.
+TEST_F(WriterTest, CubeMeshHasTheExposedFacesForEveryRowWidth) {
+    const Grid grid = make_grid({150, 70, 9}, {0.5, -3, 1}, 0.25);
+    VoxelSet set;
+    std::mt19937 rng(5);
+    for (int64_t k = 0; k < 9; ++k)
+        for (int64_t j = 0; j < 70; ++j)
+            for (int64_t i = 0; i < 150; ++i)
+                if (rng() % 100 < (k < 5 ? 30u : 2u)) set.insert({i, j, k});
+    std::string first;
+    for (const int brick : {4, 12, 64, 100, 200}) {
+        const SparseVoxels voxels = make_voxels(grid, set, brick);
+        oclvox::write_voxels(path("stairs.obj"), voxels);
+        oclvox::write_voxels(path("stairs.ply"), voxels);
+        const std::string obj = read_bytes(path("stairs.obj"));
+        check_exposed_face_mesh(read_obj(obj), grid, set);
+        check_exposed_face_mesh(read_ply(read_bytes(path("stairs.ply"))), grid, set);
+        if (first.empty()) first = obj;
+        EXPECT_EQ(obj, first) << "brick size " << brick;
+    }
+    // A staircase, one voxel a layer, each at the x after the layer below's in the same row.
+    const VoxelSet stairs = {{1, 2, 0}, {2, 2, 1}, {3, 2, 2}, {4, 2, 3}};
+    oclvox::write_voxels(path("stairs.obj"), make_voxels(make_grid({8, 8, 4}), stairs));
+    check_exposed_face_mesh(read_obj(read_bytes(path("stairs.obj"))), make_grid({8, 8, 4}), stairs);
+}
+
 TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
     const SparseVoxels empty(make_grid({3, 4, 5}), 4);
     for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply", "e.stl", "e.vdb"})

@@ -4,13 +4,13 @@
 // OBJ and PLY keep the double coordinates exactly (shortest round-trip decimal text; 64-bit
 // floats); STL is single precision by definition, with each facet's normal computed from its
 // corners. Indices are checked first so a bad mesh fails before anything is written.
-#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <vector>
 
 #include "atomic_file.hpp"
+#include "block_writer.hpp"
 #include "file_names.hpp"
 #include "little_endian.hpp"
 #include "oclvox/field.hpp"
@@ -19,41 +19,6 @@
 namespace oclvox {
 
 namespace {
-
-// Bytes gathered into blocks of about a megabyte before they reach the stream: a stream call per
-// value costs several times what formatting it does. flush() writes the rest.
-class BlockWriter {
-  public:
-    explicit BlockWriter(std::ostream& out) : out_(out) { buffer_.reserve(kBlock + 64); }
-    void bytes(const char* data, size_t size) {
-        buffer_.insert(buffer_.end(), data, data + size);
-        if (buffer_.size() >= kBlock) flush();
-    }
-    void text(const std::string& s) { bytes(s.data(), s.size()); }
-    void character(char c) { bytes(&c, 1); }
-    template <typename T>
-    void little_endian(T value) {
-        char data[sizeof(T)];
-        detail::store_le(data, value);
-        bytes(data, sizeof data);
-    }
-    // Shortest round-trip decimal text (doubles) or plain decimal (integers).
-    template <typename T>
-    void number(T value) {
-        char data[32];
-        const auto result = std::to_chars(data, data + sizeof data, value);
-        bytes(data, size_t(result.ptr - data));
-    }
-    void flush() {
-        out_.write(buffer_.data(), std::streamsize(buffer_.size()));
-        buffer_.clear();
-    }
-
-  private:
-    static constexpr size_t kBlock = size_t(1) << 20;
-    std::ostream& out_;
-    std::vector<char> buffer_;
-};
 
 // Reports a writer's items (vertices and triangles) as they are formatted, every kStride of
 // them.
@@ -73,7 +38,7 @@ class ItemProgress {
 };
 
 void write_obj(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
-    BlockWriter w(out);
+    detail::BlockWriter w(out);
     w.text("# oclvox: " + std::to_string(mesh.positions.size()) + " vertices, " +
            std::to_string(mesh.triangles.size()) + " triangles\n");
     for (const auto& p : mesh.positions) {
@@ -98,7 +63,7 @@ void write_obj(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
 }
 
 void write_ply(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
-    BlockWriter w(out);
+    detail::BlockWriter w(out);
     w.text("ply\nformat binary_little_endian 1.0\ncomment oclvox iso-surface\nelement vertex " +
            std::to_string(mesh.positions.size()) +
            "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
@@ -117,7 +82,7 @@ void write_ply(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
 }
 
 void write_stl(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
-    BlockWriter w(out);
+    detail::BlockWriter w(out);
     char header[80] = {};
     std::strncpy(header, "oclvox iso-surface", sizeof header);
     w.bytes(header, sizeof header);
