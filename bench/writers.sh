@@ -21,6 +21,12 @@ cases=(
   "npy-1536|1536|npy|"
   "vdb-4096|4096|vdb|"
   "vdb-8192|8192|vdb|"
+  "obj-512|512|obj|"
+  "ply-512|512|ply|"
+  "stl-512|512|stl|"
+  "obj-solid-512|512|obj|--mode solid --inside parity"
+  "ply-solid-512|512|ply|--mode solid --inside parity"
+  "stl-solid-512|512|stl|--mode solid --inside parity"
 )
 wanted=("$@")
 

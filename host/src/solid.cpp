@@ -3,8 +3,12 @@
 // The tests themselves are in solid_parity.cpp and solid_winding.cpp.
 #include "solid.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
 #include <string>
 
+#include "position_numbering.hpp"
 #include "solid_internal.hpp"
 
 namespace oclvox::detail {
@@ -66,20 +70,37 @@ SparseVoxels run_solid(const Mesh& mesh, const Grid& grid, const VoxelizeOptions
 }  // namespace
 
 MeshEdgeReport mesh_edge_report(const Mesh& mesh) {
-    const WeldedEdges welded = weld_edges(mesh);
-    const auto& uses = welded.uses;
-    MeshEdgeReport report;
-    report.edges = uses.size();
-    for (const auto& [edge, n] : uses) {
-        const uint32_t total = n[0] + n[1];
-        if (total == 1)
-            ++report.boundary;
-        else if (total > 2)
-            ++report.non_manifold;
-        else if (n[0] != 1)
-            ++report.misoriented;
-    }
-    return report;
+    // The edge uses between welded vertices, counted per edge straight from their buckets: each
+    // bucket's uses of one edge are adjacent, so no list of edges is made.
+    const NumberedPositions numbered = number_positions(mesh.positions);
+    const EdgeUses uses = edge_uses(mesh, numbered.numbers, numbered.positions.size());
+    auto add = [](MeshEdgeReport a, const MeshEdgeReport& b) {
+        a.edges += b.edges;
+        a.boundary += b.boundary;
+        a.non_manifold += b.non_manifold;
+        a.misoriented += b.misoriented;
+        return a;
+    };
+    return tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, numbered.positions.size()), MeshEdgeReport{},
+        [&](const tbb::blocked_range<size_t>& vertices, MeshEdgeReport report) {
+            for (size_t v = vertices.begin(); v < vertices.end(); ++v)
+                for (size_t e = uses.first[v]; e < uses.first[v + 1];) {
+                    uint64_t runs[2] = {0, 0};  // low -> high, high -> low
+                    const uint64_t upper = uses.upper[e] >> 1;
+                    for (; e < uses.first[v + 1] && uses.upper[e] >> 1 == upper; ++e)
+                        ++runs[uses.upper[e] & 1];
+                    ++report.edges;
+                    if (runs[0] + runs[1] == 1)
+                        ++report.boundary;
+                    else if (runs[0] + runs[1] > 2)
+                        ++report.non_manifold;
+                    else if (runs[0] != 1)
+                        ++report.misoriented;
+                }
+            return report;
+        },
+        add);
 }
 InsideTest whole_mesh_inside_test(const Mesh& mesh, const Grid& grid, InsideTest requested) {
     ParityTriangles triangles;

@@ -61,6 +61,16 @@ struct WeldedEdges {
 
 WeldedEdges weld_edges(const Mesh& mesh);
 
+// The uses of the mesh's edges between welded vertices (`welded`: each vertex's welded id, of
+// `vertices`), bucketed by their lower end: bucket v holds, sorted, (u << 1 | d) for each use of
+// an edge {v, u} with u > v, d being 1 when the triangle runs it from u to v. Triangles with a
+// repeated welded vertex enclose nothing and are left out.
+struct EdgeUses {
+    std::vector<size_t> first;  // bucket v is upper[first[v] .. first[v + 1])
+    FilledLaterVector<uint64_t> upper;
+};
+EdgeUses edge_uses(const Mesh& mesh, const std::vector<uint32_t>& welded, size_t vertices);
+
 // The winding-number solid into `result`: on the device with tree evaluations only where they
 // can matter, and as the exact double-precision sum of every triangle at every voxel centre.
 void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,

@@ -674,16 +674,10 @@ struct Tile {
 
 }  // namespace
 
-WeldedEdges weld_edges(const Mesh& mesh) {
-    // Phase 1: equal positions numbered alike, in the order their first vertex comes.
-    NumberedPositions numbered = number_positions(mesh.positions);
-    const std::vector<uint32_t>& welded = numbered.numbers;
-    WeldedEdges out;
-    out.positions = std::move(numbered.positions);
-
-    // Phase 2: every triangle's edges, bucketed by their lower end (a counting sort: linear, where
-    // sorting all edges was most of the closed-mesh check), then each bucket (a few edges) sorted
-    // by the upper end and counted per direction. Edges come out ordered by (lower, upper) end.
+EdgeUses edge_uses(const Mesh& mesh, const std::vector<uint32_t>& welded, size_t vertices) {
+    // Every triangle's edges, bucketed by their lower end (a counting sort: linear, where sorting
+    // all edges was most of the closed-mesh check), then each bucket (a few edges) sorted, in
+    // parallel.
     auto for_each_edge = [&](auto&& f) {
         for (const auto& tri : mesh.triangles) {
             const uint32_t v[3] = {welded[tri[0]], welded[tri[1]], welded[tri[2]]};
@@ -691,35 +685,48 @@ WeldedEdges weld_edges(const Mesh& mesh) {
             for (int e = 0; e < 3; ++e) f(v[e], v[(e + 1) % 3]);
         }
     };
-    std::vector<size_t> first(out.positions.size() + 1, 0);
-    for_each_edge([&](uint32_t a, uint32_t b) { ++first[std::min(a, b) + size_t(1)]; });
-    for (size_t v = 1; v < first.size(); ++v) first[v] += first[v - 1];
-    // Per edge: its upper end and direction (1 when it runs from the upper end to the lower).
-    std::vector<uint64_t> upper(first.back());
-    std::vector<size_t> next(first.begin(), first.end() - 1);
+    EdgeUses out;
+    out.first.assign(vertices + 1, 0);
+    for_each_edge([&](uint32_t a, uint32_t b) { ++out.first[std::min(a, b) + size_t(1)]; });
+    for (size_t v = 1; v <= vertices; ++v) out.first[v] += out.first[v - 1];
+    out.upper.resize(out.first.back());
+    std::vector<size_t> next(out.first.begin(), out.first.end() - 1);
     for_each_edge([&](uint32_t a, uint32_t b) {
-        upper[next[std::min(a, b)]++] = uint64_t(std::max(a, b)) << 1 | uint64_t(a < b ? 0 : 1);
+        out.upper[next[std::min(a, b)]++] = uint64_t(std::max(a, b)) << 1 | uint64_t(a < b ? 0 : 1);
     });
-    // Each bucket sorted, with its count of distinct edges; then every edge's uses written to its
-    // place (buckets in parallel both times).
-    const size_t vertices = first.size() - 1;
+    tbb::parallel_for(size_t(0), vertices, [&](size_t v) {
+        std::sort(out.upper.begin() + ptrdiff_t(out.first[v]),
+                  out.upper.begin() + ptrdiff_t(out.first[v + 1]));
+    });
+    return out;
+}
+
+WeldedEdges weld_edges(const Mesh& mesh) {
+    // Phase 1: equal positions numbered alike, in the order their first vertex comes.
+    NumberedPositions numbered = number_positions(mesh.positions);
+    WeldedEdges out;
+    out.positions = std::move(numbered.positions);
+
+    // Phase 2: the edge uses by lower end, sorted; then per bucket its count of distinct edges,
+    // and every edge's uses written to its place (buckets in parallel). Edges come out ordered by
+    // (lower, upper) end.
+    const size_t vertices = out.positions.size();
+    const EdgeUses uses = edge_uses(mesh, numbered.numbers, vertices);
     std::vector<size_t> first_use(vertices + 1, 0);
     tbb::parallel_for(size_t(0), vertices, [&](size_t v) {
-        const auto begin = upper.begin() + ptrdiff_t(first[v]),
-                   end = upper.begin() + ptrdiff_t(first[v + 1]);
-        std::sort(begin, end);
-        for (auto e = begin; e != end; ++e)
-            if (e == begin || *e >> 1 != *(e - 1) >> 1) ++first_use[v + 1];
+        for (size_t e = uses.first[v]; e < uses.first[v + 1]; ++e)
+            if (e == uses.first[v] || uses.upper[e] >> 1 != uses.upper[e - 1] >> 1)
+                ++first_use[v + 1];
     });
     for (size_t v = 0; v < vertices; ++v) first_use[v + 1] += first_use[v];
     out.uses.resize(first_use.back());
     tbb::parallel_for(size_t(0), vertices, [&](size_t v) {
         size_t use = first_use[v];
-        for (size_t e = first[v]; e < first[v + 1]; ++e) {
-            const uint32_t b = uint32_t(upper[e] >> 1);
-            if (e == first[v] || b != uint32_t(upper[e - 1] >> 1))
+        for (size_t e = uses.first[v]; e < uses.first[v + 1]; ++e) {
+            const uint32_t b = uint32_t(uses.upper[e] >> 1);
+            if (e == uses.first[v] || b != uint32_t(uses.upper[e - 1] >> 1))
                 out.uses[use++] = {{uint32_t(v), b}, {0, 0}};
-            ++out.uses[use - 1].second[size_t(upper[e] & 1)];
+            ++out.uses[use - 1].second[size_t(uses.upper[e] & 1)];
         }
     });
     return out;
