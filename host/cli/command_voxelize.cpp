@@ -84,9 +84,19 @@ int run(const VoxelizeArgs& args) {
     if (!args.preview.empty()) check_output(args.preview, {args.input}, {".png"});
     check_reporting(args.reporting, {args.input}, {args.output, args.preview});
     const OutputTarget output(args.output, output_extension(args.output, args.files));
+    oclvox::VoxelizeOptions options;
+    options.test = oclvox::overlap_test_from_string(args.voxelization.test);
+    options.mode = oclvox::voxelize_mode_from_string(args.voxelization.mode);
+    options.inside = oclvox::inside_test_from_string(args.voxelization.inside);
+    options.boundary = oclvox::boundary_from_string(args.voxelization.boundary);
+    options.brick_size = args.tiling.brick_size;
+    options.device_budget_bytes = args.tiling.device_mib << 20;
+    options.host_budget_bytes = args.tiling.host_mib << 20;
+    options.download = oclvox::download_from_string(args.tiling.download);
 
-    // Phase 2: the mesh and the grid around it, while the device opens.
-    DeviceOpening opening(args.device);
+    // Phase 2: the mesh and the grid around it, while the device opens and loads its kernels.
+    DeviceOpening opening(args.device,
+                          [options](oclvox::Device& device) { device.load_kernels(options); });
     const MeshInput input(args.input, args.files.input_format);
     const oclvox::Mesh mesh =
         timed(record.seconds.load, [&] { return load_mesh_input(input, args.reporting); });
@@ -98,15 +108,6 @@ int run(const VoxelizeArgs& args) {
     std::optional<oclvox::Device> device = opening.wait(record.seconds);
 
     // Phase 4: voxelize, drawing progress and checking for Ctrl-C after every batch.
-    oclvox::VoxelizeOptions options;
-    options.test = oclvox::overlap_test_from_string(args.voxelization.test);
-    options.mode = oclvox::voxelize_mode_from_string(args.voxelization.mode);
-    options.inside = oclvox::inside_test_from_string(args.voxelization.inside);
-    options.boundary = oclvox::boundary_from_string(args.voxelization.boundary);
-    options.brick_size = args.tiling.brick_size;
-    options.device_budget_bytes = args.tiling.device_mib << 20;
-    options.host_budget_bytes = args.tiling.host_mib << 20;
-    options.download = oclvox::download_from_string(args.tiling.download);
     oclvox::VoxelizeStats stats;
     const oclvox::SparseVoxels voxels = timed(record.seconds.compute, [&] {
         ProgressBar bar("voxelizing", "bricks", args.reporting);

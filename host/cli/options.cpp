@@ -219,11 +219,36 @@ void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& 
         ->group(group);
 }
 
-DeviceOpening::DeviceOpening(const DeviceArgs& args) {
+namespace {
+
+void announce_build(const std::string& program) {
+    std::fprintf(stderr,
+                 "compiling kernels '%s' for this device (first run; cached for later runs)...\n",
+                 program.c_str());
+}
+
+void report_build(const oclvox::Device::KernelCompile& build) {
+    std::fprintf(stderr, "compiled kernels '%s' in %.1f s\n", build.program.c_str(), build.seconds);
+}
+
+}  // namespace
+
+DeviceOpening::DeviceOpening(const DeviceArgs& args, std::function<void(oclvox::Device&)> prepare) {
     if (!args.reference)
-        opening_ = std::async(std::launch::async, [selector = args.selector] {
+        opening_ = std::async(std::launch::async, [selector = args.selector,
+                                                   prepare = std::move(prepare), builds = builds_] {
             const Clock::time_point start = Clock::now();
             oclvox::Device device = oclvox::Device::open(selector);
+            device.on_kernel_compile([builds](const oclvox::Device::KernelCompile& c) {
+                const std::lock_guard<std::mutex> lock(builds->mutex);
+                if (c.finished) {
+                    builds->running.reset();
+                    builds->finished.push_back(c);
+                } else {
+                    builds->running = c.program;
+                }
+            });
+            if (prepare) prepare(device);
             return Opened{std::move(device), seconds_since(start)};
         });
 }
@@ -232,20 +257,26 @@ std::optional<oclvox::Device> DeviceOpening::wait(Timings& seconds) {
     std::optional<oclvox::Device> device;
     if (opening_.valid()) {
         const Clock::time_point waiting = Clock::now();
+        // A build still running is announced while it is waited for, once.
+        std::string announced;
+        while (opening_.wait_for(std::chrono::milliseconds(50)) != std::future_status::ready) {
+            const std::lock_guard<std::mutex> lock(builds_->mutex);
+            if (builds_->running && *builds_->running != announced) {
+                announced = *builds_->running;
+                announce_build(announced);
+            }
+        }
         Opened opened = opening_.get();
         const double waited = seconds_since(waiting);
+        for (const auto& build : builds_->finished) report_build(build);
         device.emplace(std::move(opened.device));
         seconds.device_open += waited;
         seconds.device_open_overlapped += std::max(0.0, opened.seconds - waited);
         device->on_kernel_compile([](const oclvox::Device::KernelCompile& c) {
-            if (!c.finished)
-                std::fprintf(stderr,
-                             "compiling kernels '%s' for this device (first run; cached for later "
-                             "runs)...\n",
-                             c.program.c_str());
+            if (c.finished)
+                report_build(c);
             else
-                std::fprintf(stderr, "compiled kernels '%s' in %.1f s\n", c.program.c_str(),
-                             c.seconds);
+                announce_build(c.program);
         });
     }
     stop_if_interrupted();

@@ -4,7 +4,10 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <functional>
 #include <future>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -53,21 +56,32 @@ struct DeviceArgs {
 void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& group);
 // The device, unless the CPU reference was asked for, opened on a thread of its own from
 // construction on, so that an OpenCL platform's start (a quarter of a second on NVIDIA's driver,
-// 20 ms for PoCL) passes while the command loads its inputs. wait() hands it over, booking the
-// time it waited as the device-open phase and the rest of the open's time, spent beside the
-// caller's work, as `device_open_overlapped`, and rethrows the open's error (a DeviceError) there.
-// Kernels are built (or loaded from the disk cache) when first used; a build, which only the first
-// run on a device pays, is announced on stderr because it can take tens of seconds.
+// 20 ms for PoCL) passes while the command loads its inputs; that thread then runs `prepare` (the
+// command's kernels loaded ahead: a few milliseconds from the disk cache, up to tens of seconds
+// for the first run's build). wait() hands the device over, booking the time it waited as the
+// device-open phase and the rest of the thread's time, spent beside the caller's work, as
+// `device_open_overlapped`, and rethrows the thread's error (a DeviceError, a KernelBuildError)
+// there. A build, which only the first run on a device pays, is announced on stderr (by wait()'s
+// thread alone) because it can take tens of seconds; kernels not loaded ahead are built when
+// first used, and announced then.
 class DeviceOpening {
   public:
-    explicit DeviceOpening(const DeviceArgs& args);
+    explicit DeviceOpening(const DeviceArgs& args,
+                           std::function<void(oclvox::Device&)> prepare = {});
     std::optional<oclvox::Device> wait(Timings& seconds);
 
   private:
     struct Opened {
         oclvox::Device device;
-        double seconds;  // the open's own wall time
+        double seconds;  // the thread's own wall time
     };
+    // The builds the thread ran: the one running now, and those finished.
+    struct Builds {
+        std::mutex mutex;
+        std::optional<std::string> running;
+        std::vector<oclvox::Device::KernelCompile> finished;
+    };
+    std::shared_ptr<Builds> builds_ = std::make_shared<Builds>();
     std::future<Opened> opening_;  // not valid for the CPU reference
 };
 

@@ -149,7 +149,7 @@ std::string stats_text(const RunRecord& r) {
     text += format("  load          %9.4f\n", t.load);
     text += format("  fit           %9.4f\n", t.fit);
     text += format(
-        "  device open   %9.4f  (OpenCL platform, context and queue; %.4f more beside "
+        "  device open   %9.4f  (OpenCL platform, context, queue and kernels; %.4f more beside "
         "loading)\n",
         t.device_open, t.device_open_overlapped);
     if (is_voxelize(r)) {

@@ -19,9 +19,7 @@ void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, siz
     const auto start = Clock::now();
     const uint64_t block_count = uint64_t(units) * blocks_per_unit;
     // Block indices are 32-bit on the device.
-    const bool compact = block_count < (uint64_t(1) << 32) &&
-                         (mode == Download::NonEmptyBlocks ||
-                          (mode == Download::Auto && !cl.info.host_unified_memory));
+    const bool compact = block_count < (uint64_t(1) << 32) && downloads_non_empty_blocks(cl, mode);
     if (!compact) {
         read_mapped<cl_uint>(cl.queue, bits, 2 * block_count, [&](const cl_uint* words) {
             result.merge_bricks(units, brick_of, [&](size_t unit, uint64_t* blocks) {

@@ -9,6 +9,13 @@
 
 namespace oclvox::detail {
 
+// Whether downloads in `mode` bring back only the non-empty blocks (a batch of 2^32 blocks or
+// more comes back whole): Download::Auto does unless the device works in host memory.
+inline bool downloads_non_empty_blocks(const Device::Impl& cl, Download mode) {
+    return mode == Download::NonEmptyBlocks ||
+           (mode == Download::Auto && !cl.info.host_unified_memory);
+}
+
 // A batch's `units` bricks in `bits` (each blocks_per_unit 4^3 blocks of two 32-bit words, low
 // word first, one brick after another) come back whole or as their non-empty blocks, as `mode`
 // says (Download::Auto: non-empty blocks unless the device works in host memory), and are merged

@@ -69,6 +69,18 @@ detail::PairBatch make_batch(const detail::Binning& binning,
 
 }  // namespace
 
+void Device::load_kernels(const VoxelizeOptions& options) {
+    try {
+        if (options.mode != VoxelizeMode::Solid) impl_->program(detail::kKernel_voxelize);
+        if (options.mode == VoxelizeMode::Solid || options.mode == VoxelizeMode::Filled)
+            impl_->program(detail::kKernel_solid);
+        if (detail::downloads_non_empty_blocks(*impl_, options.download))
+            impl_->program(detail::kKernel_blocks);
+    } catch (const cl::Error& e) {
+        detail::throw_device_error(e, "loading kernels on " + impl_->info.name);
+    }
+}
+
 SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                               VoxelizeStats* stats_out) {
     SparseVoxels result(grid, options.brick_size);

@@ -359,6 +359,11 @@ class Device {
     };
     void on_kernel_compile(std::function<void(const KernelCompile&)> callback);
 
+    // Loads (compiling on the first run) the kernels voxelize(..., options) needs, so that call
+    // does not wait for them: e.g. on another thread while the mesh loads, as the CLI does.
+    // Optional: voxelize loads what is missing.
+    void load_kernels(const VoxelizeOptions& options);
+
     SparseVoxels voxelize(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,
                           VoxelizeStats* stats = nullptr);
 
