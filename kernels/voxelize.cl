@@ -64,8 +64,9 @@ static void store_block(__global uint* bits, const Item* it, const int block[3],
                         uint mask_lo, uint mask_hi) {
     int nb = brick_size / 4;
     size_t words_per_brick = 2 * (size_t)nb * nb * nb;
-    size_t word =
-        it->slot * words_per_brick + 2 * (size_t)ov_brick_block(block, it->brick, brick_size);
+    size_t word = it->slot * words_per_brick +
+                  2 * (size_t)ov_brick_block(block[0], block[1], block[2], it->brick[0],
+                                             it->brick[1], it->brick[2], brick_size);
     if (mask_lo) atomic_or(&bits[word], mask_lo);
     if (mask_hi) atomic_or(&bits[word + 1], mask_hi);
 }

@@ -57,9 +57,10 @@ detail::PairBatch make_batch(const detail::Binning& binning,
                     int(grid.dims[1]), int(grid.dims[2]), &work);
                 if (conservative && blocks > 0 && detail::ov_range_is_one_voxel(range)) {
                     const int* v = work.voxel_lo;
-                    const int block[3] = {v[0] / 4, v[1] / 4, v[2] / 4};
                     return detail::kDirectBit |
-                           cl_uint(64 * detail::ov_brick_block(block, brick.data(), brick_size) +
+                           cl_uint(64 * detail::ov_brick_block(v[0] / 4, v[1] / 4, v[2] / 4,
+                                                               brick[0], brick[1], brick[2],
+                                                               brick_size) +
                                    detail::ov_block_bit(v[0] & 3, v[1] & 3, v[2] & 3));
                 }
                 return cl_uint(detail::ov_pair_items(blocks));
