@@ -1,21 +1,22 @@
-// Voxel cubes as a surface mesh (.obj, binary little-endian .ply, or binary .stl through
-// write_mesh with each quad split into two triangles).
+// Voxel cubes as a surface mesh (.obj, binary little-endian .ply, or binary .stl with each quad
+// split into two triangles).
 //
 // Only exposed faces are emitted: a face between two set voxels is inside the solid. Each face is
 // one quad in world coordinates (origin + lattice index * voxel_size), wound counter-clockwise
-// seen from outside so the right-hand normal points out of the set voxel. Corners are lattice
-// points shared by all the quads that touch them, so the mesh is indexed, not a quad soup.
+// seen from outside so the right-hand normal points out of the set voxel. In OBJ and PLY corners
+// are lattice points shared by all the quads that touch them, so the mesh is indexed, not a quad
+// soup.
 //
-// Streaming: the mesh is built one voxel layer at a time, a brick layer's bricks at a time. Each
-// layer's exposed faces come out in (z, y, x, direction) order straight from the voxels' rows:
-// a brick's rows of a layer are its bits along x (brick-local y), so a row's exposed faces in one
-// direction are the row less its neighbour row (y +- 1, z +- 1) or its own bits shifted by one
-// (x +- 1), a few word operations a row. Vertices are numbered in order of first use; a vertex
-// is a lattice point of the layer's bottom or top plane, found in that plane's table (the top
-// plane's becomes the next layer's bottom), so the largest buffers are one brick layer's rows of
-// three planes and one layer's faces. OBJ takes each voxel layer's new vertices and quads in
-// turn; PLY, which needs the counts first and all vertices before any face, walks the layers
-// three times (count, vertices, faces), each walk numbering the vertices identically. The file
+// Streaming: the faces come one voxel layer at a time, a brick layer's bricks at a time, in
+// (z, y, x, direction) order straight from the voxels' rows: a brick's rows of a layer are its
+// bits along x (brick-local y), so a row's exposed faces in one direction are the row less its
+// neighbour row (y +- 1, z +- 1) or its own bits shifted by one (x +- 1), a few word operations a
+// row. Vertices are numbered in order of first use; a vertex is a lattice point of the layer's
+// bottom or top plane, found in that plane's table (the top plane's becomes the next layer's
+// bottom), so the largest buffers are one brick layer's rows of three planes and one layer's
+// faces. OBJ takes each voxel layer's new vertices and quads in turn; PLY, which needs the counts
+// first and all vertices before any face, walks the layers three times (count, vertices, faces),
+// each walk numbering the vertices identically; STL walks them twice (count, triangles). The file
 // does not depend on the brick size or hash order.
 #include <algorithm>
 #include <charconv>
@@ -27,6 +28,7 @@
 #include "block_writer.hpp"
 #include "brick_layout.hpp"
 #include "oclvox/field.hpp"
+#include "stl_format.hpp"
 #include "writers.hpp"
 
 namespace oclvox::detail {
@@ -158,69 +160,18 @@ class LayerReader {
     int64_t brick_, blocks_, words_;
 };
 
-// Calls `visit(layer)` for each voxel layer with an exposed face, in z order, working a brick
-// layer at a time, and reports each brick layer done as phase `phase` of `progress`.
-void for_each_layer_mesh(const std::string& path, const SparseVoxels& voxels,
-                         ProgressPhases& progress, size_t phase,
-                         const std::function<void(const LayerMesh&)>& visit) {
+// Calls face(x, y, z, direction) for every exposed face, in (z, y, x, direction) order, and
+// layer_done() after each voxel layer that has any, working a brick layer at a time; reports
+// each brick layer done as phase `phase` of `progress`. Face `direction` of a voxel: axis
+// direction / 2, towards +axis when direction is even.
+template <class Face, class LayerDone>
+void for_each_exposed_face(const SparseVoxels& voxels, ProgressPhases& progress, size_t phase,
+                           Face&& face, LayerDone&& layer_done) {
     const auto& dims = voxels.grid().dims;
-    const uint64_t points_x = uint64_t(dims[0]) + 1;
     const BrickLayout layout(voxels);
     const int64_t brick = voxels.brick_size(), words = (brick + 63) / 64;
     const uint64_t nbx = uint64_t(voxels.brick_dims()[0]), nby = uint64_t(voxels.brick_dims()[1]);
     const std::vector<uint64_t> bricks = voxels.brick_indices();  // sorted: layers in z order
-    uint64_t vertices = 0;
-    LayerMesh mesh;
-    // The vertices of the lattice planes under and over voxel layer z, and the last layer read.
-    PlaneVertices bottom, top;
-    int64_t last_z = -2;
-    int64_t z = 0;
-    auto vertex_at = [&](const std::array<int64_t, 3>& p) {
-        bool inserted;
-        const uint32_t vertex = (p[2] == z ? bottom : top)
-                                    .find_or_add(uint64_t(p[0]) + points_x * uint64_t(p[1]),
-                                                 uint32_t(vertices), inserted);
-        if (inserted) {
-            // PLY indices are signed 32-bit; OBJ shares the limit to keep one code path.
-            if (vertices >= uint64_t(std::numeric_limits<int32_t>::max()))
-                throw OutputError("cannot write " + path +
-                                  ": the surface has more than 2^31 vertices");
-            ++vertices;
-            mesh.new_points.push_back(p);
-        }
-        return vertex;
-    };
-    // The vertices of the current voxel's 8 corners (bit 0: +x, 1: +y, 2: +z), each looked up when
-    // first needed (kNone until then), so a vertex is still numbered at its first use; the
-    // corners a voxel shares with the previous voxel of its row carry over.
-    constexpr uint32_t kNone = ~uint32_t(0);
-    std::array<uint32_t, 8> corner;
-    std::array<int64_t, 3> corner_voxel{-2, -1, -1};  // the voxel `corner` is for
-    auto voxel_corners = [&](int64_t x, int64_t y) {
-        const bool next_in_row =
-            x == corner_voxel[0] + 1 && y == corner_voxel[1] && z == corner_voxel[2];
-        for (int c = 0; c < 8; c += 2)
-            corner[size_t(c)] = next_in_row ? corner[size_t(c + 1)] : kNone;
-        for (int c = 1; c < 8; c += 2) corner[size_t(c)] = kNone;
-        corner_voxel = {x, y, z};
-    };
-    // Face `direction` of voxel (x, y, z): axis direction / 2, towards +axis when it is even.
-    // The face lies in the plane axis = index (+1 for the positive side); u, v follow axis
-    // cyclically so that u x v = +axis and the corner order p, p+u, p+u+v, p+v faces +axis.
-    auto add_face = [&](int64_t x, int64_t y, int direction) {
-        const int axis = direction / 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
-        const bool positive = direction % 2 == 0;
-        auto vertex = [&](int c) {
-            if (corner[size_t(c)] == kNone)
-                corner[size_t(c)] = vertex_at({x + (c & 1), y + (c >> 1 & 1), z + (c >> 2)});
-            return corner[size_t(c)];
-        };
-        const int p = positive ? 1 << axis : 0;
-        const uint32_t a = vertex(p), b = vertex(p | 1 << u), c = vertex(p | 1 << u | 1 << v),
-                       d = vertex(p | 1 << v);
-        mesh.quads.push_back(positive ? std::array<uint32_t, 4>{a, b, c, d}
-                                      : std::array<uint32_t, 4>{a, d, c, b});
-    };
     const LayerReader reader(voxels, layout);
     std::vector<uint64_t> below, here, above;
     std::vector<uint64_t> exposed(size_t(6 * words));  // per direction, a row's exposed voxels
@@ -233,13 +184,9 @@ void for_each_layer_mesh(const std::string& path, const SparseVoxels& voxels,
         const int64_t z_first = int64_t(brick_z) * brick;
         reader.read(layer, z_first - 1, below);
         reader.read(layer, z_first, here);
-        for (z = z_first; z < std::min(z_first + brick, dims[2]); ++z) {
+        for (int64_t z = z_first; z < std::min(z_first + brick, dims[2]); ++z) {
             reader.read(layer, z + 1, above);
-            // The points of plane z are the last layer's top ones if it was layer z - 1.
-            std::swap(bottom, top);
-            if (last_z != z - 1) bottom.clear();
-            top.clear();
-            last_z = z;
+            bool any_face = false;
             // Rows in (y, x) order: a run of bricks with the same brick y, each voxel row across
             // them.
             for (size_t run = 0; run < layer.bricks.size();) {
@@ -283,29 +230,100 @@ void for_each_layer_mesh(const std::string& path, const SparseVoxels& voxels,
                         const int64_t x_first = int64_t(layer.bricks[b] % nbx) * brick;
                         for (int64_t w = 0; w < words; ++w) {
                             const uint64_t* e = &exposed[size_t(6 * w)];
-                            for (uint64_t any_face = e[0] | e[1] | e[2] | e[3] | e[4] | e[5];
-                                 any_face; any_face &= any_face - 1) {
-                                const int bit = __builtin_ctzll(any_face);
-                                const int64_t x = x_first + 64 * w + bit;
-                                voxel_corners(x, y_first + ly);
+                            for (uint64_t faces = e[0] | e[1] | e[2] | e[3] | e[4] | e[5]; faces;
+                                 faces &= faces - 1) {
+                                const int bit = __builtin_ctzll(faces);
                                 for (int d = 0; d < 6; ++d)
-                                    if (e[d] >> bit & 1) add_face(x, y_first + ly, d);
+                                    if (e[d] >> bit & 1)
+                                        face(x_first + 64 * w + bit, y_first + ly, z, d);
+                                any_face = true;
                             }
                         }
                     }
                 run = run_end;
             }
-            if (!mesh.quads.empty()) {
-                visit(mesh);
-                mesh.new_points.clear();
-                mesh.quads.clear();
-            }
+            if (any_face) layer_done();
             std::swap(below, here);
             std::swap(here, above);
         }
         first = end;
         progress.report(phase, first, bricks.size());
     }
+}
+
+// Calls `visit(layer)` for each voxel layer with an exposed face, in z order, numbering the
+// vertices in order of first use, and reports as for_each_exposed_face does.
+void for_each_layer_mesh(const std::string& path, const SparseVoxels& voxels,
+                         ProgressPhases& progress, size_t phase,
+                         const std::function<void(const LayerMesh&)>& visit) {
+    const uint64_t points_x = uint64_t(voxels.grid().dims[0]) + 1;
+    uint64_t vertices = 0;
+    LayerMesh mesh;
+    // The vertices of the lattice planes under and over the current voxel layer z (of the last
+    // face seen), and the layer before it that had faces.
+    PlaneVertices bottom, top;
+    int64_t z = -1, last_z = -2;
+    auto vertex_at = [&](const std::array<int64_t, 3>& p) {
+        bool inserted;
+        const uint32_t vertex = (p[2] == z ? bottom : top)
+                                    .find_or_add(uint64_t(p[0]) + points_x * uint64_t(p[1]),
+                                                 uint32_t(vertices), inserted);
+        if (inserted) {
+            // PLY indices are signed 32-bit; OBJ shares the limit to keep one code path.
+            if (vertices >= uint64_t(std::numeric_limits<int32_t>::max()))
+                throw OutputError("cannot write " + path +
+                                  ": the surface has more than 2^31 vertices");
+            ++vertices;
+            mesh.new_points.push_back(p);
+        }
+        return vertex;
+    };
+    // The vertices of the current voxel's 8 corners (bit 0: +x, 1: +y, 2: +z), each looked up when
+    // first needed (kNone until then), so a vertex is still numbered at its first use; the
+    // corners a voxel shares with the previous voxel of its row carry over.
+    constexpr uint32_t kNone = ~uint32_t(0);
+    std::array<uint32_t, 8> corner;
+    std::array<int64_t, 3> corner_voxel{-2, -1, -1};  // the voxel `corner` is for
+    for_each_exposed_face(
+        voxels, progress, phase,
+        [&](int64_t x, int64_t y, int64_t face_z, int direction) {
+            if (face_z != z) {
+                // The points of plane z are the last layer's top ones if it was layer z - 1.
+                z = face_z;
+                std::swap(bottom, top);
+                if (last_z != z - 1) bottom.clear();
+                top.clear();
+                last_z = z;
+            }
+            if (x != corner_voxel[0] || y != corner_voxel[1] || z != corner_voxel[2]) {
+                const bool next_in_row =
+                    x == corner_voxel[0] + 1 && y == corner_voxel[1] && z == corner_voxel[2];
+                for (int c = 0; c < 8; c += 2)
+                    corner[size_t(c)] = next_in_row ? corner[size_t(c + 1)] : kNone;
+                for (int c = 1; c < 8; c += 2) corner[size_t(c)] = kNone;
+                corner_voxel = {x, y, z};
+            }
+            // The face lies in the plane axis = index (+1 for the positive side); u, v follow
+            // axis cyclically so that u x v = +axis and the corner order p, p+u, p+u+v, p+v
+            // faces +axis.
+            const int axis = direction / 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
+            const bool positive = direction % 2 == 0;
+            auto vertex = [&](int c) {
+                if (corner[size_t(c)] == kNone)
+                    corner[size_t(c)] = vertex_at({x + (c & 1), y + (c >> 1 & 1), z + (c >> 2)});
+                return corner[size_t(c)];
+            };
+            const int p = positive ? 1 << axis : 0;
+            const uint32_t a = vertex(p), b = vertex(p | 1 << u), c = vertex(p | 1 << u | 1 << v),
+                           d = vertex(p | 1 << v);
+            mesh.quads.push_back(positive ? std::array<uint32_t, 4>{a, b, c, d}
+                                          : std::array<uint32_t, 4>{a, d, c, b});
+        },
+        [&] {
+            visit(mesh);
+            mesh.new_points.clear();
+            mesh.quads.clear();
+        });
 }
 
 double world_coordinate(const Grid& grid, int axis, int64_t lattice) {
@@ -409,25 +427,50 @@ void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
     });
 }
 
-// STL goes through the shared mesh writer, so unlike OBJ and PLY it holds the whole mesh; the
-// progress covers building it, and ends before the (shorter) write.
+// STL has no shared vertices: each exposed face is two triangles written as it comes, after a
+// first walk that counts the faces for the header.
 void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
                          ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
-    const size_t pass = progress.add(1);
-    Mesh mesh;
-    for_each_layer_mesh(path, voxels, progress, pass, [&](const LayerMesh& layer) {
-        for (const auto& p : layer.new_points)
-            mesh.positions.push_back({world_coordinate(grid, 0, p[0]),
-                                      world_coordinate(grid, 1, p[1]),
-                                      world_coordinate(grid, 2, p[2])});
-        for (const auto& q : layer.quads) {  // the quad's winding carries over to both halves
-            mesh.triangles.push_back({q[0], q[1], q[2]});
-            mesh.triangles.push_back({q[0], q[2], q[3]});
-        }
+    const size_t counting = progress.add(1), face_pass = progress.add(1);
+    uint64_t faces = 0;
+    for_each_exposed_face(
+        voxels, progress, counting, [&](int64_t, int64_t, int64_t, int) { ++faces; }, [] {});
+    if (2 * faces > std::numeric_limits<uint32_t>::max())
+        throw OutputError("cannot write " + path + ": the surface has more than 2^32 triangles");
+    write_file_atomically(path, [&](std::ostream& out) {
+        BlockWriter w(out);
+        write_stl_header(w,
+                         "oclvox: exposed faces of " + std::to_string(voxels.count()) + " voxels",
+                         uint32_t(2 * faces));
+        for_each_exposed_face(
+            voxels, progress, face_pass,
+            [&](int64_t x, int64_t y, int64_t z, int direction) {
+                // The quad of for_each_layer_mesh, split along its first diagonal.
+                const int axis = direction / 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
+                const bool positive = direction % 2 == 0;
+                std::array<int64_t, 3> p{x, y, z};
+                if (positive) p[size_t(axis)] += 1;
+                auto corner = [&](int du, int dv) {
+                    std::array<double, 3> world;
+                    for (int k = 0; k < 3; ++k)
+                        world[size_t(k)] = world_coordinate(
+                            grid, k, p[size_t(k)] + (k == u ? du : 0) + (k == v ? dv : 0));
+                    return world;
+                };
+                const auto a = corner(0, 0), b = corner(1, 0), c = corner(1, 1), d = corner(0, 1);
+                if (positive) {
+                    write_stl_facet(w, a, b, c);
+                    write_stl_facet(w, a, c, d);
+                } else {
+                    write_stl_facet(w, a, d, c);
+                    write_stl_facet(w, a, c, b);
+                }
+            },
+            [] {});
+        w.flush();
+        progress.finish();
     });
-    progress.finish();
-    write_mesh(path, mesh);
 }
 
 }  // namespace oclvox::detail

@@ -4,17 +4,15 @@
 // OBJ and PLY keep the double coordinates exactly (shortest round-trip decimal text; 64-bit
 // floats); STL is single precision by definition, with each facet's normal computed from its
 // corners. Indices are checked first so a bad mesh fails before anything is written.
-#include <cmath>
-#include <cstring>
 #include <limits>
 #include <vector>
 
 #include "atomic_file.hpp"
 #include "block_writer.hpp"
 #include "file_names.hpp"
-#include "little_endian.hpp"
 #include "oclvox/field.hpp"
 #include "progress.hpp"
+#include "stl_format.hpp"
 
 namespace oclvox {
 
@@ -83,24 +81,10 @@ void write_ply(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
 
 void write_stl(std::ostream& out, const Mesh& mesh, ItemProgress& progress) {
     detail::BlockWriter w(out);
-    char header[80] = {};
-    std::strncpy(header, "oclvox iso-surface", sizeof header);
-    w.bytes(header, sizeof header);
-    w.little_endian(uint32_t(mesh.triangles.size()));
+    detail::write_stl_header(w, "oclvox iso-surface", uint32_t(mesh.triangles.size()));
     for (const auto& t : mesh.triangles) {
-        const auto& a = mesh.positions[t[0]];
-        const auto& b = mesh.positions[t[1]];
-        const auto& c = mesh.positions[t[2]];
-        const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-        const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-        double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                       u[0] * v[1] - u[1] * v[0]};
-        const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        for (double& x : n) x = length > 0 ? x / length : 0.0;  // degenerate facets: zero normal
-        for (double x : n) w.little_endian(float(x));
-        for (const auto* p : {&a, &b, &c})
-            for (double x : *p) w.little_endian(float(x));
-        w.little_endian(uint16_t(0));
+        detail::write_stl_facet(w, mesh.positions[t[0]], mesh.positions[t[1]],
+                                mesh.positions[t[2]]);
         progress.item();
     }
     w.flush();

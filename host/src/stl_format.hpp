@@ -1,0 +1,40 @@
+// Binary STL, shared by the mesh writer and the voxel-cube writer: an 80-byte header, the
+// triangle count (32-bit), then per triangle its unit normal and three corners as floats and a
+// 16-bit attribute word.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+#include "block_writer.hpp"
+
+namespace oclvox::detail {
+
+// The header: `text`, cut to 80 bytes and padded with zero bytes, then the triangle count.
+inline void write_stl_header(BlockWriter& w, const std::string& text, uint32_t triangles) {
+    char header[80] = {};
+    std::memcpy(header, text.data(), std::min(text.size(), sizeof header));
+    w.bytes(header, sizeof header);
+    w.little_endian(triangles);
+}
+
+// Triangle (a, b, c): the normal from its corners in double (zero for a degenerate one), then
+// everything rounded to float.
+inline void write_stl_facet(BlockWriter& w, const std::array<double, 3>& a,
+                            const std::array<double, 3>& b, const std::array<double, 3>& c) {
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (double& x : n) x = length > 0 ? x / length : 0.0;
+    for (double x : n) w.little_endian(float(x));
+    for (const auto* p : {&a, &b, &c})
+        for (double x : *p) w.little_endian(float(x));
+    w.little_endian(uint16_t(0));
+}
+
+}  // namespace oclvox::detail
