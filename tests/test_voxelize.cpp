@@ -353,6 +353,37 @@ TEST(Devices, KernelBuildFailureCarriesTheBuildLog) {
     unsetenv("OCLVOX_CACHE_DIR");
 }
 
+// load_kernels loads every program the voxelize call with the same options uses: with the disk
+// cache off every load is a build the callback hears of, and the call after it hears of none.
+TEST(Devices, LoadKernelsLeavesNothingForVoxelizeToBuild) {
+    const Mesh m = load_mesh(mesh_path("spot.obj"));
+    GridFit fit;
+    fit.resolution = 24;
+    const Grid g = fit_grid(m, fit);
+    setenv("OCLVOX_CACHE_DIR", "off", 1);
+    for (const VoxelizeMode mode :
+         {VoxelizeMode::Surface, VoxelizeMode::Thin, VoxelizeMode::Solid, VoxelizeMode::Filled})
+        for (const Download download : {Download::Whole, Download::NonEmptyBlocks}) {
+            Device d =
+                Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+            std::vector<std::string> built;
+            d.on_kernel_compile([&](const Device::KernelCompile& c) {
+                if (c.finished) built.push_back(c.program);
+            });
+            VoxelizeOptions o;
+            o.mode = mode;
+            o.brick_size = 8;
+            o.download = download;
+            d.load_kernels(o);
+            EXPECT_FALSE(built.empty());
+            const size_t loaded = built.size();
+            d.voxelize(m, g, o);
+            EXPECT_EQ(built.size(), loaded)
+                << to_string(mode) << " " << to_string(download) << " built " << built.back();
+        }
+    unsetenv("OCLVOX_CACHE_DIR");
+}
+
 TEST(Devices, MissingDeviceIsAnErrorNotAFallback) {
     EXPECT_THROW(Device::open("no-such-device-anywhere"), DeviceError);
     EXPECT_FALSE(list_devices().empty());
