@@ -27,6 +27,7 @@
 
 #include "atomic_file.hpp"
 #include "bit_count.hpp"
+#include "block_writer.hpp"
 #include "brick_layout.hpp"
 #include "little_endian.hpp"
 #include "writers.hpp"
@@ -217,25 +218,20 @@ std::array<int64_t, 3> tile_size(const Grid& grid, const Tile& tile) {
     return size;
 }
 
-// XYZI content: the count, then x, y, z, colour per voxel.
+// XYZI content: the count, then x, y, z, colour per voxel (a little-endian 32-bit word each).
 void write_tile_voxels(std::ostream& out, const std::vector<TileBlock>& blocks) {
-    std::vector<char> bytes;
-    bytes.reserve(64 * 4);
+    BlockWriter w(out);
     for (const TileBlock& block : blocks) {
         const int64_t x = int64_t(block.position % kBlocksPerTileAxis) * 4;
         const int64_t y = int64_t(block.position / kBlocksPerTileAxis % kBlocksPerTileAxis) * 4;
         const int64_t z = int64_t(block.position / (kBlocksPerTileAxis * kBlocksPerTileAxis)) * 4;
-        bytes.clear();
         for (uint64_t mask = block.bits; mask; mask &= mask - 1) {
-            const int bit = __builtin_ctzll(mask);
-            const auto v = voxel_in_block(bit);
-            bytes.push_back(char(x + v[0]));
-            bytes.push_back(char(y + v[1]));
-            bytes.push_back(char(z + v[2]));
-            bytes.push_back(char(kColorIndex));
+            const auto v = voxel_in_block(__builtin_ctzll(mask));
+            w.little_endian(uint32_t(x + v[0]) | uint32_t(y + v[1]) << 8 |
+                            uint32_t(z + v[2]) << 16 | uint32_t(kColorIndex) << 24);
         }
-        out.write(bytes.data(), std::streamsize(bytes.size()));
     }
+    w.flush();
 }
 
 }  // namespace
