@@ -1,4 +1,8 @@
-// Grid fitting and the limits that refuse impossible grids.
+// Grid fitting, the limits that refuse impossible grids, and the sparse bit grid's storage.
+#include <cstring>
+
+#include "host_memory.hpp"
+#include "sparse_voxels_access.hpp"
 #include "test_support.hpp"
 
 namespace oclvox::test {
@@ -132,6 +136,62 @@ TEST(Voxelize, AbsurdGridIsRefusedBeforeAllocating) {
     g.dims = {16, 16, 16};
     o.brick_size = 6;  // not a multiple of 4
     EXPECT_THROW(voxelize_reference(m, g, o), GridError);
+}
+
+// A copy owns its bricks: changing either leaves the other as it was, whether its bricks were
+// made one by one or taken whole from a device batch.
+TEST(SparseVoxels, CopiesAreDeep) {
+    SparseVoxels made(unit_grid(40, 40, 40), 8);
+    made.set(1, 2, 3);
+    made.set(30, 31, 32);
+    const Mesh m = box_mesh({4, 4, 4}, {20, 12, 30});
+    VoxelizeOptions o;
+    o.brick_size = 8;
+    o.download = Download::Whole;  // on a CPU device: the bricks the device wrote, taken whole
+    const SparseVoxels voxelized = device().voxelize(m, unit_grid(40, 40, 40), o);
+    for (const SparseVoxels* original : {static_cast<const SparseVoxels*>(&made), &voxelized}) {
+        const uint64_t count = original->count();
+        SparseVoxels copy = *original;
+        ASSERT_TRUE(copy.same_voxels(*original));
+        EXPECT_FALSE(original->get(0, 39, 0));
+        copy.set(0, 39, 0);
+        copy.set_box({0, 0, 0}, {8, 8, 8});
+        EXPECT_FALSE(original->get(0, 39, 0));
+        EXPECT_EQ(original->count(), count);
+        SparseVoxels assigned(unit_grid(2, 2, 2), 4);
+        assigned = copy;
+        assigned.set(39, 0, 39);
+        EXPECT_FALSE(copy.get(39, 0, 39));
+        EXPECT_EQ(copy.count(), assigned.count() - 1);
+    }
+}
+
+// Bricks taken whole stay where they lie: all-zero ones are not stored, one already stored takes
+// the taken one's bits, and a brick outside the grid is an error.
+TEST(SparseVoxels, TakenBricksStayInTheirRun) {
+    SparseVoxels v(unit_grid(128, 128, 128), 64);  // 8 bricks of 32 KiB, whole pages
+    v.set(100, 1, 1);                              // brick 1
+    const size_t n = v.blocks_per_brick();
+    std::shared_ptr<uint64_t> run = detail::zeroed_host_pages(3 * n * sizeof(uint64_t));
+    ASSERT_TRUE(run);
+    run.get()[n + 5] = 0x8000000000000001u;  // run brick 1 -> grid brick 6
+    run.get()[2 * n] = 2;                    // run brick 2 -> grid brick 1, voxel (65, 0, 0)
+    const uint64_t grid_brick[3] = {0, 6, 1};
+    detail::SparseVoxelsAccess::adopt_bricks(v, run, 3, [&](size_t i) { return grid_brick[i]; });
+    EXPECT_EQ(v.brick_count(), 2u);
+    EXPECT_EQ(v.brick_blocks(0), nullptr);
+    EXPECT_EQ(v.brick_blocks(6), run.get() + n);  // not a copy
+    EXPECT_EQ(v.count(), 4u);
+    // Block 5 of brick 6 (origin (0, 64, 64)) starts at (20, 64, 64); bit 63 is its (3, 3, 3).
+    EXPECT_TRUE(v.get(20, 64, 64));
+    EXPECT_TRUE(v.get(23, 67, 67));
+    EXPECT_TRUE(v.get(100, 1, 1));
+    EXPECT_TRUE(v.get(65, 0, 0));
+    run.reset();  // the voxels keep what they took
+    EXPECT_TRUE(v.get(23, 67, 67));
+    std::shared_ptr<uint64_t> outside = detail::zeroed_host_pages(n * sizeof(uint64_t));
+    EXPECT_THROW(detail::SparseVoxelsAccess::adopt_bricks(v, outside, 1, [](size_t) { return 8; }),
+                 GridError);
 }
 
 }  // namespace

@@ -7,27 +7,39 @@
 #include <vector>
 
 #include "device_batches.hpp"
+#include "sparse_voxels_access.hpp"
 #include "timing.hpp"
 
 namespace oclvox::detail {
 
 constexpr size_t kGroupBlocks = 64;  // OV_GROUP_BLOCKS of blocks.cl
 
-void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, size_t blocks_per_unit,
-                     Download mode, VoxelizeStats& stats,
+void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer* bit_slots,
+                     size_t units, size_t blocks_per_unit, Download mode, VoxelizeStats& stats,
                      const std::function<uint64_t(size_t unit)>& brick_of, SparseVoxels& result) {
     const auto start = Clock::now();
     const uint64_t block_count = uint64_t(units) * blocks_per_unit;
     // Block indices are 32-bit on the device.
     const bool compact = block_count < (uint64_t(1) << 32) && downloads_non_empty_blocks(cl, mode);
     if (!compact) {
+        // Mapped, the bits are up to date in the host's memory: where they already lie in the
+        // pages behind the buffer (a device in the host's memory), the result takes the pages.
+        constexpr bool kLittleEndian = __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__;
+        bool in_place = false;
         read_mapped<cl_uint>(cl.queue, bits, 2 * block_count, [&](const cl_uint* words) {
+            in_place = kLittleEndian && bit_slots && bit_slots->pages() &&
+                       static_cast<const void*>(words) == bit_slots->pages();
+            if (in_place) return;
             result.merge_bricks(units, brick_of, [&](size_t unit, uint64_t* blocks) {
                 const cl_uint* unit_words = words + 2 * unit * blocks_per_unit;
                 for (size_t b = 0; b < blocks_per_unit; ++b)
                     blocks[b] = uint64_t(unit_words[2 * b]) | uint64_t(unit_words[2 * b + 1]) << 32;
             });
         });
+        if (in_place) {
+            cl.queue.finish();  // the unmap
+            SparseVoxelsAccess::adopt_bricks(result, bit_slots->take_pages(), units, brick_of);
+        }
         stats.bytes_downloaded += 2 * block_count * sizeof(cl_uint);
         stats.seconds_download += seconds_since(start);
         return;

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 
+#include "device_batches.hpp"
 #include "opencl_runtime.hpp"
 
 namespace oclvox::detail {
@@ -19,11 +20,13 @@ inline bool downloads_non_empty_blocks(const Device::Impl& cl, Download mode) {
 // A batch's `units` bricks in `bits` (each blocks_per_unit 4^3 blocks of two 32-bit words, low
 // word first, one brick after another) come back whole or as their non-empty blocks, as `mode`
 // says (Download::Auto: non-empty blocks unless the device works in host memory), and are merged
-// into `result` as bricks brick_of(unit), in parallel (SparseVoxels::merge_bricks). Adds to
-// stats.seconds_download and stats.bytes_downloaded. Device allocation failures propagate before
-// anything is merged, so run_batches can retry the batch smaller.
-void download_bricks(Device::Impl& cl, const cl::Buffer& bits, size_t units, size_t blocks_per_unit,
-                     Download mode, VoxelizeStats& stats,
+// into `result` as bricks brick_of(unit), in parallel (SparseVoxels::merge_bricks). Where `bits`
+// is bit_slots' buffer and its bricks come back whole from the host pages behind it, they are
+// not copied: the result takes the pages (on a little-endian host, where two 32-bit words, low
+// first, are the block's 64-bit word), and bit_slots gets fresh ones for the next batch. A null
+// bit_slots (bricks the kernels wrote whole, empty ones too: parity's) always copies.
+void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer* bit_slots,
+                     size_t units, size_t blocks_per_unit, Download mode, VoxelizeStats& stats,
                      const std::function<uint64_t(size_t unit)>& brick_of, SparseVoxels& result);
 
 }  // namespace oclvox::detail

@@ -46,10 +46,14 @@ inline bool is_allocation_failure(cl_int status) {
 // batch makes smaller. Fault injection for tests/fault_test.sh:
 // OCLVOX_FAULT_DEVICE_ALLOCATION_MIB=N (a number, fractions allowed) makes every such buffer
 // larger than N MiB fail as the device would when out of memory.
-inline cl::Buffer batch_buffer(const cl::Context& context, cl_mem_flags flags, size_t bytes) {
+inline void check_injected_allocation_fault(size_t bytes) {
     const char* const limit_mib = std::getenv("OCLVOX_FAULT_DEVICE_ALLOCATION_MIB");
     if (limit_mib && double(bytes) > std::strtod(limit_mib, nullptr) * double(1 << 20))
         throw cl::Error(CL_MEM_OBJECT_ALLOCATION_FAILURE, "clCreateBuffer (injected fault)");
+}
+
+inline cl::Buffer batch_buffer(const cl::Context& context, cl_mem_flags flags, size_t bytes) {
+    check_injected_allocation_fault(bytes);
     return cl::Buffer(context, flags, bytes);
 }
 
@@ -76,20 +80,41 @@ class SlotBuffer {
     size_t slots_ = 0;
 };
 
-// A SlotBuffer whose first `used` units are zero bytes whenever get returns it: the bits that work
-// items OR into. On a device working in the host's memory it is zeroed through a map on every
-// core, where the device's fill runs on one thread (through PoCL the fill took 12 ms of
-// motorBike's 17 MiB at 1024^3, most of it faulting in fresh pages; zeroed on two cores, 5 ms).
-// Elsewhere the device fills it.
-class ZeroedSlotBuffer {
+// Bits of a batch, bytes_per_slot bytes per unit, whose first `used` units are zero bytes
+// whenever get returns them: the bits work items OR into, and the bits that come back as the
+// result. On a device working in the host's memory they lie in host pages the device writes in
+// place, zeroed on every core, where the device's fill runs on one thread (through PoCL the fill
+// took 12 ms of motorBike's 17 MiB at 1024^3, most of it faulting in fresh pages; zeroed on two
+// cores, 5 ms). Fresh pages are zero already: bits the kernels write sparsely are left to fault
+// in where written (most pages of a surface's bricks never are), while bits written everywhere
+// are faulted in on every core first, as faults inside the kernels cost far more (parity solid
+// of bunny00 at 1024^3: kernels 121 ms with the pages zeroed first, 205 ms without). A result
+// can take the pages instead of a copy (take_pages, download_bricks), and the next batch gets
+// fresh ones. Elsewhere the bits are a device buffer, kept while the batch size stays, that the
+// device fills.
+class BitSlotBuffer {
   public:
-    explicit ZeroedSlotBuffer(size_t bytes_per_slot)
-        : buffer_(CL_MEM_READ_WRITE, bytes_per_slot), bytes_per_slot_(bytes_per_slot) {}
+    enum class Writes { Sparse, Everywhere };
+    BitSlotBuffer(size_t bytes_per_slot, Writes writes)
+        : bytes_per_slot_(bytes_per_slot), writes_(writes) {}
     const cl::Buffer& get(const Device::Impl& cl, size_t slots, size_t used);
 
+    const cl::Buffer& buffer() const { return buffer_; }  // as the last get returned it
+    // The host pages behind the buffer, or nullptr if it is the device's own memory.
+    const uint64_t* pages() const { return pages_.get(); }
+    // Hands over the pages, dropping the buffer (its work must be finished).
+    std::shared_ptr<uint64_t> take_pages() {
+        buffer_ = cl::Buffer();
+        slots_ = 0;
+        return std::move(pages_);
+    }
+
   private:
-    SlotBuffer buffer_;
     size_t bytes_per_slot_;
+    Writes writes_;
+    size_t slots_ = 0;
+    std::shared_ptr<uint64_t> pages_;  // declared before buffer_: released after it
+    cl::Buffer buffer_;
 };
 
 // Work items of one batch are numbered with 32-bit offsets.

@@ -2,6 +2,7 @@
 // dense field, a sparse result's bricks, a mesher's buffers) makes before it allocates.
 #pragma once
 
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -57,6 +58,35 @@ inline void check_host_memory(uint64_t bytes, uint64_t budget, const std::string
         throw GridError(what + " needs " + mib_text(bytes) +
                         " of host memory, over the host memory budget of " + mib_text(budget) +
                         ": lower the resolution or raise the budget");
+}
+
+// Bytes of a page of host memory.
+inline size_t host_page_size() {
+    static const size_t page = [] {
+        const long size = sysconf(_SC_PAGE_SIZE);
+        return size > 0 ? size_t(size) : size_t(4096);
+    }();
+    return page;
+}
+
+// `bytes` (> 0) of zero, page-aligned host memory, owned by the pointer: fresh pages from the
+// system, which cost nothing until first touched (unlike memory that is zeroed on allocation).
+// nullptr if the system gives none.
+inline std::shared_ptr<uint64_t> zeroed_host_pages(size_t bytes) {
+    void* const p =
+        mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) return nullptr;
+    return std::shared_ptr<uint64_t>(static_cast<uint64_t*>(p),
+                                     [bytes](uint64_t* q) { munmap(q, bytes); });
+}
+
+// Gives the whole pages of zeroed_host_pages memory within [p, p + bytes) back to the system
+// (they read as zero after, and take no memory until touched again).
+inline void release_host_pages(void* p, size_t bytes) {
+    const size_t page = host_page_size();
+    const uintptr_t begin = (reinterpret_cast<uintptr_t>(p) + page - 1) / page * page;
+    const uintptr_t end = (reinterpret_cast<uintptr_t>(p) + bytes) / page * page;
+    if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_DONTNEED);
 }
 
 // An allocator whose resize leaves new elements of trivial types uninitialised instead of zeroing

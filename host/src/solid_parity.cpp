@@ -193,7 +193,7 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
     const cl::Buffer tri_buffer = read_in_place(cl, triangles);
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
-    ZeroedSlotBuffer bits(column_words * sizeof(cl_uint));
+    BitSlotBuffer bits(column_words * sizeof(cl_uint), BitSlotBuffer::Writes::Everywhere);
     SlotBuffer blocks(CL_MEM_READ_WRITE, block_words * sizeof(cl_uint));
 
     cl::Kernel flip(program, "parity_flip"), prefix(program, "parity_prefix"),
@@ -248,7 +248,7 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
 
         // Each slot's bricks, bottom to top, are units of the download.
         download_bricks(
-            cl, block_buffer, batch.unit_count * size_t(l.nbz), l.blocks_per_brick,
+            cl, block_buffer, nullptr, batch.unit_count * size_t(l.nbz), l.blocks_per_brick,
             options.download, stats,
             [&](size_t unit) {
                 const uint64_t column = bins.columns[batch.first_unit + unit / size_t(l.nbz)];

@@ -9,6 +9,7 @@
 #include "bit_count.hpp"
 #include "host_memory.hpp"
 #include "oclvox/oclvox.hpp"
+#include "sparse_voxels_access.hpp"
 
 namespace oclvox {
 
@@ -23,6 +24,39 @@ SparseVoxels::SparseVoxels(const Grid& grid, int brick_size)
     if (brick_size < 4 || brick_size > 1024 || brick_size % kBlock != 0)
         throw GridError("brick size " + std::to_string(brick_size) +
                         " is invalid: it must be a multiple of 4 in [4, 1024]");
+}
+
+namespace {
+// Zeroed words for one brick of its own.
+std::shared_ptr<uint64_t> new_brick(size_t words) {
+    return std::shared_ptr<uint64_t>(new uint64_t[words](), std::default_delete<uint64_t[]>());
+}
+}  // namespace
+
+SparseVoxels::SparseVoxels(const SparseVoxels& other)
+    : grid_(other.grid_), brick_size_(other.brick_size_) {
+    if (other.bricks_.empty()) return;
+    // One run for all the bricks.
+    const size_t n = blocks_per_brick();
+    const std::shared_ptr<uint64_t> run = new_brick(n * other.bricks_.size());
+    uint64_t* next = run.get();
+    bricks_.reserve(other.bricks_.size());
+    for (const auto& [index, words] : other.bricks_) {
+        std::copy_n(words.get(), n, next);
+        bricks_.emplace(index, std::shared_ptr<uint64_t>(run, next));
+        next += n;
+    }
+}
+
+SparseVoxels& SparseVoxels::operator=(const SparseVoxels& other) {
+    if (this != &other) *this = SparseVoxels(other);
+    return *this;
+}
+
+uint64_t* SparseVoxels::writable_brick(uint64_t brick_index) {
+    const auto it = bricks_.find(brick_index);
+    if (it != bricks_.end()) return it->second.get();
+    return bricks_.emplace(brick_index, new_brick(blocks_per_brick())).first->second.get();
 }
 
 size_t SparseVoxels::blocks_per_brick() const {
@@ -74,29 +108,28 @@ bool SparseVoxels::get(int64_t i, int64_t j, int64_t k) const {
     if (!inside(grid_, i, j, k)) return false;
     const Address a = address_of(*this, i, j, k);
     auto it = bricks_.find(a.brick);
-    return it != bricks_.end() && ((it->second[a.word] >> a.bit) & 1u);
+    return it != bricks_.end() && ((it->second.get()[a.word] >> a.bit) & 1u);
 }
 
 void SparseVoxels::set(int64_t i, int64_t j, int64_t k) {
     if (!inside(grid_, i, j, k)) throw std::out_of_range("SparseVoxels::set outside the grid");
     const Address a = address_of(*this, i, j, k);
-    auto& brick = bricks_[a.brick];
-    if (brick.empty()) brick.assign(blocks_per_brick(), 0);
-    brick[a.word] |= uint64_t(1) << a.bit;
+    writable_brick(a.brick)[a.word] |= uint64_t(1) << a.bit;
 }
 
 uint64_t SparseVoxels::count() const {
     // The bricks in parallel: a large surface's bricks hold hundreds of MiB of words (a serial
     // count of stanford-bunny's at 1024^3 took 7 ms of a 75 ms voxelize phase).
-    std::vector<const std::vector<uint64_t>*> all;
+    std::vector<const uint64_t*> all;
     all.reserve(bricks_.size());
-    for (const auto& [index, blocks] : bricks_) all.push_back(&blocks);
+    for (const auto& [index, words] : bricks_) all.push_back(words.get());
+    const size_t words_per_brick = blocks_per_brick();
     return tbb::parallel_reduce(
         tbb::blocked_range<size_t>(0, all.size()), uint64_t(0),
         [&](const tbb::blocked_range<size_t>& range, uint64_t n) {
             for (size_t i = range.begin(); i < range.end(); ++i)
-                for (uint64_t w : *all[i])
-                    if (w) n += uint64_t(detail::popcount64(w));  // most words of a surface are 0
+                for (size_t w = 0; w < words_per_brick; ++w)
+                    if (all[i][w]) n += uint64_t(detail::popcount64(all[i][w]));  // most are 0
             return n;
         },
         std::plus<uint64_t>());
@@ -110,17 +143,15 @@ void SparseVoxels::merge_brick(uint64_t brick_index, const uint64_t* blocks) {
     bool any = false;
     for (size_t w = 0; w < n && !any; ++w) any = blocks[w] != 0;
     if (!any) return;
-    auto& brick = bricks_[brick_index];
-    if (brick.empty()) {
-        brick.assign(blocks, blocks + n);
-        return;
-    }
+    uint64_t* const brick = writable_brick(brick_index);
     for (size_t w = 0; w < n; ++w) brick[w] |= blocks[w];
 }
 
-void SparseVoxels::merge_bricks(size_t count, const std::function<uint64_t(size_t)>& brick_index,
-                                const std::function<void(size_t, uint64_t*)>& fill) {
-    const auto nb = brick_dims();
+namespace {
+// brick_index(i) for i in [0, count); throws GridError for one outside the grid of `voxels`.
+std::vector<uint64_t> checked_brick_indices(const SparseVoxels& voxels, size_t count,
+                                            const std::function<uint64_t(size_t)>& brick_index) {
+    const auto nb = voxels.brick_dims();
     const uint64_t bricks = uint64_t(nb[0]) * uint64_t(nb[1]) * uint64_t(nb[2]);
     std::vector<uint64_t> indices(count);
     for (size_t i = 0; i < count; ++i) {
@@ -128,31 +159,64 @@ void SparseVoxels::merge_bricks(size_t count, const std::function<uint64_t(size_
         if (indices[i] >= bricks)
             throw GridError("brick index " + std::to_string(indices[i]) + " is outside the grid");
     }
+    return indices;
+}
+}  // namespace
+
+void SparseVoxels::merge_bricks(size_t count, const std::function<uint64_t(size_t)>& brick_index,
+                                const std::function<void(size_t, uint64_t*)>& fill) {
+    const std::vector<uint64_t> indices = checked_brick_indices(*this, count, brick_index);
     const size_t n = blocks_per_brick();
-    std::vector<std::vector<uint64_t>> filled(count);
+    std::vector<std::shared_ptr<uint64_t>> filled(count);
     tbb::parallel_for(size_t(0), count, [&](size_t i) {
-        std::vector<uint64_t> blocks(n, 0);
-        fill(i, blocks.data());
-        if (std::any_of(blocks.begin(), blocks.end(), [](uint64_t w) { return w != 0; }))
+        std::shared_ptr<uint64_t> blocks = new_brick(n);
+        fill(i, blocks.get());
+        if (std::any_of(blocks.get(), blocks.get() + n, [](uint64_t w) { return w != 0; }))
             filled[i] = std::move(blocks);
     });
     for (size_t i = 0; i < count; ++i) {
-        if (filled[i].empty()) continue;
-        const auto [it, fresh] = bricks_.try_emplace(indices[i], std::move(filled[i]));
+        if (!filled[i]) continue;
+        const auto [it, fresh] = bricks_.try_emplace(indices[i], filled[i]);
         if (!fresh)
-            for (size_t w = 0; w < n; ++w) it->second[w] |= filled[i][w];
+            for (size_t w = 0; w < n; ++w) it->second.get()[w] |= filled[i].get()[w];
+    }
+}
+
+void detail::SparseVoxelsAccess::adopt_bricks(SparseVoxels& voxels,
+                                              const std::shared_ptr<uint64_t>& run, size_t count,
+                                              const std::function<uint64_t(size_t)>& brick_index) {
+    const std::vector<uint64_t> indices = checked_brick_indices(voxels, count, brick_index);
+    const size_t n = voxels.blocks_per_brick();
+    // Phase 1: which bricks hold a voxel, in parallel (a non-empty brick stops at its first set
+    // word); the pages of the others are given back.
+    std::vector<uint8_t> holds_voxels(count);
+    tbb::parallel_for(size_t(0), count, [&](size_t i) {
+        const uint64_t* words = run.get() + i * n;
+        holds_voxels[i] = std::any_of(words, words + n, [](uint64_t w) { return w != 0; });
+        if (!holds_voxels[i]) release_host_pages(run.get() + i * n, n * sizeof(uint64_t));
+    });
+    // Phase 2: the others are stored where they lie, or ORed into the brick already stored.
+    for (size_t i = 0; i < count; ++i) {
+        if (!holds_voxels[i]) continue;
+        uint64_t* const words = run.get() + i * n;
+        const auto [it, fresh] =
+            voxels.bricks_.try_emplace(indices[i], std::shared_ptr<uint64_t>(run, words));
+        if (fresh) continue;
+        for (size_t w = 0; w < n; ++w) it->second.get()[w] |= words[w];
+        release_host_pages(words, n * sizeof(uint64_t));
     }
 }
 
 void SparseVoxels::for_each(const std::function<void(int64_t, int64_t, int64_t)>& f) const {
     const auto nbricks = brick_dims();
     const int64_t b = brick_size_, nb = blocks_per_brick_axis();
-    for (const auto& [index, blocks] : bricks_) {
+    const size_t words_per_brick = blocks_per_brick();
+    for (const auto& [index, words] : bricks_) {
         const int64_t bx = int64_t(index % uint64_t(nbricks[0]));
         const int64_t by = int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1]));
         const int64_t bz = int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1])));
-        for (size_t w = 0; w < blocks.size(); ++w) {
-            uint64_t mask = blocks[w];
+        for (size_t w = 0; w < words_per_brick; ++w) {
+            uint64_t mask = words.get()[w];
             if (!mask) continue;
             const int64_t ox = bx * b + int64_t(w % nb) * 4;
             const int64_t oy = by * b + int64_t(w / nb % nb) * 4;
@@ -176,7 +240,7 @@ std::vector<uint64_t> SparseVoxels::brick_indices() const {
 
 const uint64_t* SparseVoxels::brick_blocks(uint64_t brick_index) const {
     const auto it = bricks_.find(brick_index);
-    return it == bricks_.end() ? nullptr : it->second.data();
+    return it == bricks_.end() ? nullptr : it->second.get();
 }
 
 namespace {
@@ -270,7 +334,7 @@ void SparseVoxels::mark_box(const std::array<int64_t, 3>& lo, const std::array<i
     for_each_brick_in(brick_dims(), brick_size_, first, last,
                       [&](uint64_t index, const std::array<int64_t, 3>& origin) {
                           const auto it = bricks_.find(index);
-                          if (it != bricks_.end()) touched.emplace_back(it->second.data(), origin);
+                          if (it != bricks_.end()) touched.emplace_back(it->second.get(), origin);
                       });
     // Phase 2: each brick's blocks inside the box, then their set voxels. Bricks hold disjoint
     // voxels, so they write disjoint bytes of the window: in parallel.
@@ -319,8 +383,7 @@ uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
     const auto nbricks = brick_dims();
     const int64_t b = brick_size_;
     uint64_t count = 0;
-    auto count_brick = [&](const std::array<int64_t, 3>& origin,
-                           const std::vector<uint64_t>& blocks) {
+    auto count_brick = [&](const std::array<int64_t, 3>& origin, const uint64_t* blocks) {
         for_each_block_in(origin, b, blocks_per_brick_axis(), first, last,
                           [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {
                               count += uint64_t(detail::popcount64(blocks[word] & mask));
@@ -335,13 +398,13 @@ uint64_t SparseVoxels::count_box(const std::array<int64_t, 3>& lo,
             count_brick({int64_t(index % uint64_t(nbricks[0])) * b,
                          int64_t(index / uint64_t(nbricks[0]) % uint64_t(nbricks[1])) * b,
                          int64_t(index / (uint64_t(nbricks[0]) * uint64_t(nbricks[1]))) * b},
-                        blocks);
+                        blocks.get());
         return count;
     }
     for_each_brick_in(nbricks, b, first, last,
                       [&](uint64_t index, const std::array<int64_t, 3>& origin) {
                           const auto it = bricks_.find(index);
-                          if (it != bricks_.end()) count_brick(origin, it->second);
+                          if (it != bricks_.end()) count_brick(origin, it->second.get());
                       });
     return count;
 }
@@ -351,8 +414,7 @@ void SparseVoxels::set_box(const std::array<int64_t, 3>& lo, const std::array<in
     if (!clip_box(grid_, lo, hi, first, last)) return;
     for_each_brick_in(brick_dims(), brick_size_, first, last,
                       [&](uint64_t index, const std::array<int64_t, 3>& origin) {
-                          auto& blocks = bricks_[index];
-                          if (blocks.empty()) blocks.assign(blocks_per_brick(), 0);
+                          uint64_t* const blocks = writable_brick(index);
                           for_each_block_in(
                               origin, brick_size_, blocks_per_brick_axis(), first, last,
                               [&](size_t word, uint64_t mask, const std::array<int64_t, 3>&) {

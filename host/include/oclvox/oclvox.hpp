@@ -136,6 +136,10 @@ std::string to_string(const Grid& grid);
 // ---------------------------------------------------------------------------------------------
 // Sparse voxel results
 // ---------------------------------------------------------------------------------------------
+namespace detail {
+struct SparseVoxelsAccess;
+}
+
 // A bit grid stored as cubic bricks of `brick_size`^3 voxels; only bricks with at least one set
 // voxel are stored. Inside a brick, voxels are grouped in 4x4x4 blocks, one uint64_t each (bit
 // x + 4*(y + 4*z) of the block), blocks ordered x-fastest. Voxels outside the grid are never set.
@@ -145,6 +149,11 @@ class SparseVoxels {
 
     SparseVoxels() = default;
     SparseVoxels(const Grid& grid, int brick_size);
+    // Copies are deep: a copy's bricks are its own.
+    SparseVoxels(const SparseVoxels& other);
+    SparseVoxels& operator=(const SparseVoxels& other);
+    SparseVoxels(SparseVoxels&&) noexcept = default;
+    SparseVoxels& operator=(SparseVoxels&&) noexcept = default;
 
     const Grid& grid() const { return grid_; }
     int brick_size() const { return brick_size_; }
@@ -195,9 +204,15 @@ class SparseVoxels {
     bool same_voxels(const SparseVoxels& other) const;
 
   private:
+    friend struct detail::SparseVoxelsAccess;
+    uint64_t* writable_brick(uint64_t brick_index);  // the brick's words, made zero if absent
+
     Grid grid_{};
     int brick_size_ = 0;
-    std::unordered_map<uint64_t, std::vector<uint64_t>> bricks_;
+    // Each stored brick's blocks_per_brick() words. A pointer shares the ownership of the memory
+    // the words lie in: the brick's own, or a run of bricks taken whole (a device batch's results,
+    // written in the host's memory, are kept where the device wrote them instead of copied).
+    std::unordered_map<uint64_t, std::shared_ptr<uint64_t>> bricks_;
 };
 
 // ---------------------------------------------------------------------------------------------
