@@ -347,6 +347,38 @@ TEST(Binning, EveryBrickOfATriangleMeetsIt) {
     EXPECT_GT(row_pairs, 5000u);
 }
 
+// The limit on (triangle, brick) candidates refuses exactly the binnings over it: 9 small
+// triangles (a brick each) and one across the whole 8^3-brick grid make 521 candidates. Under a
+// limit of 500 binning is refused; under 600 or more it goes ahead, whether it counted them (600)
+// or the limit is at least triangles x bricks (5120), so that it cannot be passed and nothing is
+// counted; the pairs are the same.
+TEST(Binning, ThePairLimitRefusesExactlyTheBinningsOverIt) {
+    Mesh m;
+    for (int t = 0; t < 9; ++t) {
+        const double x = 8.0 * (t % 8) + 1, y = 8.0 * (t / 8) + 2;
+        const uint32_t v = uint32_t(m.positions.size());
+        m.positions.push_back({x, y, 3});
+        m.positions.push_back({x + 2, y + 1, 4});
+        m.positions.push_back({x + 1, y + 3, 2});
+        m.triangles.push_back({v, v + 1, v + 2});
+    }
+    const uint32_t v = uint32_t(m.positions.size());
+    m.positions.push_back({0.5, 0.5, 0.5});
+    m.positions.push_back({63.5, 0.5, 63.5});
+    m.positions.push_back({0.5, 63.5, 63.5});
+    m.triangles.push_back({v, v + 1, v + 2});
+    const Grid g = unit_grid(64, 64, 64);
+    const detail::PreparedTriangles prepared = detail::prepare_triangles(m, g);
+    const detail::BrickSelection all({}, SparseVoxels(g, 8));
+    EXPECT_THROW(detail::bin_triangles(prepared, g, 8, all, 520), GridError);
+    EXPECT_THROW(detail::touched_bricks(prepared, g, 8, 500), GridError);
+    const auto counted = binned_pairs(detail::bin_triangles(prepared, g, 8, all, 521));
+    EXPECT_EQ(binned_pairs(detail::bin_triangles(prepared, g, 8, all, 5120)), counted);
+    EXPECT_EQ(binned_pairs(detail::bin_triangles(prepared, g, 8, all)), counted);
+    EXPECT_GT(counted.size(), 9u + 8 * 8);  // the large triangle is culled to its bricks only
+    EXPECT_LT(counted.size(), 9u + 8 * 8 * 8);
+}
+
 // ---- selection_triangles ----
 
 // Contiguous runs of the candidates, as oclvox.distributed cuts them.
