@@ -75,16 +75,19 @@ void round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c, int half_op
 }
 
 // Triangle t's vertices in grid coordinates (voxel units), in double. Throws InputError for a
-// triangle that refers to a missing vertex or does not fit grid coordinates. Checking here, on
-// the way, spares a pass over the mesh that validating it first would cost.
-inline void grid_coordinates(const Mesh& mesh, const Grid& grid, double inv, size_t t, Vec3d g[3]) {
+// triangle that refers to a missing vertex or (unless told that every vertex is known to be
+// finite there: CheckFinite::No) does not fit grid coordinates. Checking here, on the way, spares
+// a pass over the mesh that validating it first would cost.
+enum class CheckFinite { No, Yes };
+inline void grid_coordinates(const Mesh& mesh, const Grid& grid, double inv, size_t t, Vec3d g[3],
+                             CheckFinite check = CheckFinite::Yes) {
     bool valid = true;
     for (int i = 0; i < 3; ++i) {
         const uint32_t v = mesh.triangles[t][i];
         if (v >= mesh.positions.size()) throw_unpreparable(mesh, t);
         for (int k = 0; k < 3; ++k) {
             g[i][k] = (mesh.positions[v][k] - grid.origin[k]) * inv;
-            valid = valid && std::isfinite(g[i][k]);
+            if (check == CheckFinite::Yes) valid = valid && std::isfinite(g[i][k]);
         }
     }
     if (!valid) throw_unpreparable(mesh, t);
@@ -193,9 +196,9 @@ PreparedTriangles prepare_triangles(const Mesh& mesh, const Grid& grid, Boundary
     const int half_open = boundary == Boundary::HalfOpen;
     for_each_chunk([&](size_t c, size_t begin, size_t end) {
         Vec3d g[3];
-        if (one_piece_each) {  // piece t is triangle t, with no clip test to make
+        if (one_piece_each) {  // piece t is triangle t, with no clip or finiteness test to make
             for (size_t t = begin; t < end; ++t) {
-                grid_coordinates(mesh, grid, inv, t, g);
+                grid_coordinates(mesh, grid, inv, t, g, CheckFinite::No);
                 round_to_anchor(g[0], g[1], g[2], half_open, out.triangles[t], out.ranges[t]);
             }
             return;
