@@ -1,4 +1,5 @@
-// Names of enumerations, for options and summaries.
+// Names of the options' enumerations (overlap test, mode, inside test, boundary, download), for
+// command lines, summaries and messages: to_string and the strict parse back.
 #include <algorithm>
 #include <cctype>
 
