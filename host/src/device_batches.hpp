@@ -99,7 +99,6 @@ class BitSlotBuffer {
         : bytes_per_slot_(bytes_per_slot), writes_(writes) {}
     const cl::Buffer& get(const Device::Impl& cl, size_t slots, size_t used);
 
-    const cl::Buffer& buffer() const { return buffer_; }  // as the last get returned it
     // The host pages behind the buffer, or nullptr if it is the device's own memory.
     const uint64_t* pages() const { return pages_.get(); }
     // Hands over the pages, dropping the buffer (its work must be finished).
