@@ -23,10 +23,11 @@ using std::fabs;
 using std::nextafter;
 namespace oclvox::detail {
 // fmin and fmax as OpenCL and C define them (a NaN argument yields the other), inline: on
-// baseline x86-64 std::fmin is an out-of-line libm call, and the host's preparation and binning
-// make millions of them. The comparison is written apart from the NaN test so that it compiles to
-// minss/maxss rather than to a branch on unpredictable data. They may differ from libm only in
-// the sign of a zero result, which both standards leave unspecified and no comparison can see.
+// baseline x86-64 std::fmin is an out-of-line libm call, and the host's distance-field
+// reference (sdf_math.h) makes millions of them (the overlap math here uses ov_min and ov_max).
+// The comparison is written apart from the NaN test so that it compiles to minss/maxss rather
+// than to a branch on unpredictable data. They may differ from libm only in the sign of a zero
+// result, which both standards leave unspecified and no comparison can see.
 inline float fmin(float a, float b) {
     const float smaller = b < a ? b : a;
     return a != a ? b : smaller;

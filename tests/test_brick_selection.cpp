@@ -348,10 +348,10 @@ TEST(Binning, EveryBrickOfATriangleMeetsIt) {
 }
 
 // The limit on (triangle, brick) candidates refuses exactly the binnings over it: 9 small
-// triangles (a brick each) and one across the whole 8^3-brick grid make 521 candidates. Under a
-// limit of 500 binning is refused; under 600 or more it goes ahead, whether it counted them (600)
-// or the limit is at least triangles x bricks (5120), so that it cannot be passed and nothing is
-// counted; the pairs are the same.
+// triangles (a brick each) and one across the whole 8^3-brick grid make 521 candidates. Under
+// limits of 520 and 500 binning is refused; at 521 it goes ahead, having counted them, and at
+// 5120 (triangles x bricks) and above, where the limit cannot be passed, without counting; the
+// pairs are the same.
 TEST(Binning, ThePairLimitRefusesExactlyTheBinningsOverIt) {
     Mesh m;
     for (int t = 0; t < 9; ++t) {

@@ -191,9 +191,9 @@ void detail::SparseVoxelsAccess::adopt_bricks(SparseVoxels& voxels,
     // word); the pages of the others are given back.
     std::vector<uint8_t> holds_voxels(count);
     tbb::parallel_for(size_t(0), count, [&](size_t i) {
-        const uint64_t* words = run.get() + i * n;
+        uint64_t* const words = run.get() + i * n;
         holds_voxels[i] = std::any_of(words, words + n, [](uint64_t w) { return w != 0; });
-        if (!holds_voxels[i]) release_host_pages(run.get() + i * n, n * sizeof(uint64_t));
+        if (!holds_voxels[i]) release_host_pages(words, n * sizeof(uint64_t));
     });
     // Phase 2: the others are stored where they lie, or ORed into the brick already stored.
     for (size_t i = 0; i < count; ++i) {
