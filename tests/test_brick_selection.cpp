@@ -3,6 +3,7 @@
 // it, also when each shard holds only the triangles selection_triangles gives it. That is what
 // lets a grid be computed on several processes or machines and merged.
 #include <cstring>
+#include <random>
 #include <set>
 
 #include "binning.hpp"
@@ -220,6 +221,43 @@ TEST(Preparation, SkippingTheCountGivesTheCountedTriangles) {
             ASSERT_EQ(std::memcmp(&fast.ranges[t], &counted.ranges[t], sizeof(detail::OvRange)), 0);
         }
     }
+}
+
+// Preparation works a triangle's voxel range out in fewer steps than ov_triangle_range, relying
+// on each coordinate lying at or above the anchor (round_to_anchor). The kernels take the range
+// from ov_triangle_range, so the two must agree: here on vertices at, just off and between whole
+// voxel coordinates (the cases where ceil and floor differ), of triangles inside the grid, crossing
+// its low faces (negative anchors) and clipped far outside it, at two voxel sizes.
+TEST(Preparation, RangesAreThoseOfTheRoundedTriangles) {
+    const double offsets[] = {0, 1e-12, -1e-12, 1e-7, -1e-7, 3e-8, 0.5, 0.999999999};
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<int> whole(-3, 34), pick(0, 7), far(0, 9);
+    Mesh m;
+    for (int t = 0; t < 30000; ++t) {
+        Vec3d v[3];
+        for (auto& p : v)
+            for (double& x : p)
+                x = far(rng) == 0 ? 900.0 * (pick(rng) - 3) : whole(rng) + offsets[pick(rng)];
+        add_triangle(m, v[0], v[1], v[2]);
+    }
+    Grid coarse = unit_grid(32, 32, 32);
+    coarse.voxel_size = 0.7;
+    coarse.origin = {-0.3, 0.1, 1.0 / 3};
+    size_t clipped = 0;
+    for (const Grid& g : {unit_grid(32, 32, 32), coarse})
+        for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
+            const detail::PreparedTriangles prepared = detail::prepare_triangles(m, g, boundary);
+            ASSERT_GT(prepared.triangles.size(), 1000u);
+            clipped += prepared.source.size();
+            const int half_open = boundary == Boundary::HalfOpen;
+            for (size_t t = 0; t < prepared.triangles.size(); ++t) {
+                const detail::OvRange expected =
+                    detail::ov_triangle_range(prepared.triangles[t], half_open);
+                ASSERT_EQ(std::memcmp(&prepared.ranges[t], &expected, sizeof expected), 0)
+                    << "piece " << t << ", half-open " << half_open;
+            }
+        }
+    EXPECT_GT(clipped, 0u);  // the clipping path ran
 }
 
 // ---- bin_triangles ----
