@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -933,6 +934,42 @@ TEST_F(WriterTest, StreamedNpyAndBinvoxEqualTheDenseDefinitionForAnySlabAndBrick
             EXPECT_EQ(after(read_bytes(path("s.binvox")), "data\n"), binvox);
         }
     }
+}
+
+// Bytes a file takes on its file system (holes take none).
+uint64_t allocated_bytes(const std::string& file) {
+    struct stat info;
+    if (stat(file.c_str(), &info) != 0) throw std::runtime_error("cannot stat " + file);
+    return uint64_t(info.st_blocks) * 512;
+}
+
+// Long runs of empty pages in a .npy are left as holes: the file reads exactly as the dense
+// definition, whichever run starts or ends it, wherever slabs cut the runs, and (on a file system
+// that keeps holes, probed first) it takes far less space than its size.
+TEST_F(WriterTest, NpyLeavesLongEmptyRunsAsHolesAndReadsAsTheDenseDefinition) {
+    const Grid grid = make_grid({128, 128, 64});  // 16 KiB a layer, 1 MiB in all
+    // Voxels at the start, a few in the middle, near the end; then also in the very last byte,
+    // and none at all.
+    const VoxelSet scattered = {{0, 0, 0}, {5, 7, 1}, {100, 3, 30}, {64, 64, 31}, {1, 120, 50}};
+    VoxelSet to_the_end = scattered;
+    to_the_end.insert({127, 127, 63});
+    {
+        std::ofstream probe(path("probe"), std::ios::binary);
+        probe.seekp(std::streamoff(1) << 20);
+        probe.put(0);
+    }
+    const bool keeps_holes = allocated_bytes(path("probe")) < (uint64_t(1) << 19);
+    for (const VoxelSet& set : {scattered, to_the_end, VoxelSet{}})
+        for (uint64_t slab : {uint64_t(1), uint64_t(70000), oclvox::detail::kSlabBytes}) {
+            SCOPED_TRACE(std::to_string(set.size()) + " voxels, slab " + std::to_string(slab));
+            const SparseVoxels voxels = make_voxels(grid, set, 16);
+            oclvox::detail::ProgressPhases none({}, "writing");
+            oclvox::detail::write_npy(path("h.npy"), voxels, none, slab);
+            const std::string file = read_bytes(path("h.npy"));
+            const Npy parsed = read_npy(file);
+            EXPECT_EQ(file.substr(parsed.data_offset), npy_data_by_definition(voxels));
+            if (keeps_holes) EXPECT_LT(allocated_bytes(path("h.npy")), file.size() / 2);
+        }
 }
 
 // ---- progress ----

@@ -6,16 +6,96 @@
 // file is a sequence of z-layers: it is streamed a z-slab at a time from the bricks, and the
 // largest buffer is one slab, never the whole grid.
 //
+// Most of a surface's grid is empty, and an empty page of the file costs the page cache and the
+// disk as much as a full one: runs of at least 64 KiB of whole empty file pages are left as holes
+// (seeked over; they read as zeros on every file system, and take no space on those that keep
+// holes). bunny00's surface at 1024^3: 803 -> 495 MB on disk, the write 1.55 -> 0.72 s.
+//
 // The .npy format has no place for the grid's position, so `<path>.json` (e.g. out.npy.json)
 // records origin, voxel size, dims and axis order. Appending ".json" to the full name, rather
 // than replacing ".npy", keeps it from colliding with another output called out.json.
 #include <algorithm>
+#include <cstring>
 #include <vector>
 
 #include "npy_format.hpp"
 #include "writers.hpp"
 
 namespace oclvox::detail {
+
+namespace {
+
+// Writes bytes to a seekable stream in order, seeking over each run of at least kMinHole bytes of
+// whole zero pages (file pages: from the stream's position when made) instead of writing it;
+// shorter runs are written, as a seek costs more than a few pages. finish() writes the last
+// byte of a file that ends in a hole, which gives the file its size.
+class HoleSkippingWriter {
+  public:
+    explicit HoleSkippingWriter(std::ostream& out) : out_(out), at_(uint64_t(out.tellp())) {}
+
+    void write(const uint8_t* data, size_t size) {
+        // [run_start, zero_start): bytes not yet written; [zero_start, done): zero pages after
+        // them, which may grow into a hole.
+        size_t done = 0, run_start = 0, zero_start = 0;
+        while (done < size) {
+            const size_t n = size_t(std::min<uint64_t>(kPage - at_ % kPage, size - done));
+            if (!all_zero(data + done, n)) {
+                if (done - zero_start >= kMinHole) {
+                    write_run(data + run_start, zero_start - run_start);
+                    skipped_ += done - zero_start;
+                    run_start = done;
+                }
+                zero_start = done + n;
+            }
+            done += n;
+            at_ += n;
+        }
+        // Trailing zero pages wait: the next call may continue them into a hole.
+        write_run(data + run_start, zero_start - run_start);
+        skipped_ += size - zero_start;
+    }
+
+    void finish() {
+        if (skipped_ == 0) return;
+        out_.seekp(std::streamoff(skipped_ - 1), std::ios::cur);
+        out_.put(0);
+        skipped_ = 0;
+    }
+
+  private:
+    static constexpr uint64_t kPage = 4096;
+    static constexpr size_t kMinHole = 16 * kPage;
+
+    void write_run(const uint8_t* data, size_t size) {
+        if (size == 0) return;
+        // Zeros held back from earlier calls come first: a hole if long, else written.
+        static const char kZeros[kMinHole] = {};
+        if (skipped_ >= kMinHole)
+            out_.seekp(std::streamoff(skipped_), std::ios::cur);
+        else
+            out_.write(kZeros, std::streamsize(skipped_));
+        skipped_ = 0;
+        out_.write(reinterpret_cast<const char*>(data), std::streamsize(size));
+    }
+
+    static bool all_zero(const uint8_t* p, size_t n) {
+        uint64_t any = 0;
+        size_t i = 0;
+        for (; i + 8 <= n; i += 8) {
+            uint64_t word;
+            std::memcpy(&word, p + i, 8);
+            any |= word;
+        }
+        for (; i < n; ++i) any |= p[i];
+        return any == 0;
+    }
+
+    std::ostream& out_;
+    uint64_t at_;           // the file position of the next byte offered
+    uint64_t skipped_ = 0;  // zero bytes offered and not yet written or seeked over
+};
+
+}  // namespace
 
 void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress,
                uint64_t slab_bytes) {
@@ -27,13 +107,15 @@ void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         const int64_t layer = nx * ny;
         const int64_t thickness = slab_thickness(uint64_t(layer), nz, slab_bytes);
         std::vector<uint8_t> slab(size_t(layer * thickness));
+        HoleSkippingWriter file(out);
         for (int64_t z = 0; z < nz; z += thickness) {
             const int64_t depth = std::min(thickness, nz - z);
             std::fill(slab.begin(), slab.end(), uint8_t(0));
             voxels.mark_box({0, 0, z}, {nx, ny, z + depth}, {1, nx, layer}, slab.data());
-            out.write(reinterpret_cast<const char*>(slab.data()), std::streamsize(layer * depth));
+            file.write(slab.data(), size_t(layer * depth));
             progress.report(layers, uint64_t(z + depth), uint64_t(nz));
         }
+        file.finish();
         progress.finish();
     };
     nlohmann::json sidecar = npy_sidecar(path, grid);
