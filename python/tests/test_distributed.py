@@ -239,7 +239,9 @@ def test_sdf_sharded_equals_single_process(client, open_spot, mesh, options):
     single = oclvox.sdf(mesh, 40, **options)
     sharded, slabs = counting_tasks(client, lambda: sdf_sharded(mesh, 40, client=client,
                                                                  **options))
-    assert sum(slabs) >= 4 and min(slabs) > 0
+    # The slabs ran on the workers; which worker took which is the scheduler's choice (the mesh is
+    # on both, and slabs of a few milliseconds may all go to one), unlike the voxelize shards.
+    assert sum(slabs) >= 4
     assert (sharded.dims, sharded.origin, sharded.voxel_size, sharded.band) == \
         (single.dims, single.origin, single.voxel_size, single.band)
     assert np.array_equal(sharded.to_numpy().view(np.uint32), single.to_numpy().view(np.uint32))
@@ -275,7 +277,9 @@ def test_sparse_sdf_sharded_equals_single_process(client, open_spot, mesh, optio
     single = oclvox.sdf(mesh, 40, **options)
     sharded, slabs = counting_tasks(client, lambda: sdf_sharded(mesh, 40, client=client,
                                                                  shard_layers=8, **options))
-    assert sum(slabs) >= 4 and min(slabs) > 0
+    # The slabs ran on the workers; which worker took which is the scheduler's choice (the mesh is
+    # on both, and slabs of a few milliseconds may all go to one), unlike the voxelize shards.
+    assert sum(slabs) >= 4
     assert isinstance(sharded, oclvox.SparseField)
     assert (sharded.dims, sharded.origin, sharded.voxel_size, sharded.band, sharded.leaf_count) \
         == (single.dims, single.origin, single.voxel_size, single.band, single.leaf_count)
