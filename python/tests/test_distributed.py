@@ -81,7 +81,11 @@ def test_sharded_equals_single_process(client, open_spot, resolution, options, s
     with_triangles = len(shards) if plan.triangles is None else \
         sum(1 for t in plan.triangles if len(t))
     assert sum(tasks) == with_triangles >= 3, "too few shards to test sharding"
-    assert min(tasks) > 0, "both workers should have taken shards"
+    if plan.triangles is not None:
+        # Each shard's part of the mesh is scattered to one worker, round robin, and its task runs
+        # there. (A whole mesh is on both workers, and which takes short tasks is the
+        # scheduler's choice.)
+        assert min(tasks) > 0, "both workers should have taken shards"
     assert single.count > 0
     assert sharded.same_voxels(single)
     assert (sharded.dims, sharded.origin, sharded.voxel_size) == \
