@@ -50,18 +50,6 @@ typedef struct {
     float u[9];
 } OvTriangle;
 
-// floor(x) and ceil(x) as ints, through truncation, exact for |x| < 2^31: (int)x is exact there
-// and so is (float)(int)x, since a float of magnitude 2^24 or more is a whole number. Baseline
-// x86-64 has no instruction for floor (roundss is SSE4.1), and the host computes millions.
-OV_FN int ov_floor_int(float x) {
-    int i = (int)x;
-    return x < (float)i ? i - 1 : i;
-}
-OV_FN int ov_ceil_int(float x) {
-    int i = (int)x;
-    return x > (float)i ? i + 1 : i;
-}
-
 // Voxel index range [lo, hi] (inclusive, global voxel indices, not clipped to the grid) of the
 // voxels whose boxes meet the triangle's bounding box. A closed voxel i spans [i, i+1], so it
 // meets [a, b] iff i <= b and i + 1 >= a, i.e. i in [ceil(a) - 1, floor(b)]: touching counts. A
@@ -118,12 +106,18 @@ OV_FN float ov_max3(float a, float b, float c) {
     return ov_max(ov_max(a, b), c);
 }
 
-// The range along one axis, from the anchor and the three vertices' coordinates on that axis.
+// The range along one axis, from the anchor and the three vertices' coordinates on that axis,
+// relative to it. The anchor is the floor of the smallest coordinate (prepare_triangles), so that
+// coordinate less the anchor lies in [0, 1), and rounding it (to double, then to float) keeps it
+// in [0, 1]; rounding is monotonic, so it is still the smallest, `low`, and the largest, `high`, is
+// at least 0. Then ceil(low) - 1 is -1 where low is 0 and 0 elsewhere, floor(low) is 1 where low
+// is 1 and 0 elsewhere, and floor(high) is its truncation: a comparison each instead of a floor
+// or ceiling (most of preparing's arithmetic on the host, which computes millions).
 OV_FN void ov_axis_range(int anchor, float a, float b, float c, int half_open, int* lo, int* hi) {
     float low = ov_min3(a, b, c);
     float high = ov_max3(a, b, c);
-    *lo = anchor + (half_open ? ov_floor_int(low) : ov_ceil_int(low) - 1);
-    *hi = anchor + ov_floor_int(high);
+    *lo = anchor + (half_open ? (low == 1.0f ? 1 : 0) : (low == 0.0f ? -1 : 0));
+    *hi = anchor + (int)high;
 }
 
 OV_FN OvRange ov_triangle_range(OvTriangle t, int half_open) {

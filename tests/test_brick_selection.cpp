@@ -2,6 +2,7 @@
 // over the shards of a split are pieces of the unrestricted run, exactly, and together are all of
 // it, also when each shard holds only the triangles selection_triangles gives it. That is what
 // lets a grid be computed on several processes or machines and merged.
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <set>
@@ -223,11 +224,12 @@ TEST(Preparation, SkippingTheCountGivesTheCountedTriangles) {
     }
 }
 
-// Preparation works a triangle's voxel range out in fewer steps than ov_triangle_range, relying
-// on each coordinate lying at or above the anchor (round_to_anchor). The kernels take the range
-// from ov_triangle_range, so the two must agree: here on vertices at, just off and between whole
-// voxel coordinates (the cases where ceil and floor differ), of triangles inside the grid, crossing
-// its low faces (negative anchors) and clipped far outside it, at two voxel sizes.
+// The voxel range (ov_axis_range, shared by preparation and the kernels) takes a comparison where
+// the definition takes a floor or a ceiling, relying on each coordinate lying at or above the
+// anchor. Every prepared range is the definition's, computed here with std::floor and std::ceil
+// of the rounded coordinates: on vertices at, just off and between whole voxel coordinates (the
+// cases where ceil and floor differ), of triangles inside the grid, crossing its low faces
+// (negative anchors) and clipped far outside it, at two voxel sizes.
 TEST(Preparation, RangesAreThoseOfTheRoundedTriangles) {
     const double offsets[] = {0, 1e-12, -1e-12, 1e-7, -1e-7, 3e-8, 0.5, 0.999999999};
     std::mt19937 rng(11);
@@ -251,10 +253,16 @@ TEST(Preparation, RangesAreThoseOfTheRoundedTriangles) {
             clipped += prepared.source.size();
             const int half_open = boundary == Boundary::HalfOpen;
             for (size_t t = 0; t < prepared.triangles.size(); ++t) {
-                const detail::OvRange expected =
-                    detail::ov_triangle_range(prepared.triangles[t], half_open);
-                ASSERT_EQ(std::memcmp(&prepared.ranges[t], &expected, sizeof expected), 0)
-                    << "piece " << t << ", half-open " << half_open;
+                const detail::OvTriangle& tri = prepared.triangles[t];
+                for (int k = 0; k < 3; ++k) {
+                    const double low = std::min({tri.u[k], tri.u[3 + k], tri.u[6 + k]});
+                    const double high = std::max({tri.u[k], tri.u[3 + k], tri.u[6 + k]});
+                    const double lo = half_open ? std::floor(low) : std::ceil(low) - 1;
+                    ASSERT_EQ(prepared.ranges[t].lo[k], tri.anchor[k] + int64_t(lo))
+                        << "piece " << t << ", axis " << k << ", half-open " << half_open;
+                    ASSERT_EQ(prepared.ranges[t].hi[k], tri.anchor[k] + int64_t(std::floor(high)))
+                        << "piece " << t << ", axis " << k << ", half-open " << half_open;
+                }
             }
         }
     EXPECT_GT(clipped, 0u);  // the clipping path ran

@@ -51,13 +51,6 @@ int floor_to_int(double x) {
 // The triangle rounded to float relative to its anchor, and its voxel range (ov_triangle_range,
 // taken from the rounded coordinates while they are in registers: read back from the triangle
 // once written, they cost a quarter of preparing, as the loads waited for the stores).
-//
-// The range is ov_axis_range's, in fewer steps (this is most of preparing's arithmetic). The
-// anchor is the floor of the smallest coordinate, so that coordinate less the anchor lies in
-// [0, 1), and rounding (to double, then to float) keeps it in [0, 1]; rounding is monotonic, so it
-// is still the smallest rounded coordinate `low`, and the largest, `high`, is at least 0. Then
-// ceil(low) - 1 is -1 where low is 0 and 0 elsewhere, floor(low) is 1 where low is 1 and 0
-// elsewhere, and floor(high) is its truncation.
 void round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c, int half_open,
                      OvTriangle& triangle, OvRange& range) {
     for (int k = 0; k < 3; ++k) {
@@ -67,9 +60,7 @@ void round_to_anchor(const Vec3d& a, const Vec3d& b, const Vec3d& c, int half_op
         triangle.u[k] = ua;
         triangle.u[3 + k] = ub;
         triangle.u[6 + k] = uc;
-        const float low = std::min({ua, ub, uc}), high = std::max({ua, ub, uc});
-        range.lo[k] = anchor + (half_open ? int(low == 1.0f) : -int(low == 0.0f));
-        range.hi[k] = anchor + int(high);
+        ov_axis_range(anchor, ua, ub, uc, half_open, &range.lo[k], &range.hi[k]);
     }
 }
 
