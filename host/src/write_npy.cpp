@@ -39,7 +39,7 @@ class HoleSkippingWriter {
         size_t done = 0, run_start = 0, zero_start = 0;
         while (done < size) {
             const size_t n = size_t(std::min<uint64_t>(kPage - at_ % kPage, size - done));
-            if (!all_zero(data + done, n)) {
+            if (std::memcmp(data + done, kZeros, n) != 0) {
                 if (done - zero_start >= kMinHole) {
                     write_run(data + run_start, zero_start - run_start);
                     skipped_ += done - zero_start;
@@ -65,29 +65,17 @@ class HoleSkippingWriter {
   private:
     static constexpr uint64_t kPage = 4096;
     static constexpr size_t kMinHole = 16 * kPage;
+    static constexpr char kZeros[kMinHole] = {};
 
     void write_run(const uint8_t* data, size_t size) {
         if (size == 0) return;
         // Zeros held back from earlier calls come first: a hole if long, else written.
-        static const char kZeros[kMinHole] = {};
         if (skipped_ >= kMinHole)
             out_.seekp(std::streamoff(skipped_), std::ios::cur);
         else
             out_.write(kZeros, std::streamsize(skipped_));
         skipped_ = 0;
         out_.write(reinterpret_cast<const char*>(data), std::streamsize(size));
-    }
-
-    static bool all_zero(const uint8_t* p, size_t n) {
-        uint64_t any = 0;
-        size_t i = 0;
-        for (; i + 8 <= n; i += 8) {
-            uint64_t word;
-            std::memcpy(&word, p + i, 8);
-            any |= word;
-        }
-        for (; i < n; ++i) any |= p[i];
-        return any == 0;
     }
 
     std::ostream& out_;
