@@ -202,6 +202,7 @@ int run(const FieldArgs& args) {
         stop_if_interrupted();
         record.stats = stats;
     }
+    const DeviceClosing closing(device);  // closes while the host meshes and writes
 
     // Phase 3: mesh if the output is a mesh.
     std::optional<oclvox::Mesh> surface;
@@ -222,7 +223,7 @@ int run(const FieldArgs& args) {
     record.seconds.total = seconds_since(start);
 
     record.outputs = {args.output};
-    if (device) record.device = device->info();
+    record.device = closing.info;
     record_field_settings(record, args);
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};
     if (!streamed) record.border_inside = oclvox::border_samples_inside(*sparse);

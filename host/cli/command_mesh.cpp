@@ -115,6 +115,7 @@ int run(const FieldArgs& args) {
         });
         record.stats = stats;
     }
+    const DeviceClosing closing(device);  // closes while the host meshes and writes
     stop_if_interrupted();
     if (voxels) {
         sparse = timed(record.seconds.compute,
@@ -135,7 +136,7 @@ int run(const FieldArgs& args) {
 
     record.outputs = {args.output};
     record.grid = sparse->grid();
-    if (device) record.device = device->info();
+    record.device = closing.info;
     record_field_settings(record, args);
     record.mesh_made = {{surface.triangles.size(), surface.positions.size()}};
     record.border_inside = oclvox::border_samples_inside(*sparse, float(args.iso));

@@ -112,6 +112,7 @@ int run(const SdfArgs& args) {
                        [&] { return signed_distance_sparse(device, mesh, grid, args, &stats); });
         record.border_inside = oclvox::border_samples_inside(*sparse);
     }
+    const DeviceClosing closing(device);  // closes while the host meshes and writes
     stop_if_interrupted();
     std::optional<oclvox::Mesh> surface;
     if (!args.mesh_output.empty()) {
@@ -134,7 +135,7 @@ int run(const SdfArgs& args) {
     if (surface) record.outputs.push_back(args.mesh_output);
     if (!args.preview.empty()) record.outputs.push_back(args.preview);
     record.grid = grid;
-    if (device) record.device = device->info();
+    record.device = closing.info;
     record_field_settings(record, args);
     record.stats = stats;
     if (surface) record.mesh_made = {{surface->triangles.size(), surface->positions.size()}};

@@ -117,7 +117,8 @@ int run(const VoxelizeArgs& args) {
     });
     stop_if_interrupted();
 
-    // Phase 5: the files, then the report.
+    // Phase 5: the files while the device closes, then the report.
+    const DeviceClosing closing(device);
     timed(record.seconds.write, [&] {
         ProgressBar bar("writing", "", args.reporting);
         oclvox::write_voxels(output.path(), voxels, bar.callback());
@@ -131,7 +132,7 @@ int run(const VoxelizeArgs& args) {
     record.outputs = {args.output};
     if (!args.preview.empty()) record.outputs.push_back(args.preview);
     record.grid = grid;
-    if (device) record.device = device->info();
+    record.device = closing.info;
     record.settings = {{"test", args.voxelization.test},
                        {"mode", args.voxelization.mode},
                        {"boundary", args.voxelization.boundary},

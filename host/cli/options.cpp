@@ -283,6 +283,17 @@ std::optional<oclvox::Device> DeviceOpening::wait(Timings& seconds) {
     return device;
 }
 
+DeviceClosing::DeviceClosing(std::optional<oclvox::Device>& device) {
+    if (!device) return;
+    info = device->info();
+    // Moved into a local of the thread's body, so that the thread, not whoever destroys the task,
+    // releases it.
+    closing_ = std::async(std::launch::async, [closing = std::move(*device)]() mutable {
+        const oclvox::Device released = std::move(closing);
+    });
+    device.reset();
+}
+
 void add_tiling_options(CLI::App& command, TilingArgs& args) {
     command.add_option("--brick-size", args.brick_size, "voxels per brick edge")
         ->type_name("B")
