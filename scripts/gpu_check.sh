@@ -3,13 +3,15 @@
 # short: every start, wait and rerun counts). Here, first:
 #   bash scripts/build.sh -DOCLVOX_BUILD_TESTS=ON
 #   PACK_MESHES="bunny00.off spot.obj stanford-bunny.obj buildings.obj motorBike.obj TR12J_OCC.stl \
-#     flange.stl horse.ply mug.obj spot_quadrangulated.obj double-torus-example.off" \
+#     flange.stl horse.ply mug.obj spot_quadrangulated.obj double-torus-example.off \
+#     Sterngarten_Wien_innerArea.obj Sterngarten_Wien_innerArea.mtl" \
 #     bash ../shared/tools/gpu/pack.sh build
 # Then with the device tool, from the repository root:
 #   run(command="source .gpu/env.sh && bash scripts/gpu_check.sh", carry=[".gpu"], timeout_s=540)
 # It writes under $OUT (the device tool brings it back):
 #   tests.txt    each C++ test binary on the GPU (OCLVOX_DEVICE as env.sh set it): exit status and
-#                gtest's summary; the whole output in tests/NAME.log
+#                gtest's summary; the whole output of a failing one in tests/NAME.log (only those:
+#                the device tool brings back a limited number of files)
 #   same.txt     surface, thin and parity voxels of a few meshes on the GPU and through PoCL
 #                (`OCLVOX_DEVICE=Portable`, the same machine's 16 cores): "same" where the two
 #                .binvox files are byte-identical, as the kernels promise
@@ -24,10 +26,12 @@ meshes=$(dirname "$B")/meshes
 : > "$out/tests.txt"
 for test in "$B"/test_*; do
     name=$(basename "$test")
-    timeout 150 "$test" --gtest_brief=1 > "$out/tests/$name.log" 2>&1
+    log=$(mktemp)
+    timeout 150 "$test" --gtest_brief=1 > "$log" 2>&1
     status=$?
-    echo "$name exit $status: $(grep -E '^\[  (PASSED|FAILED)  \]' "$out/tests/$name.log" | tr '\n' ' ')" |
+    echo "$name exit $status: $(grep -E '^\[  (PASSED|FAILED)  \]' "$log" | tr '\n' ' ')" |
         tee -a "$out/tests.txt"
+    if [[ $status == 0 ]]; then rm -f "$log"; else mv "$log" "$out/tests/$name.log"; fi
 done
 
 # Part 2: the GPU's voxels against PoCL's, byte for byte.

@@ -1052,7 +1052,9 @@ TEST(SparseSdf, BatchBudgetAndBrickSizeDoNotChangeAnySample) {
     EXPECT_EQ(many.batches, (batched.leaf_count() + 6) / 7);
     expect_identical(batched.to_dense(), expected);
     EXPECT_TRUE(monotonic);
-    EXPECT_GT(calls, 2u);
+    // Reports are at most one per 50 ms after the first, so a fast device (an H200 here) may
+    // make only the first and the last.
+    EXPECT_GE(calls, 2u);
     EXPECT_EQ(last, 1000000u);
 }
 
