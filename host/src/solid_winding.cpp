@@ -1198,6 +1198,9 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                     for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                         for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
                             const uint64_t i = inside.index(x, y, z);
+                            // Away from the fans a settled state, n + kZero, already says what
+                            // the inside bits below read from it: inside iff n != 0.
+                            if (state[i] != kUnknown && !near_fans) continue;
                             const Vec3d centre{double(box.lo[0] + x) + 0.5,
                                                double(box.lo[1] + y) + 0.5,
                                                double(box.lo[2] + z) + 0.5};
@@ -1206,27 +1209,18 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                                 for (double v : centre) out.points.push_back(float(v));
                                 continue;
                             }
+                            // Near the fans the state is rewritten to say inside (kZero + 1) or
+                            // not, or not yet (kZero: decided below, from w_fans summed on the
+                            // device).
                             const int whole = int(state[i]) - kZero;
-                            bool in = whole != 0;
-                            // From here a settled state says only inside (kZero + 1) or not, or
-                            // not yet (kZero: near voxels are decided below).
-                            state[i] = kZero;
-                            if (near_fans) {
-                                const double low = std::fabs(whole + fan_centre) - spread;
-                                const double high = std::fabs(whole + fan_centre) + spread;
-                                if (low > 0.5)
-                                    in = true;
-                                else if (high < 0.5)
-                                    in = false;
-                                else {
-                                    // Decided below, from w_fans summed on the device.
-                                    out.near_voxels.push_back(i);
-                                    out.near_whole.push_back(whole);
-                                    for (double v : centre) out.near_points.push_back(float(v));
-                                    continue;
-                                }
+                            const double low = std::fabs(whole + fan_centre) - spread;
+                            const double high = std::fabs(whole + fan_centre) + spread;
+                            state[i] = low > 0.5 ? kZero + 1 : kZero;
+                            if (!(low > 0.5) && !(high < 0.5)) {
+                                out.near_voxels.push_back(i);
+                                out.near_whole.push_back(whole);
+                                for (double v : centre) out.near_points.push_back(float(v));
                             }
-                            if (in) state[i] = kZero + 1;
                         }
             }
         });
