@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <system_error>
 
 #include "file_names.hpp"
 #include "interrupt.hpp"
@@ -287,10 +288,13 @@ DeviceClosing::DeviceClosing(std::optional<oclvox::Device>& device) {
     if (!device) return;
     info = device->info();
     // Moved into a local of the thread's body, so that the thread, not whoever destroys the task,
-    // releases it.
-    closing_ = std::async(std::launch::async, [closing = std::move(*device)]() mutable {
-        const oclvox::Device released = std::move(closing);
-    });
+    // releases it. Where no thread can be started the device is released here, as before.
+    try {
+        closing_ = std::async(std::launch::async, [closing = std::move(*device)]() mutable {
+            const oclvox::Device released = std::move(closing);
+        });
+    } catch (const std::system_error&) {
+    }
     device.reset();
 }
 
