@@ -4,8 +4,13 @@
 // turns a level set's leaves and tiles into a sparse field the same way round.
 #include "field_vdb.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <memory>
 
 #include "host_memory.hpp"
 #include "vdb_format.hpp"
@@ -23,16 +28,20 @@ namespace {
 
 constexpr int kLeaf = SparseField::kLeaf;
 
-// One leaf of the field: its minimum voxel and its 8x8x8 samples, x fastest (those beyond the
-// grid are never read).
-using LeafVisit = std::function<void(const std::array<int64_t, 3>& origin, const float* samples)>;
+// Leaf i of a batch: its minimum voxel in `origin`, and its 8x8x8 samples, x fastest (those
+// beyond the grid are never read), either in `scratch` (filled) or where the field holds them.
+// Called for several leaves at once, from several threads.
+using LeafAt =
+    std::function<const float*(size_t i, float* scratch, std::array<int64_t, 3>& origin)>;
+// A batch of `count` leaves, leaf_at(i, ...) for each.
+using LeafBatch = std::function<void(size_t count, const LeafAt& leaf_at)>;
 
-// The level set of the leaves for_each_leaf(visit) visits (every leaf that may hold a sample
-// within the band; `leaves` of them, for progress). band_voxels <= 0: the largest |value|, found
-// as the leaves pass (every sample is kept until it is known).
+// The level set of the leaves that for_each_batch hands over, batch by batch (every leaf that may
+// hold a sample within the band; `leaves` of them, for progress). band_voxels <= 0: the largest
+// |value|, found as the leaves pass (every sample is kept until it is known).
 void write_level_set(const std::string& path, const Grid& g, double band_voxels,
                      ProgressPhases& progress, uint64_t leaves,
-                     const std::function<void(const LeafVisit&)>& for_each_leaf) {
+                     const std::function<void(const LeafBatch&)>& for_each_batch) {
     openvdb::initialize();
     const bool band_known = band_voxels > 0;
     float background = band_known ? float(band_voxels * g.voxel_size) : INFINITY;
@@ -43,32 +52,56 @@ void write_level_set(const std::string& path, const Grid& g, double band_voxels,
 
     // Phase 2: the narrow band as active voxels, leaf by leaf. The rest stays background, and the
     // signed flood fill then gives the inactive regions inside the surface the background's
-    // negative, as a level set's tiles must have.
-    // The band, then the flood fill and the file (no progress of their own, estimated at about
-    // the band's cost together).
+    // negative, as a level set's tiles must have. A batch's leaves are built on their own, in
+    // parallel (one after another they were a quarter of writing a 2048^3 band), and then put in
+    // the tree. The band, then the flood fill and the file (no progress of their own, estimated
+    // at about the band's cost together).
     const size_t band = progress.add(2), file = progress.add(1);
     openvdb::FloatTree& tree = grid->tree();
+    openvdb::tree::ValueAccessor<openvdb::FloatTree> access(tree);
+    using Leaf = openvdb::FloatTree::LeafNodeType;
+    static_assert(Leaf::DIM == kLeaf, "our leaves are OpenVDB's");
     uint64_t visited = 0;
     float largest = 0;
-    for_each_leaf([&](const std::array<int64_t, 3>& origin, const float* samples) {
-        const int64_t nx = std::min<int64_t>(kLeaf, g.dims[0] - origin[0]);
-        const int64_t ny = std::min<int64_t>(kLeaf, g.dims[1] - origin[1]);
-        const int64_t nz = std::min<int64_t>(kLeaf, g.dims[2] - origin[2]);
-        openvdb::FloatTree::LeafNodeType* leaf = nullptr;
-        for (int64_t z = 0; z < nz; ++z)
-            for (int64_t y = 0; y < ny; ++y)
-                for (int64_t x = 0; x < nx; ++x) {
-                    const float value = samples[x + kLeaf * (y + kLeaf * z)];
-                    largest = std::max(largest, std::abs(value));
-                    if (!(std::abs(value) < background)) continue;
-                    if (!leaf)
-                        leaf = tree.touchLeaf(
-                            openvdb::Coord(int(origin[0]), int(origin[1]), int(origin[2])));
-                    leaf->setValueOn(
-                        openvdb::Coord(int(origin[0] + x), int(origin[1] + y), int(origin[2] + z)),
-                        value);
+    std::vector<std::unique_ptr<Leaf>> built;
+    for_each_batch([&](size_t count, const LeafAt& leaf_at) {
+        built.clear();
+        built.resize(count);
+        const float batch_largest = tbb::parallel_reduce(
+            tbb::blocked_range<size_t>(0, count, 64), 0.0f,
+            [&](const tbb::blocked_range<size_t>& r, float most) {
+                float scratch[SparseField::kLeafSamples];
+                for (size_t i = r.begin(); i != r.end(); ++i) {
+                    std::array<int64_t, 3> origin;
+                    const float* samples = leaf_at(i, scratch, origin);
+                    const int64_t nx = std::min<int64_t>(kLeaf, g.dims[0] - origin[0]);
+                    const int64_t ny = std::min<int64_t>(kLeaf, g.dims[1] - origin[1]);
+                    const int64_t nz = std::min<int64_t>(kLeaf, g.dims[2] - origin[2]);
+                    for (int64_t z = 0; z < nz; ++z)
+                        for (int64_t y = 0; y < ny; ++y)
+                            for (int64_t x = 0; x < nx; ++x) {
+                                const float value = samples[x + kLeaf * (y + kLeaf * z)];
+                                most = std::max(most, std::abs(value));
+                                if (!(std::abs(value) < background)) continue;
+                                // Made at its first value in the band, holding the tree's
+                                // background, inactive, as the tree makes a leaf.
+                                if (!built[i])
+                                    built[i] = std::make_unique<Leaf>(
+                                        openvdb::Coord(int(origin[0]), int(origin[1]),
+                                                       int(origin[2])),
+                                        tree.background(), false);
+                                // The leaf's own offset (z fastest): origin is a whole leaf's.
+                                built[i]->setValueOn(openvdb::Index(x << 6 | y << 3 | z), value);
+                            }
                 }
-        progress.report(band, ++visited, leaves);
+                return most;
+            },
+            [](float a, float b) { return std::max(a, b); });
+        largest = std::max(largest, batch_largest);
+        for (std::unique_ptr<Leaf>& leaf : built)
+            if (leaf) access.addLeaf(leaf.release());
+        visited += count;
+        progress.report(band, visited, leaves);
     });
     if (!band_known) {
         // Now the band is known: what a known band would have left out becomes background,
@@ -96,38 +129,46 @@ void write_level_set(const std::string& path, const Grid& g, double band_voxels,
 
 void write_field_vdb(const std::string& path, const Grid& g, double band_voxels,
                      const FieldLayer& layer, ProgressPhases& progress) {
-    // Every leaf of the grid, gathered from a slab of a leaf's height of layers, row by row.
+    // Every leaf of the grid, gathered from a slab of a leaf's height of layers: a slab's leaves
+    // are a batch.
     const auto& d = g.dims;
-    const uint64_t leaves = uint64_t((d[0] + kLeaf - 1) / kLeaf) *
-                            uint64_t((d[1] + kLeaf - 1) / kLeaf) *
-                            uint64_t((d[2] + kLeaf - 1) / kLeaf);
+    const int64_t leaves_x = (d[0] + kLeaf - 1) / kLeaf, leaves_y = (d[1] + kLeaf - 1) / kLeaf;
+    const uint64_t leaves =
+        uint64_t(leaves_x) * uint64_t(leaves_y) * uint64_t((d[2] + kLeaf - 1) / kLeaf);
     const size_t per_layer = size_t(d[0]) * size_t(d[1]);
-    write_level_set(path, g, band_voxels, progress, leaves, [&](const LeafVisit& visit) {
+    write_level_set(path, g, band_voxels, progress, leaves, [&](const LeafBatch& batch) {
         std::vector<float> slab(per_layer * kLeaf);
-        float samples[SparseField::kLeafSamples];
         for (int64_t z = 0; z < d[2]; z += kLeaf) {
             const int64_t depth = std::min<int64_t>(kLeaf, d[2] - z);
             for (int64_t k = 0; k < depth; ++k) layer(z + k, &slab[size_t(k) * per_layer]);
-            for (int64_t y = 0; y < d[1]; y += kLeaf)
-                for (int64_t x = 0; x < d[0]; x += kLeaf) {
-                    const int64_t row = std::min<int64_t>(kLeaf, d[0] - x);
-                    for (int64_t k = 0; k < depth; ++k)
-                        for (int64_t j = y; j < std::min(y + kLeaf, d[1]); ++j)
-                            std::copy_n(&slab[size_t(k) * per_layer + size_t(x + d[0] * j)], row,
-                                        &samples[kLeaf * ((j - y) + kLeaf * k)]);
-                    visit({x, y, z}, samples);
-                }
+            batch(size_t(leaves_x * leaves_y),
+                  [&](size_t i, float* scratch, std::array<int64_t, 3>& origin) {
+                      const int64_t x = int64_t(i) % leaves_x * kLeaf;
+                      const int64_t y = int64_t(i) / leaves_x * kLeaf;
+                      origin = {x, y, z};
+                      const int64_t row = std::min<int64_t>(kLeaf, d[0] - x);
+                      for (int64_t k = 0; k < depth; ++k)
+                          for (int64_t j = y; j < std::min(y + kLeaf, d[1]); ++j)
+                              std::copy_n(&slab[size_t(k) * per_layer + size_t(x + d[0] * j)], row,
+                                          &scratch[kLeaf * ((j - y) + kLeaf * k)]);
+                      return static_cast<const float*>(scratch);
+                  });
         }
     });
 }
 
 void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress) {
-    // The stored leaves only: every sample outside them is the background.
+    // The stored leaves only (every sample outside them is the background), in batches that keep
+    // progress coming.
+    constexpr size_t kBatchLeaves = size_t(1) << 14;
     write_level_set(path, field.grid(), field.band_voxels(), progress, field.leaf_count(),
-                    [&](const LeafVisit& visit) {
-                        for (size_t l = 0; l < field.leaf_count(); ++l)
-                            visit(field.leaf_origin(field.leaf_indices()[l]),
-                                  field.leaf_samples(l));
+                    [&](const LeafBatch& batch) {
+                        for (size_t first = 0; first < field.leaf_count(); first += kBatchLeaves)
+                            batch(std::min(kBatchLeaves, field.leaf_count() - first),
+                                  [&](size_t i, float*, std::array<int64_t, 3>& origin) {
+                                      origin = field.leaf_origin(field.leaf_indices()[first + i]);
+                                      return field.leaf_samples(first + i);
+                                  });
                     });
 }
 
