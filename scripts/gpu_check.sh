@@ -6,12 +6,14 @@
 #     flange.stl horse.ply mug.obj spot_quadrangulated.obj double-torus-example.off \
 #     Sterngarten_Wien_innerArea.obj Sterngarten_Wien_innerArea.mtl" \
 #     bash ../shared/tools/gpu/pack.sh build
+#   bash scripts/gpu_python.sh pack   (optional: the Python and CLI shell tests, part 1b)
 # Then with the device tool, from the repository root:
 #   run(command="source .gpu/env.sh && bash scripts/gpu_check.sh", carry=[".gpu"], timeout_s=540)
 # It writes under $OUT (the device tool brings it back):
 #   tests.txt    each C++ test binary on the GPU (OCLVOX_DEVICE as env.sh set it): exit status and
-#                gtest's summary; the whole output of a failing one in tests/NAME.log (only those:
-#                the device tool brings back a limited number of files)
+#                gtest's summary; then the CLI's shell tests (their FAIL and SKIP lines) and pytest;
+#                the whole output of a failing one in tests/NAME.log (only those: the device tool
+#                brings back a limited number of files)
 #   same.txt     surface, thin and parity voxels of a few meshes on the GPU and through PoCL
 #                (`OCLVOX_DEVICE=Portable`, the same machine's 16 cores): "same" where the two
 #                .binvox files are byte-identical, as the kernels promise
@@ -22,7 +24,7 @@ out=${OUT:-/tmp/oclvox-gpu-check}
 mkdir -p "$out/tests"
 meshes=$(dirname "$B")/meshes
 
-# Part 1: the C++ test binaries (the CLI's shell tests assume PoCL's timing; not run here).
+# Part 1: the C++ test binaries.
 : > "$out/tests.txt"
 for test in "$B"/test_*; do
     name=$(basename "$test")
@@ -33,6 +35,27 @@ for test in "$B"/test_*; do
         tee -a "$out/tests.txt"
     if [[ $status == 0 ]]; then rm -f "$log"; else mv "$log" "$out/tests/$name.log"; fi
 done
+
+# Part 1b: where scripts/gpu_python.sh packed Python (.gpu/python.tar.xz), the Python package's
+# tests and the CLI's shell tests (whose checks read files with numpy) on the GPU too.
+if [[ -f .gpu/python.tar.xz ]]; then
+    py=$(bash scripts/gpu_python.sh unpack)
+    source_dir=$(sed -n 's/^source_dir=//p' "$(dirname "$B")/paths")
+    for shell_test in cli_test fault_test; do
+        log=$(mktemp)
+        PATH=$py/bin:$PATH OCLVOX=$B/oclvox OCLVOX_MESH_DIR=$meshes \
+            OCLVOX_SAMPLE_DIR=$source_dir/samples timeout 300 bash "tests/$shell_test.sh" > "$log" 2>&1
+        status=$?
+        echo "$shell_test exit $status: $(tail -n1 "$log")" | tee -a "$out/tests.txt"
+        grep -E '^(FAIL|SKIP)' "$log" >> "$out/tests.txt"
+        if [[ $status == 0 ]]; then rm -f "$log"; else mv "$log" "$out/tests/$shell_test.log"; fi
+    done
+    log=$(mktemp)
+    timeout 300 bash scripts/gpu_python.sh run > "$log" 2>&1
+    status=$?
+    echo "pytest exit $status: $(tail -n1 "$log")" | tee -a "$out/tests.txt"
+    if [[ $status == 0 ]]; then rm -f "$log"; else mv "$log" "$out/tests/pytest.log"; fi
+fi
 
 # Part 2: the GPU's voxels against PoCL's, byte for byte.
 : > "$out/same.txt"

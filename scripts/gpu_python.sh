@@ -1,15 +1,18 @@
 #!/usr/bin/env bash
 # The Python package's tests on the lent GPU machine, which has neither Debian's python3.11 nor
-# numpy, pytest or Dask. Two halves:
+# numpy, pytest or Dask. Three parts:
 #   bash scripts/gpu_python.sh pack   here, after scripts/build.sh with -DOCLVOX_BUILD_PYTHON=ON and
 #                                     ../shared/tools/gpu/pack.sh: writes .gpu/python.tar.xz
 #                                     (python3.11 with its standard library, Debian's numpy, pytest
 #                                     and Dask, the libraries they link, our built package and its
-#                                     tests; about 23 MB, so .gpu stays within the 64 MiB a call
+#                                     tests; about 19 MB, so .gpu stays within the 64 MiB a call
 #                                     carries)
 #   bash scripts/gpu_python.sh run    there, after `source .gpu/env.sh` (which sets $B): unpacks it
 #                                     and runs pytest on the GPU (OCLVOX_DEVICE as env.sh set it);
 #                                     extra arguments go to pytest
+#   bash scripts/gpu_python.sh unpack there: only unpacks it, and prints the folder whose
+#                                     bin/python3 runs it (scripts/gpu_check.sh puts it on PATH for
+#                                     the CLI tests, whose checks read files with numpy)
 # For example: run(command="source .gpu/env.sh && bash scripts/gpu_python.sh run", carry=[".gpu"])
 # python3-openvdb is left out (it links OpenVDB AX and LLVM, over 100 MB): its one test skips.
 set -euo pipefail
@@ -43,22 +46,38 @@ pack() {
     echo "packed $(du -h .gpu/python.tar.xz | cut -f1) into .gpu/python.tar.xz"
 }
 
+# Unpacks .gpu/python.tar.xz into /tmp/oclvox-python and writes py/bin/python3 there, a wrapper
+# that runs the bundled interpreter with its libraries and packages (and ours): on PATH it serves
+# the shell tests' numpy checks too.
+unpack() {
+    local dir=/tmp/oclvox-python
+    if [[ ! -x $dir/py/bin/python3 ]]; then
+        mkdir -p "$dir" && tar -C "$dir" -xJf "$root/.gpu/python.tar.xz"
+        cat > "$dir/py/bin/python3" <<WRAP
+#!/usr/bin/env bash
+export LD_LIBRARY_PATH=$dir/py/so\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}
+export PYTHONHOME=$dir/py PYTHONPATH=$dir/py:$dir/py/dist
+exec $dir/py/bin/python3.11 "\$@"
+WRAP
+        chmod +x "$dir/py/bin/python3"
+    fi
+    echo "$dir/py"
+}
+
 run() {
     : "${B:?source .gpu/env.sh first}"
-    local dir=/tmp/oclvox-python py
-    mkdir -p "$dir" && tar -C "$dir" -xJf .gpu/python.tar.xz
-    py=$dir/py
+    local py source_dir
+    py=$(unpack)
     # env.sh links the samples folder where the build looked for it.
-    local source_dir
     source_dir=$(sed -n 's/^source_dir=//p' "$(dirname "$B")/paths")
-    LD_LIBRARY_PATH=$py/so:$LD_LIBRARY_PATH PYTHONHOME=$py PYTHONPATH=$py:$py/dist \
-        OCLVOX_CLI=$B/oclvox OCLVOX_MESH_DIR=$(dirname "$B")/meshes \
+    OCLVOX_CLI=$B/oclvox OCLVOX_MESH_DIR=$(dirname "$B")/meshes \
         OCLVOX_SAMPLE_DIR=$source_dir/samples \
-        "$py/bin/python3.11" -m pytest -q -rs -p no:cacheprovider "$py/tests" "$@"
+        "$py/bin/python3" -m pytest -q -rs -p no:cacheprovider "$py/tests" "$@"
 }
 
 case ${1:-} in
 pack) shift; pack "$@" ;;
+unpack) unpack ;;
 run) shift; run "$@" ;;
-*) echo "usage: bash scripts/gpu_python.sh pack [BUILD_DIR] | run [PYTEST_ARGS...]" >&2; exit 2 ;;
+*) echo "usage: bash scripts/gpu_python.sh pack [BUILD_DIR] | unpack | run [PYTEST_ARGS...]" >&2; exit 2 ;;
 esac

@@ -93,7 +93,7 @@ void run_on_cluster(const ClusterRun& run) {
     else
         args.insert(args.end(), {"--scheduler", run.cluster->scheduler});
     args.insert(args.end(), {"-r", std::to_string(run.fit->resolution)});
-    if (run.device_given) args.insert(args.end(), {"--device", run.device->selector});
+    if (run.device->selector_given) args.insert(args.end(), {"--device", run.device->selector});
     nlohmann::json keywords = run.keywords;
     add_grid_keywords(*run.fit, run.device->reference, keywords);
     // dump() doubles as the shortest text that reads back to the same double.

@@ -32,8 +32,8 @@ struct ClusterRun {
     nlohmann::json keywords;
     const ClusterArgs* cluster;
     const oclvox::GridFit* fit;
-    const DeviceArgs* device;
-    bool device_given;  // --device on the command line; else each worker picks its own
+    const DeviceArgs* device;  // its selector goes to the workers only if given as --device;
+                               // else each worker picks its own
     const ReportingArgs* reporting;
 };
 

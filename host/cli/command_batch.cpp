@@ -17,7 +17,6 @@ struct BatchArgs {
     TilingArgs tiling;
     ReportingArgs reporting;
     ClusterArgs cluster;
-    const CLI::Option* device_option = nullptr;
 };
 
 void add_options(CLI::App& command, BatchArgs& args) {
@@ -44,7 +43,6 @@ void add_options(CLI::App& command, BatchArgs& args) {
     add_grid_options(command, args.fit);
     add_voxelization_options(command, args.voxelization);
     add_device_options(command, args.device, "Voxelization");
-    args.device_option = command.get_option("--device");
     add_tiling_options(command, args.tiling);
     command.add_flag("-q,--quiet", args.reporting.quiet, "print neither progress nor the summary")
         ->group("Reporting");
@@ -59,7 +57,6 @@ int run(BatchArgs& args) {
          &args.cluster,
          &args.fit,
          &args.device,
-         args.device_option->count() > 0,
          &args.reporting});
 }
 

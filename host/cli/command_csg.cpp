@@ -94,7 +94,7 @@ int run(const FieldArgs& args) {
     const bool level_sets_in = fields_in && is_sparse_field_path(args.input);
     if (fields_in && level_sets_in != is_sparse_field_path(args.input_b))
         throw UsageError("csg takes two .npy fields or two .vdb level sets, not one of each");
-    if (fields_in && !args.device.selector.empty())
+    if (fields_in && args.device.selector_given)
         throw UsageError(
             "two field files are combined and meshed on the host's cores; --device applies to "
             "meshes");

@@ -64,7 +64,7 @@ int run(const FieldArgs& args) {
     // A field file's header says whether it holds a field or an occupancy.
     const bool level_set_in = is_sparse_field_path(args.input);
     const bool npy_field_in = field_in && !level_set_in && oclvox::npy_holds_field(args.input);
-    if (field_in && !args.device.selector.empty())
+    if (field_in && args.device.selector_given)
         throw UsageError(
             "a field or occupancy file is meshed on the host's cores; --device applies to "
             "voxelizing a mesh input");

@@ -12,7 +12,6 @@ namespace {
 
 struct SdfArgs : FieldArgs {
     std::string preview;
-    CLI::Option* device_option = nullptr;
     ClusterArgs cluster;
 };
 
@@ -40,7 +39,6 @@ void add_options(CLI::App& command, SdfArgs& args) {
     describe_field_padding(args.grid_options);
     add_distance_options(command, args);
     add_device_options(command, args.device, "Distance");
-    args.device_option = command.get_option("--device");
     command
         .add_option("--mesh", args.mesh_output,
                     "also write the field's zero level set as a mesh: .obj, .ply or .stl")
@@ -65,7 +63,6 @@ void add_options(CLI::App& command, SdfArgs& args) {
                     &args.cluster,
                     &fit,
                     &args.device,
-                    args.device_option->count() > 0,
                     &args.reporting});
 }
 

@@ -23,7 +23,6 @@ struct VoxelizeArgs {
     TilingArgs tiling;
     ReportingArgs reporting;
     ClusterArgs cluster;
-    const CLI::Option* device_option = nullptr;
 };
 
 void add_options(CLI::App& command, VoxelizeArgs& args) {
@@ -52,7 +51,6 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
 
     add_voxelization_options(command, args.voxelization);
     add_device_options(command, args.device, "Voxelization");
-    args.device_option = command.get_option("--device");
     add_tiling_options(command, args.tiling);
     add_reporting_options(command, args.reporting);
     add_cluster_options(command, args.cluster, true);
@@ -69,7 +67,7 @@ void add_options(CLI::App& command, VoxelizeArgs& args) {
         command.insert(command.end(),
                        {"--shard-bricks", std::to_string(args.cluster.shard_bricks)});
     run_on_cluster({command, voxelize_keywords(args.voxelization, args.tiling), &args.cluster,
-                    &args.fit, &args.device, args.device_option->count() > 0, &args.reporting});
+                    &args.fit, &args.device, &args.reporting});
 }
 
 int run(const VoxelizeArgs& args) {

@@ -210,6 +210,7 @@ void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& 
                                    "of the device or platform name. Default: $OCLVOX_DEVICE, else "
                                    "the first GPU, else the first device. A device that does not "
                                    "exist is an error, never a fallback")
+                       ->each([&args](const std::string&) { args.selector_given = true; })
                        ->type_name("SEL")
                        ->group(group);
     command

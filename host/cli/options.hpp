@@ -51,6 +51,7 @@ void add_voxelization_options(CLI::App& command, VoxelizationArgs& args);
 // --device / --reference (mutually exclusive; $OCLVOX_DEVICE is the default selector).
 struct DeviceArgs {
     std::string selector;
+    bool selector_given = false;  // --device on the command line, not just $OCLVOX_DEVICE
     bool reference = false;
 };
 void add_device_options(CLI::App& command, DeviceArgs& args, const std::string& group);
