@@ -250,18 +250,19 @@ expect_failure "--device no-such-device" "$o" 'no-such-device' \
 OCLVOX_DEVICE=no-such-device expect_failure "OCLVOX_DEVICE=no-such-device" "$o" 'no-such-device' \
     voxelize "$MESH" -r 32 -o "$o"
 
-# With no OpenCL platform (an empty ICD folder for the ocl-icd loader) devices fail clearly and
-# the CPU reference still works. A loader that does not read OCL_ICD_VENDORS (some drivers ship
-# their own) cannot be shown an empty folder, so there the first check is skipped, saying why.
+# With no OpenCL platform (an empty ICD folder for the loader, and no drivers named in
+# OCL_ICD_FILENAMES, which a GPU machine may set) devices fail clearly and the CPU reference still
+# works. A loader that does not read OCL_ICD_VENDORS (some drivers ship their own) cannot be shown
+# an empty folder, so there the first check is skipped, saying why.
 mkdir "$WORK/no-icds"
 loader=$(ldd "$OCLVOX" | awk '/libOpenCL/ { print $3 }')
 if [ -n "$loader" ] && grep -q OCL_ICD_VENDORS "$(readlink -f "$loader")"; then
-    OCL_ICD_VENDORS="$WORK/no-icds" expect_failure "devices without an OpenCL platform" "$o" \
-        'platform' devices
+    OCL_ICD_FILENAMES= OCL_ICD_VENDORS="$WORK/no-icds" expect_failure \
+        "devices without an OpenCL platform" "$o" 'platform' devices
 else
     skip "devices without an OpenCL platform: the OpenCL loader ($loader) does not read OCL_ICD_VENDORS"
 fi
-OCL_ICD_VENDORS="$WORK/no-icds" run voxelize "$MESH" -r 32 --reference -q -o "$WORK/no-icd.npy"
+OCL_ICD_FILENAMES= OCL_ICD_VENDORS="$WORK/no-icds" run voxelize "$MESH" -r 32 --reference -q -o "$WORK/no-icd.npy"
 [ "$RC" -eq 0 ] && [ "$(npy_ones "$WORK/no-icd.npy")" = "$reference_ones" ] &&
     pass "--reference works without an OpenCL platform" ||
     fail "--reference without an OpenCL platform" "rc=$RC err=$ERR"
