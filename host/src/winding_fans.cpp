@@ -1,0 +1,220 @@
+// Fans over an open mesh's holes; see winding_fans.hpp.
+#include "winding_fans.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "solid_internal.hpp"
+
+namespace oclvox::detail {
+
+namespace {
+
+// Signed solid angle of triangle (a, b, c) seen from p, in double (Van Oosterom & Strackee, as
+// in the kernel): positive when p lies behind the triangle.
+double solid_angle_double(const double* a_, const double* b_, const double* c_, const double* p) {
+    double a[3], b[3], c[3];
+    for (int k = 0; k < 3; ++k) {
+        a[k] = a_[k] - p[k];
+        b[k] = b_[k] - p[k];
+        c[k] = c_[k] - p[k];
+    }
+    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
+                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+    const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    const double lb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    const double lc = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    const double den = la * lb * lc + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
+                       (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la +
+                       (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]) * lb;
+    return 2 * std::atan2(det, den);
+}
+
+}  // namespace
+
+double BoundaryFans::winding(const Vec3d& p) const {
+    double sum = 0;
+    for (size_t t = 0; t < triangles.size(); ++t)
+        sum += weight[t] *
+               solid_angle_double(&triangles[t][0], &triangles[t][3], &triangles[t][6], p.data());
+    return sum / (4 * M_PI);
+}
+
+double BoundaryFans::bound(const Vec3d& p, double reach) const {
+    double sum = 0;
+    for (const Chunk& c : chunks) {
+        const double gap = distance(p, c.centre) - c.radius - reach;
+        if (gap > c.radius) {
+            sum += c.area / (gap * gap);
+            continue;
+        }
+        for (size_t t = c.first; t < c.first + c.count; ++t) {
+            const double d = least_distance(t, p) * (1 - 1e-9) - reach;
+            sum += weight[t] * (d > 0 ? std::min(2 * M_PI, area_of(t) / (d * d)) : 2 * M_PI);
+        }
+    }
+    return sum / (4 * M_PI);
+}
+
+double BoundaryFans::gradient_bound(const Vec3d& p, double reach) const {
+    double sum = 0;
+    for (const Chunk& c : chunks) {
+        const double gap = distance(p, c.centre) - c.radius - reach;
+        if (gap > c.radius) {
+            sum += 2 * c.area / (gap * gap * gap);
+            continue;
+        }
+        for (size_t t = c.first; t < c.first + c.count; ++t) {
+            // Shrunk a little so that rounding cannot make d larger than the true distance.
+            const double d = least_distance(t, p) * (1 - 1e-9) - reach;
+            if (!(d > 0)) return INFINITY;
+            sum += weight[t] * std::min(2 * area_of(t) / (d * d * d), 4 * M_PI / d);
+        }
+    }
+    return sum / (4 * M_PI);
+}
+
+double BoundaryFans::least_distance(size_t t, const Vec3d& p) const {
+    const auto& v = triangles[t];
+    const Vec3d a{v[0], v[1], v[2]}, b{v[3], v[4], v[5]}, c{v[6], v[7], v[8]};
+    auto sub = [](const Vec3d& x, const Vec3d& y) {
+        return Vec3d{x[0] - y[0], x[1] - y[1], x[2] - y[2]};
+    };
+    auto dot = [](const Vec3d& x, const Vec3d& y) {
+        return x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+    };
+    auto cross = [](const Vec3d& x, const Vec3d& y) {
+        return Vec3d{x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2],
+                     x[0] * y[1] - x[1] * y[0]};
+    };
+    // Within the prism over the triangle, the distance to its plane.
+    const Vec3d n = cross(sub(b, a), sub(c, a));
+    const double nn = dot(n, n);
+    if (nn > 0 && dot(cross(sub(b, a), sub(p, a)), n) >= 0 &&
+        dot(cross(sub(c, b), sub(p, b)), n) >= 0 && dot(cross(sub(a, c), sub(p, c)), n) >= 0)
+        return std::fabs(dot(sub(p, a), n)) / std::sqrt(nn);
+    // Elsewhere (and for a degenerate triangle), the distance to the nearest edge.
+    auto segment = [&](const Vec3d& x, const Vec3d& y) {
+        const Vec3d e = sub(y, x), q = sub(p, x);
+        const double ee = dot(e, e);
+        const double s = ee > 0 ? std::clamp(dot(q, e) / ee, 0.0, 1.0) : 0.0;
+        const Vec3d r{q[0] - s * e[0], q[1] - s * e[1], q[2] - s * e[2]};
+        return std::sqrt(dot(r, r));
+    };
+    return std::min({segment(a, b), segment(b, c), segment(c, a)});
+}
+
+double BoundaryFans::area_of(size_t t) const {
+    const auto& v = triangles[t];
+    const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+    const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+    const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                         e1[0] * e2[1] - e1[1] * e2[0]};
+    return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) / 2;
+}
+
+double BoundaryFans::distance(const Vec3d& p, const Vec3d& q) {
+    return std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                     (p[2] - q[2]) * (p[2] - q[2]));
+}
+
+namespace {
+
+constexpr size_t kFanTrianglesPerChunk = 16;
+
+// Groups fan triangles [lo, hi) into chunks by recursive median splits of their centroids.
+void build_chunks(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size_t hi) {
+    auto centroid = [&](size_t t, int k) {
+        const auto& v = fans.triangles[t];
+        return (v[k] + v[3 + k] + v[6 + k]) / 3;
+    };
+    if (hi - lo > kFanTrianglesPerChunk) {
+        double extent[3];
+        for (int k = 0; k < 3; ++k) {
+            double mn = INFINITY, mx = -INFINITY;
+            for (size_t i = lo; i < hi; ++i) {
+                mn = std::min(mn, centroid(order[i], k));
+                mx = std::max(mx, centroid(order[i], k));
+            }
+            extent[k] = mx - mn;
+        }
+        const int axis = int(std::max_element(extent, extent + 3) - extent);
+        const size_t mid = lo + (hi - lo) / 2;
+        std::nth_element(order.begin() + lo, order.begin() + mid, order.begin() + hi,
+                         [&](size_t x, size_t y) { return centroid(x, axis) < centroid(y, axis); });
+        build_chunks(fans, order, lo, mid);
+        build_chunks(fans, order, mid, hi);
+        return;
+    }
+    BoundaryFans::Chunk chunk{{0, 0, 0}, 0, 0, lo, hi - lo};
+    for (size_t i = lo; i < hi; ++i)
+        for (int k = 0; k < 3; ++k) chunk.centre[k] += centroid(order[i], k) / double(hi - lo);
+    for (size_t i = lo; i < hi; ++i) {
+        const auto& v = fans.triangles[order[i]];
+        for (int c = 0; c < 3; ++c)
+            chunk.radius = std::max(
+                chunk.radius,
+                BoundaryFans::distance(chunk.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
+        chunk.area += fans.weight[order[i]] * fans.area_of(order[i]);
+    }
+    fans.chunks.push_back(chunk);
+}
+
+}  // namespace
+
+BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid) {
+    const WeldedEdges welded = weld_edges(mesh);
+    // Boundary edges (net count != 0), and their connected components by union-find.
+    std::vector<std::pair<std::pair<uint32_t, uint32_t>, int64_t>> edges;
+    for (const auto& [edge, uses] : welded.uses)
+        if (uses[0] != uses[1]) edges.push_back({edge, int64_t(uses[0]) - int64_t(uses[1])});
+    BoundaryFans fans;
+    if (edges.empty()) return fans;
+    std::vector<uint32_t> parent(welded.positions.size());
+    for (size_t v = 0; v < parent.size(); ++v) parent[v] = uint32_t(v);
+    auto find = [&](uint32_t v) {
+        while (parent[v] != v) v = parent[v] = parent[parent[v]];
+        return v;
+    };
+    for (const auto& [edge, net] : edges) parent[find(edge.first)] = find(edge.second);
+    // Apex per component: the mean of its vertices (each edge end counted once per edge).
+    std::map<uint32_t, std::array<double, 4>> apex;
+    for (const auto& [edge, net] : edges)
+        for (uint32_t v : {edge.first, edge.second}) {
+            auto& a = apex[find(v)];
+            for (int k = 0; k < 3; ++k) a[k] += welded.positions[v][k];
+            a[3] += 1;
+        }
+    auto to_grid = [&](const std::array<double, 3>& p, int k) {
+        return (p[k] - grid.origin[k]) / grid.voxel_size;
+    };
+    for (const auto& [edge, net] : edges) {
+        const auto& a = apex[find(edge.first)];
+        const std::array<double, 3> centre{a[0] / a[3], a[1] / a[3], a[2] / a[3]};
+        // The fan triangle's boundary runs low -> high `net` times, like the mesh's.
+        const uint32_t from = net > 0 ? edge.first : edge.second;
+        const uint32_t to = net > 0 ? edge.second : edge.first;
+        std::array<double, 9> t;
+        for (int k = 0; k < 3; ++k) {
+            t[k] = to_grid(centre, k);
+            t[3 + k] = to_grid(welded.positions[from], k);
+            t[6 + k] = to_grid(welded.positions[to], k);
+        }
+        fans.triangles.push_back(t);
+        fans.weight.push_back(double(net > 0 ? net : -net));
+    }
+    std::vector<size_t> order(fans.triangles.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    build_chunks(fans, order, 0, order.size());
+    // Store the triangles in chunk order.
+    BoundaryFans sorted;
+    sorted.chunks = std::move(fans.chunks);
+    for (size_t i : order) {
+        sorted.triangles.push_back(fans.triangles[i]);
+        sorted.weight.push_back(fans.weight[i]);
+    }
+    return sorted;
+}
+
+}  // namespace oclvox::detail

@@ -1,0 +1,58 @@
+// The fans that close an open mesh's holes for the generalized winding number solid
+// (solid_winding.cpp): their triangles, their winding number in double, and bounds on it and on
+// its gradient over a ball, which let whole tiles of voxels near a hole be decided at once.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <vector>
+
+#include "oclvox/oclvox.hpp"
+#include "overlap_double.hpp"
+
+namespace oclvox::detail {
+
+// Fans that close the mesh's holes. The boundary of the mesh (after welding: each edge carrying
+// the number of triangles running it one way minus the other) splits into connected cycles; a
+// fan of triangles (apex, a, b) from the mean vertex of each cycle has exactly that boundary. So
+// the mesh minus the fans is a closed cycle, and w = n + w_fans where n, the winding number of
+// that cycle, is an integer that changes only across the mesh or a fan. A closed, consistently
+// oriented mesh (or a union of such, duplicated shells included) has no fans.
+struct BoundaryFans {
+    std::vector<std::array<double, 9>> triangles;  // grid coordinates (voxel units)
+    std::vector<double> weight;                    // how many times each counts
+    struct Chunk {
+        Vec3d centre;
+        double radius, area;  // ball holding the chunk's triangles; their weighted area
+        size_t first, count;
+    };
+    std::vector<Chunk> chunks;
+
+    // w of the fans at p, in double.
+    double winding(const Vec3d& p) const;
+
+    // An upper bound on |w of the fans| over the ball of radius `reach` around p: a triangle's
+    // solid angle is at most its area over its least distance squared, and at most 2 pi.
+    double bound(const Vec3d& p, double reach) const;
+
+    // An upper bound on |grad w of the fans| over the ball of radius `reach` around p (infinite
+    // if a fan triangle comes that close). The solid angle's kernel n.r/|r|^3 has a gradient of
+    // at most 2/|r|^3, so a triangle at least d away contributes at most 2 area / d^3, and also
+    // at most 4 pi / d (the integral of 2/|r|^3 over the whole of its plane beyond distance d):
+    // the second is what keeps the long triangles of a fan over a large hole from making every
+    // voxel near it undecided. A near triangle's d is its least distance, not its ball's.
+    double gradient_bound(const Vec3d& p, double reach) const;
+
+    // The least distance from p to fan triangle t, in double.
+    double least_distance(size_t t, const Vec3d& p) const;
+
+    // Area of fan triangle t; the distance between two points.
+    double area_of(size_t t) const;
+    static double distance(const Vec3d& p, const Vec3d& q);
+};
+
+// The fans of the mesh's holes, in grid coordinates (voxel units): none for a closed,
+// consistently oriented mesh.
+BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid);
+
+}  // namespace oclvox::detail
