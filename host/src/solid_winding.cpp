@@ -371,10 +371,11 @@ SurfaceVoxels surface_voxels(const std::vector<std::array<double, 9>>& tri, cons
             for (int k = 0; k < 3; ++k) {
                 const double mn = std::min({t[k], t[3 + k], t[6 + k]});
                 const double mx = std::max({t[k], t[3 + k], t[6 + k]});
-                // Voxel i's closed box is [i, i + 1]; clamped first so huge coordinates stay exact.
+                // Voxel i's closed box [i, i + 1] holds x for i from ceil(x) - 1 to floor(x);
+                // clamped first so huge coordinates stay exact.
                 const double below = double(box.lo[k]) - 2, above = double(box.hi[k]) + 2;
                 lo[k] = std::max<int64_t>(
-                    0, int64_t(std::floor(std::clamp(mn, below, above))) - 1 - box.lo[k]);
+                    0, int64_t(std::ceil(std::clamp(mn, below, above))) - 1 - box.lo[k]);
                 hi[k] = std::min<int64_t>(
                     out.bits.dim(k) - 1,
                     int64_t(std::floor(std::clamp(mx, below, above))) - box.lo[k]);
