@@ -42,37 +42,19 @@ double BoundaryFans::winding(const Vec3d& p) const {
 }
 
 double BoundaryFans::bound(const Vec3d& p, double reach) const {
-    double sum = 0;
-    for (const Chunk& c : chunks) {
-        const double gap = distance(p, c.centre) - c.radius - reach;
-        if (gap > c.radius) {
-            sum += c.area / (gap * gap);
-            continue;
-        }
-        for (size_t t = c.first; t < c.first + c.count; ++t) {
-            const double d = least_distance(t, p) * (1 - 1e-9) - reach;
-            sum += weight[t] * (d > 0 ? std::min(2 * M_PI, area_of(t) / (d * d)) : 2 * M_PI);
-        }
-    }
-    return sum / (4 * M_PI);
+    return sum_over_ball(
+        p, reach, [](double area, double gap) { return area / (gap * gap); },
+        [](double area, double d) {
+            return d > 0 ? std::min(2 * M_PI, area / (d * d)) : 2 * M_PI;
+        });
 }
 
 double BoundaryFans::gradient_bound(const Vec3d& p, double reach) const {
-    double sum = 0;
-    for (const Chunk& c : chunks) {
-        const double gap = distance(p, c.centre) - c.radius - reach;
-        if (gap > c.radius) {
-            sum += 2 * c.area / (gap * gap * gap);
-            continue;
-        }
-        for (size_t t = c.first; t < c.first + c.count; ++t) {
-            // Shrunk a little so that rounding cannot make d larger than the true distance.
-            const double d = least_distance(t, p) * (1 - 1e-9) - reach;
-            if (!(d > 0)) return INFINITY;
-            sum += weight[t] * std::min(2 * area_of(t) / (d * d * d), 4 * M_PI / d);
-        }
-    }
-    return sum / (4 * M_PI);
+    return sum_over_ball(
+        p, reach, [](double area, double gap) { return 2 * area / (gap * gap * gap); },
+        [](double area, double d) {
+            return d > 0 ? std::min(2 * area / (d * d * d), 4 * M_PI / d) : INFINITY;
+        });
 }
 
 double BoundaryFans::least_distance(size_t t, const Vec3d& p) const {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <vector>
 
@@ -49,6 +50,28 @@ struct BoundaryFans {
     // Area of fan triangle t; the distance between two points.
     double area_of(size_t t) const;
     static double distance(const Vec3d& p, const Vec3d& q);
+
+  private:
+    // The sum over the fans of a term of area and distance from the ball of radius `reach`
+    // around p, over 4 pi: a chunk whose ball is farther off than its radius as one term,
+    // far(its weighted area, the gap between the balls), which must bound the sum of its
+    // triangles' terms; every other triangle as near(its area, d) times its weight, d its least
+    // distance less `reach` (shrunk a little so that rounding cannot make it larger than the
+    // true distance; 0 or less when the triangle comes within the ball).
+    template <class Far, class Near>
+    double sum_over_ball(const Vec3d& p, double reach, Far far, Near near) const {
+        double sum = 0;
+        for (const Chunk& c : chunks) {
+            const double gap = distance(p, c.centre) - c.radius - reach;
+            if (gap > c.radius) {
+                sum += far(c.area, gap);
+                continue;
+            }
+            for (size_t t = c.first; t < c.first + c.count; ++t)
+                sum += weight[t] * near(area_of(t), least_distance(t, p) * (1 - 1e-9) - reach);
+        }
+        return sum / (4 * M_PI);
+    }
 };
 
 // The fans of the mesh's holes, in grid coordinates (voxel units): none for a closed,
