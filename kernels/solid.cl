@@ -4,12 +4,11 @@
 // Parity works on a batch of brick columns (a brick_size^2 footprint and the whole grid height),
 // each held as `words` layers of 32 voxels: word w of voxel column (x, y) of slot s is
 // bits[((s * words + w) * brick_size + y) * brick_size + x], and its bit b is voxel 32 w + b of the
-// column. Neighbouring columns' words are neighbours, so the prefix and pack kernels read
-// consecutive words in consecutive work items. parity_flip: one work item per (triangle, voxel row
+// column. Neighbouring columns' words are neighbours, so neighbouring work items of parity_blocks
+// read neighbouring words. parity_flip: one work item per (triangle, voxel row
 // of its footprint in the brick column) toggles, in each voxel column of the row it covers, the bit
-// just above the crossing. parity_prefix: one work item per voxel column turns flips into parity.
-// parity_pack: one work item per 4x4 voxel columns and 32 layers copies the bits into the bricks'
-// block layout.
+// just above the crossing. parity_blocks: one work item per 4x4 voxel columns turns their flips
+// into parity, word by word up the columns, and copies the bits into the bricks' block layout.
 #include "solid_math.h"
 
 __kernel void parity_flip(__global const OvParityTriangle* triangles,
@@ -36,74 +35,82 @@ __kernel void parity_flip(__global const OvParityTriangle* triangles,
     }
 }
 
-__kernel void parity_prefix(__global uint* bits, uint columns, int brick_size, uint words) {
-    uint column = (uint)get_global_id(0);
-    if (column >= columns) return;
-    size_t layer = (size_t)brick_size * brick_size;
-    __global uint* w = bits + column / layer * words * layer + column % layer;
-    uint carry = 0;
-    for (uint i = 0; i < words; ++i) {
-        uint v = ovs_prefix_xor(w[i * layer], carry);
-        w[i * layer] = v;
-        carry = v >> 31;
-    }
-}
-
 // blocks: per slot, the bricks of the column bottom to top, each in the SparseVoxels block layout
-// as two 32-bit words per block (low word first). Voxels at or above nz are left clear: the grid
-// ends there even when the parity does not. One work item per 4x4 columns and 8 block rows: the
-// rows' 32 layers are one word of each of its 16 voxel columns, read once.
-__kernel void parity_pack(__global const uint* bits, uint slots, int brick_size, int brick_rows,
-                          int nz, uint words, __global uint* blocks) {
+// as two 32-bit words per block (low word first). One work item per 4x4 voxel columns walks their
+// words bottom to top: each word of flips becomes parity (a prefix XOR continuing its column's
+// carry), and its 32 layers, 8 block rows, are copied into the blocks. Taking the prefix on the
+// way spares a pass that wrote every parity word back and one that read it again. Voxels at or
+// above nz are left clear: the grid ends there even when the parity does not.
+__kernel void parity_blocks(__global const uint* bits, uint slots, int brick_size, int brick_rows,
+                            int nz, uint words, __global uint* blocks) {
     uint item = (uint)get_global_id(0);
     int nb = brick_size / 4;
+    if (item >= slots * (uint)(nb * nb)) return;
+    uint slot = item / (uint)(nb * nb);
+    int gx = (int)(item % (uint)nb);
+    int gy = (int)(item / (uint)nb % (uint)nb);
     int rows = nb * brick_rows;  // block rows over the whole column height
-    uint per_slot = (uint)(nb * nb * ((rows + 7) / 8));
-    if (item >= slots * per_slot) return;
-    uint slot = item / per_slot;
-    uint in_slot = item % per_slot;
-    int gx = (int)(in_slot % (uint)nb);
-    int gy = (int)(in_slot / (uint)nb % (uint)nb);
-    int word = (int)(in_slot / (uint)(nb * nb));
-    // Layer 32 * word + 4 * r + z of column (x, y) is bit 4 * r + z of that column's word; above
-    // nz it is cut (and the column has no word there).
-    int k0 = 32 * word;
-    uint valid = k0 + 32 <= nz ? 0xffffffffu : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
-    __global const uint* layers =
-        bits + (((size_t)slot * words + (size_t)word) * brick_size + (size_t)gy * 4) * brick_size +
-        (size_t)gx * 4;
-    uint column_bits[16];
-    for (int y = 0; y < 4; ++y)
-        for (int x = 0; x < 4; ++x)
-            column_bits[x + 4 * y] = valid ? layers[(size_t)y * brick_size + x] & valid : 0u;
-    // Transpose the 16 x 32 bit matrix (column c, layer k) in place, as two 16 x 16 halves side by
-    // side in each word: afterwards bits 0-15 of column_bits[k] are layer k's 16 columns and bits
-    // 16-31 are layer 16 + k's. Each step swaps the off-diagonal j x j blocks of every 2j x 2j
-    // block (Hacker's Delight, "transposing a bit matrix"), the masks repeated in both halves.
-    const uint masks[4] = {0x00ff00ffu, 0x0f0f0f0fu, 0x33333333u, 0x55555555u};
-#pragma unroll
-    for (int s = 0; s < 4; ++s) {
-        int j = 8 >> s;
-#pragma unroll
-        for (int i = 0; i < 8; ++i) {
-            int a = (i & ~(j - 1)) << 1 | (i & (j - 1));  // the i-th row with bit j clear
-            uint t = (column_bits[a] >> j ^ column_bits[a + j]) & masks[s];
-            column_bits[a + j] ^= t;
-            column_bits[a] ^= t << j;
+    size_t layer = (size_t)brick_size * brick_size;
+    __global const uint* columns =
+        bits + (size_t)slot * words * layer + (size_t)gy * 4 * brick_size + (size_t)gx * 4;
+    // Row y's 4 columns as the lanes of carry[y]: each one's parity below the current word (0 or
+    // 1). Lane-wise, the prefix below is ovs_prefix_xor; a row's 4 words are neighbours, read as
+    // one vector.
+    uint4 carry[4] = {(uint4)(0u), (uint4)(0u), (uint4)(0u), (uint4)(0u)};
+    // The column's bricks may reach above its last word: those block rows are written clear.
+    for (int word = 0; 8 * word < rows; ++word) {
+        // Layer 32 * word + 4 * r + z of column (x, y) is bit 4 * r + z of that column's word.
+        int k0 = 32 * word;
+        uint valid = k0 + 32 <= nz ? 0xffffffffu : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
+        uint column_bits[16];
+        for (int y = 0; y < 4; ++y) {
+            uint4 parity = valid
+                               ? vload4(0, columns + (size_t)word * layer + (size_t)y * brick_size)
+                               : (uint4)(0u);
+            parity ^= parity << 1;
+            parity ^= parity << 2;
+            parity ^= parity << 4;
+            parity ^= parity << 8;
+            parity ^= parity << 16;
+            parity ^= (uint4)(0u) - carry[y];  // complemented where the parity below is odd
+            carry[y] = parity >> 31;
+            parity &= (uint4)(valid);
+            column_bits[4 * y] = parity.s0;
+            column_bits[4 * y + 1] = parity.s1;
+            column_bits[4 * y + 2] = parity.s2;
+            column_bits[4 * y + 3] = parity.s3;
         }
-    }
-    for (int r = 0; r < 8 && 8 * word + r < rows; ++r) {
-        // Layers 4r .. 4r + 3 are bits z = 0 .. 3 of the block's rows: bit x + 4y + 16z.
-        int shift = r < 4 ? 0 : 16;
-        int k = 4 * r - shift;
-        uint low = (column_bits[k] >> shift & 0xffffu) | (column_bits[k + 1] >> shift) << 16;
-        uint high = (column_bits[k + 2] >> shift & 0xffffu) | (column_bits[k + 3] >> shift) << 16;
-        // Block (gx, gy, gz) is block (gx, gy, gz % nb) of brick gz / nb in the column.
-        int gz = 8 * word + r;
-        size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
-        size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));
-        blocks[2 * (brick * nb * nb * nb + block)] = low;
-        blocks[2 * (brick * nb * nb * nb + block) + 1] = high;
+        // Transpose the 16 x 32 bit matrix (column c, layer k) in place, as two 16 x 16 halves
+        // side by side in each word: afterwards bits 0-15 of column_bits[k] are layer k's 16
+        // columns and bits 16-31 are layer 16 + k's. Each step swaps the off-diagonal j x j
+        // blocks of every 2j x 2j block (Hacker's Delight, "transposing a bit matrix"), the masks
+        // repeated in both halves.
+        const uint masks[4] = {0x00ff00ffu, 0x0f0f0f0fu, 0x33333333u, 0x55555555u};
+#pragma unroll
+        for (int s = 0; s < 4; ++s) {
+            int j = 8 >> s;
+#pragma unroll
+            for (int i = 0; i < 8; ++i) {
+                int a = (i & ~(j - 1)) << 1 | (i & (j - 1));  // the i-th row with bit j clear
+                uint t = (column_bits[a] >> j ^ column_bits[a + j]) & masks[s];
+                column_bits[a + j] ^= t;
+                column_bits[a] ^= t << j;
+            }
+        }
+        for (int r = 0; r < 8 && 8 * word + r < rows; ++r) {
+            // Layers 4r .. 4r + 3 are bits z = 0 .. 3 of the block's rows: bit x + 4y + 16z.
+            int shift = r < 4 ? 0 : 16;
+            int k = 4 * r - shift;
+            uint low = (column_bits[k] >> shift & 0xffffu) | (column_bits[k + 1] >> shift) << 16;
+            uint high = (column_bits[k + 2] >> shift & 0xffffu) | (column_bits[k + 3] >> shift)
+                                                                      << 16;
+            // Block (gx, gy, gz) is block (gx, gy, gz % nb) of brick gz / nb in the column.
+            int gz = 8 * word + r;
+            size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
+            size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));
+            blocks[2 * (brick * nb * nb * nb + block)] = low;
+            blocks[2 * (brick * nb * nb * nb + block) + 1] = high;
+        }
     }
 }
 

@@ -86,17 +86,18 @@ class SlotBuffer {
 // place, zeroed on every core, where the device's fill runs on one thread (through PoCL the fill
 // took 12 ms of motorBike's 17 MiB at 1024^3, most of it faulting in fresh pages; zeroed on two
 // cores, 5 ms). Fresh pages are zero already: bits the kernels write sparsely are left to fault
-// in where written (most pages of a surface's bricks never are), while bits written everywhere
-// are faulted in on every core first, as faults inside the kernels cost far more (parity solid
-// of bunny00 at 1024^3: kernels 121 ms with the pages zeroed first, 205 ms without). A result
+// in where written (most pages of a surface's bricks never are), while bits the kernels touch
+// everywhere (the parity solid's flips, read back whole) are faulted in on every core first, as
+// faults inside the kernels cost far more (parity solid of bunny00 at 1024^3: voxelize phase
+// 145 ms with the pages zeroed first, 173-191 ms without, 2026-11-27). A result
 // can take the pages instead of a copy (take_pages, download_bricks), and the next batch gets
 // fresh ones. Elsewhere the bits are a device buffer, kept while the batch size stays, that the
 // device fills.
 class BitSlotBuffer {
   public:
-    enum class Writes { Sparse, Everywhere };
-    BitSlotBuffer(size_t bytes_per_slot, Writes writes)
-        : bytes_per_slot_(bytes_per_slot), writes_(writes) {}
+    enum class Touched { Sparsely, Everywhere };
+    BitSlotBuffer(size_t bytes_per_slot, Touched touched)
+        : bytes_per_slot_(bytes_per_slot), touched_(touched) {}
     const cl::Buffer& get(const Device::Impl& cl, size_t slots, size_t used);
 
     // The host pages behind the buffer, or nullptr if it is the device's own memory.
@@ -110,7 +111,7 @@ class BitSlotBuffer {
 
   private:
     size_t bytes_per_slot_;
-    Writes writes_;
+    Touched touched_;
     size_t slots_ = 0;
     std::shared_ptr<uint64_t> pages_;  // declared before buffer_: released after it
     cl::Buffer buffer_;

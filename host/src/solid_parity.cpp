@@ -1,9 +1,10 @@
 // Solid voxelization by crossing parity. Phases: snap every vertex to fixed point
 // (solid_math.h); bin triangles into the brick columns (brick_size^2 footprints over the whole grid
 // height) their xy boxes reach; then per batch of brick columns that fits the device budget: flip
-// one bit per (triangle, covered voxel column), prefix-XOR every voxel column, pack the bits into
-// bricks and merge the non-empty ones. A voxel column never crosses a batch, so the result cannot
-// depend on the brick size. The host reference does the same flips, prefix and packing.
+// one bit per (triangle, covered voxel column), prefix-XOR every voxel column while packing its
+// bits into bricks, and merge the non-empty ones. A voxel column never crosses a batch, so the
+// result cannot depend on the brick size. The host reference does the same flips, prefix and
+// packing.
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -193,14 +194,12 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
     const cl::Buffer tri_buffer = read_in_place(cl, triangles);
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
-    BitSlotBuffer bits(column_words * sizeof(cl_uint), BitSlotBuffer::Writes::Everywhere);
+    BitSlotBuffer bits(column_words * sizeof(cl_uint), BitSlotBuffer::Touched::Everywhere);
     SlotBuffer blocks(CL_MEM_READ_WRITE, block_words * sizeof(cl_uint));
 
-    cl::Kernel flip(program, "parity_flip"), prefix(program, "parity_prefix"),
-        pack(program, "parity_pack");
+    cl::Kernel flip(program, "parity_flip"), to_blocks(program, "parity_blocks");
     const size_t flip_group = work_group_size(flip, cl.device);
-    const size_t prefix_group = work_group_size(prefix, cl.device);
-    const size_t pack_group = work_group_size(pack, cl.device);
+    const size_t to_blocks_group = work_group_size(to_blocks, cl.device);
 
     // Batches of brick columns, smaller after a device allocation failure (nothing of a failed
     // batch has been merged).
@@ -221,7 +220,7 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
         cl.queue.finish();
         stats.seconds_upload += seconds_since(t);
 
-        // Flips, then parity per voxel column, then the brick layout.
+        // Flips, then parity up each voxel column into the brick layout.
         t = Clock::now();
         set_args(flip, 0, tri_buffer, pair_triangle, pair_slot, pair_first, item_pair, slot_column,
                  cl_uint(0), cl_uint(batch.items), cl_int(l.brick), cl_int(l.nx), cl_int(l.ny),
@@ -232,19 +231,15 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
                        launch(cl.queue, flip, count, flip_group);
                    },
                    {});
-        const uint64_t columns = uint64_t(batch.unit_count) * l.brick * l.brick;
-        set_args(prefix, 0, bit_buffer, cl_uint(columns), cl_int(l.brick), cl_uint(l.words));
-        launch(cl.queue, prefix, columns, prefix_group);
-        // parity_pack: an item per 4x4 voxel columns and 8 block rows (a 32-bit word of layers).
-        const uint64_t block_rows = uint64_t(l.nbz) * uint64_t(l.brick / 4);
-        const uint64_t pack_items = uint64_t(batch.unit_count) * uint64_t(l.brick / 4) *
-                                    uint64_t(l.brick / 4) * ((block_rows + 7) / 8);
-        set_args(pack, 0, bit_buffer, cl_uint(batch.unit_count), cl_int(l.brick), cl_int(l.nbz),
-                 cl_int(l.nz), cl_uint(l.words), block_buffer);
-        launch(cl.queue, pack, pack_items, pack_group);
+        // parity_blocks: an item per 4x4 voxel columns.
+        const uint64_t block_items =
+            uint64_t(batch.unit_count) * uint64_t(l.brick / 4) * uint64_t(l.brick / 4);
+        set_args(to_blocks, 0, bit_buffer, cl_uint(batch.unit_count), cl_int(l.brick),
+                 cl_int(l.nbz), cl_int(l.nz), cl_uint(l.words), block_buffer);
+        launch(cl.queue, to_blocks, block_items, to_blocks_group);
         cl.queue.finish();
         stats.seconds_kernels += seconds_since(t);
-        stats.work_items += batch.items + columns + pack_items;
+        stats.work_items += batch.items + block_items;
 
         // Each slot's bricks, bottom to top, are units of the download.
         download_bricks(

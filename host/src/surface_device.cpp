@@ -151,7 +151,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             const size_t words_per_brick = 2 * result.blocks_per_brick();
             size_t slots = std::min(max_slots, binning.bricks.size());
             detail::BitSlotBuffer bits(words_per_brick * sizeof(cl_uint),
-                                       detail::BitSlotBuffer::Writes::Sparse);
+                                       detail::BitSlotBuffer::Touched::Sparsely);
 
             // Phase 4: batches of bricks, smaller after a device allocation failure (nothing of
             // a failed batch has been merged).
