@@ -14,7 +14,7 @@ namespace oclvox::detail {
 
 constexpr size_t kGroupBlocks = 64;  // OV_GROUP_BLOCKS of blocks.cl
 
-void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer* bit_slots,
+void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer& bit_slots,
                      size_t units, size_t blocks_per_unit, Download mode, VoxelizeStats& stats,
                      const std::function<uint64_t(size_t unit)>& brick_of, SparseVoxels& result) {
     const auto start = Clock::now();
@@ -27,8 +27,8 @@ void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer* bi
         constexpr bool kLittleEndian = __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__;
         bool in_place = false;
         read_mapped<cl_uint>(cl.queue, bits, 2 * block_count, [&](const cl_uint* words) {
-            in_place = kLittleEndian && bit_slots && bit_slots->pages() &&
-                       static_cast<const void*>(words) == bit_slots->pages();
+            in_place = kLittleEndian && bit_slots.pages() &&
+                       static_cast<const void*>(words) == bit_slots.pages();
             if (in_place) return;
             result.merge_bricks(units, brick_of, [&](size_t unit, uint64_t* blocks) {
                 const cl_uint* unit_words = words + 2 * unit * blocks_per_unit;
@@ -38,7 +38,7 @@ void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer* bi
         });
         if (in_place) {
             cl.queue.finish();  // the unmap
-            SparseVoxelsAccess::adopt_bricks(result, bit_slots->take_pages(), units, brick_of);
+            SparseVoxelsAccess::adopt_bricks(result, bit_slots.take_pages(), units, brick_of);
         }
         stats.bytes_downloaded += 2 * block_count * sizeof(cl_uint);
         stats.seconds_download += seconds_since(start);

@@ -23,9 +23,9 @@ inline bool downloads_non_empty_blocks(const Device::Impl& cl, Download mode) {
 // into `result` as bricks brick_of(unit), in parallel (SparseVoxels::merge_bricks). Where `bits`
 // is bit_slots' buffer and its bricks come back whole from the host pages behind it, they are
 // not copied: the result takes the pages (on a little-endian host, where two 32-bit words, low
-// first, are the block's 64-bit word), and bit_slots gets fresh ones for the next batch. A null
-// bit_slots (bricks the kernels wrote whole, empty ones too: parity's) always copies.
-void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer* bit_slots,
+// first, are the block's 64-bit word), and bit_slots gets fresh ones for the next batch; empty
+// bricks' pages are given back.
+void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer& bit_slots,
                      size_t units, size_t blocks_per_unit, Download mode, VoxelizeStats& stats,
                      const std::function<uint64_t(size_t unit)>& brick_of, SparseVoxels& result);
 

@@ -27,7 +27,8 @@ const cl::Buffer& BitSlotBuffer::get(const Device::Impl& cl, size_t slots, size_
         cl.queue.enqueueFillBuffer(buffer_, cl_uint(0), 0, used_bytes);
         return buffer_;
     }
-    if (fresh && touched_ == Touched::Sparsely) return buffer_;  // fresh pages are zero
+    if (fresh && fresh_pages_ == FreshPages::FaultWhereWritten)
+        return buffer_;  // fresh pages are zero
     void* const mapped =
         cl.queue.enqueueMapBuffer(buffer_, CL_TRUE, CL_MAP_WRITE_INVALIDATE_REGION, 0, used_bytes);
     constexpr size_t kPart = size_t(1) << 20;

@@ -194,8 +194,10 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
     const cl::Buffer tri_buffer = read_in_place(cl, triangles);
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
-    BitSlotBuffer bits(column_words * sizeof(cl_uint), BitSlotBuffer::Touched::Everywhere);
-    SlotBuffer blocks(CL_MEM_READ_WRITE, block_words * sizeof(cl_uint));
+    BitSlotBuffer bits(column_words * sizeof(cl_uint), BitSlotBuffer::FreshPages::ZeroOnEveryCore);
+    // The blocks are written whole, and a result in the host's memory takes their pages.
+    BitSlotBuffer blocks(block_words * sizeof(cl_uint),
+                         BitSlotBuffer::FreshPages::FaultWhereWritten);
 
     cl::Kernel flip(program, "parity_flip"), to_blocks(program, "parity_blocks");
     const size_t flip_group = work_group_size(flip, cl.device);
@@ -207,7 +209,7 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
         t = Clock::now();
         const PairBatch batch = make_batch(bins, triangles, l, done, max_columns);
         const cl::Buffer& bit_buffer = bits.get(cl, max_columns, batch.unit_count);
-        const cl::Buffer& block_buffer = blocks.get(cl.context, max_columns);
+        const cl::Buffer& block_buffer = blocks.get(cl, max_columns, batch.unit_count);
         std::vector<cl_int> slot_coordinates;  // each slot's brick column (bx, by)
         for (size_t slot = 0; slot < batch.unit_count; ++slot)
             for (const int k : column_coordinates(l, bins.columns[done + slot]))
@@ -243,7 +245,7 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
 
         // Each slot's bricks, bottom to top, are units of the download.
         download_bricks(
-            cl, block_buffer, nullptr, batch.unit_count * size_t(l.nbz), l.blocks_per_brick,
+            cl, block_buffer, blocks, batch.unit_count * size_t(l.nbz), l.blocks_per_brick,
             options.download, stats,
             [&](size_t unit) {
                 const uint64_t column = bins.columns[batch.first_unit + unit / size_t(l.nbz)];

@@ -151,7 +151,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
             const size_t words_per_brick = 2 * result.blocks_per_brick();
             size_t slots = std::min(max_slots, binning.bricks.size());
             detail::BitSlotBuffer bits(words_per_brick * sizeof(cl_uint),
-                                       detail::BitSlotBuffer::Touched::Sparsely);
+                                       detail::BitSlotBuffer::FreshPages::FaultWhereWritten);
 
             // Phase 4: batches of bricks, smaller after a device allocation failure (nothing of
             // a failed batch has been merged).
@@ -201,7 +201,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 stats.work_items += batch.items + directs;
 
                 detail::download_bricks(
-                    cl, bit_buffer, &bits, batch.unit_count, result.blocks_per_brick(),
+                    cl, bit_buffer, bits, batch.unit_count, result.blocks_per_brick(),
                     options.download, stats,
                     [&](size_t slot) { return binning.bricks[batch.first_unit + slot]; }, result);
                 ++stats.batches;
