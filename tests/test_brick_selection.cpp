@@ -8,6 +8,7 @@
 #include <set>
 
 #include "binning.hpp"
+#include "bit_count.hpp"
 #include "device_batches.hpp"
 #include "overlap_double.hpp"
 #include "test_support.hpp"
@@ -202,6 +203,30 @@ TEST(BrickDivider, EqualsDivisionForEveryIndexAndBrickSize) {
 
 // A grid holding every vertex lets preparation skip counting the pieces; the triangles it
 // prepares are those of the counting path, which an unused vertex outside the grid forces.
+TEST(BitCount, CountBitsEqualsCountingOneBitAtATime) {
+    std::mt19937_64 random(7);
+    std::vector<uint64_t> words = {0, ~uint64_t(0), 1, uint64_t(1) << 63, 0x8000000000000001ull};
+    for (int i = 0; i < 2000; ++i) {
+        const uint64_t w = random();
+        words.push_back(i % 3 == 0 ? w & random() & random() : w);  // sparse words too
+    }
+    for (size_t begin : {size_t(0), size_t(3), size_t(5)})
+        for (size_t count : {size_t(0), size_t(1), size_t(2), size_t(7), words.size() - 5}) {
+            uint64_t expected = 0;
+            for (size_t i = begin; i < begin + count; ++i)
+                for (int b = 0; b < 64; ++b) expected += words[i] >> b & 1;
+            EXPECT_EQ(detail::count_bits(words.data() + begin, count), expected)
+                << "words " << begin << " .. " << begin + count;
+            EXPECT_EQ(detail::count_bits_portable(words.data() + begin, count), expected)
+                << "words " << begin << " .. " << begin + count;
+        }
+    for (const uint64_t w : words) {
+        uint32_t expected = 0;
+        for (int b = 0; b < 64; ++b) expected += uint32_t(w >> b & 1);
+        ASSERT_EQ(detail::popcount64(w), expected) << w;
+    }
+}
+
 TEST(Preparation, SkippingTheCountGivesTheCountedTriangles) {
     const Mesh inside = random_triangles(20000, 4, 28, 3, 5);  // every vertex in [1, 31]
     Mesh with_far_vertex = inside;

@@ -128,8 +128,7 @@ uint64_t SparseVoxels::count() const {
         tbb::blocked_range<size_t>(0, all.size()), uint64_t(0),
         [&](const tbb::blocked_range<size_t>& range, uint64_t n) {
             for (size_t i = range.begin(); i < range.end(); ++i)
-                for (size_t w = 0; w < words_per_brick; ++w)
-                    if (all[i][w]) n += uint64_t(detail::popcount64(all[i][w]));  // most are 0
+                n += detail::count_bits(all[i], words_per_brick);
             return n;
         },
         std::plus<uint64_t>());
