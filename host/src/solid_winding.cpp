@@ -734,12 +734,19 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
             const Tile& tile = evaluated[i];
             const Vec3d centre = centre_of(tile);
             const double reach = tile_reach(tile);
-            const double cycle =
-                double(w[i]) - (fans.triangles.empty() ? 0.0 : fans.winding(centre));
-            const double whole = std::round(cycle);
-            const bool certain =
-                std::fabs(cycle - whole) + double(error[i]) + kTileRounding < 0.5 &&
-                std::fabs(whole) < kZero;
+            // n from the fans' estimated w, unless its error leaves open what their exact sum
+            // would decide: then from that sum (so the decision is always the exact sum's).
+            const double spread = double(error[i]) + kTileRounding;
+            BoundaryFans::Estimate fan{0, 0};
+            if (!fans.triangles.empty()) fan = fans.winding_estimate(centre);
+            double cycle = double(w[i]) - fan.value, whole = std::round(cycle);
+            bool certain = std::fabs(cycle - whole) + spread + fan.error < 0.5;
+            if (!certain && std::fabs(cycle - whole) + spread - fan.error < 0.5) {
+                cycle = double(w[i]) - fans.winding(centre);
+                whole = std::round(cycle);
+                certain = std::fabs(cycle - whole) + spread < 0.5;
+            }
+            certain = certain && std::fabs(whole) < kZero;
             tile_state[i] =
                 !certain || (!fans.triangles.empty() && !(fans.bound(centre, reach) < 0.5))
                     ? kUnknown
@@ -1032,11 +1039,16 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                 const double reach = tile_reach(tile);
                 const bool near_fans =
                     !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
-                double fan_centre = 0, gradient = INFINITY;
+                // The fans' w at the centre is estimated; where its error leaves a voxel's
+                // decision open that the exact sum would settle, the exact sum is taken.
+                BoundaryFans::Estimate fan_centre{0, 0};
+                bool fan_centre_exact = true;
+                double gradient = INFINITY;
                 if (near_fans &&
                     !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
                                      tile.lo[2] >> kFinestTileLevel)) {
-                    fan_centre = fans.winding(tile_centre);
+                    fan_centre = fans.winding_estimate(tile_centre);
+                    fan_centre_exact = false;
                     gradient = fans.gradient_bound(tile_centre, reach);
                 }
                 for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
@@ -1062,8 +1074,18 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                                 gradient == INFINITY
                                     ? INFINITY
                                     : gradient * BoundaryFans::distance(centre, tile_centre);
-                            const double low = std::fabs(whole + fan_centre) - spread;
-                            const double high = std::fabs(whole + fan_centre) + spread;
+                            double low = std::fabs(whole + fan_centre.value) - spread;
+                            double high = std::fabs(whole + fan_centre.value) + spread;
+                            if (!fan_centre_exact && !(low - fan_centre.error > 0.5) &&
+                                !(high + fan_centre.error < 0.5) &&
+                                (low + fan_centre.error > 0.5 || high - fan_centre.error < 0.5)) {
+                                fan_centre = {fans.winding(tile_centre), 0};
+                                fan_centre_exact = true;
+                                low = std::fabs(whole + fan_centre.value) - spread;
+                                high = std::fabs(whole + fan_centre.value) + spread;
+                            }
+                            low -= fan_centre.error;
+                            high += fan_centre.error;
                             state[i] = low > 0.5 ? kZero + 1 : kZero;
                             if (!(low > 0.5) && !(high < 0.5)) {
                                 out.near_voxels.push_back(i);

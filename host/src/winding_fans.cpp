@@ -41,6 +41,41 @@ double BoundaryFans::winding(const Vec3d& p) const {
     return sum / (4 * M_PI);
 }
 
+BoundaryFans::Estimate BoundaryFans::winding_estimate(const Vec3d& p) const {
+    double sum = 0, error = 0;
+    for (size_t i = 0; i < nodes.size();) {
+        const Node& c = nodes[i];
+        const Vec3d d{c.centre[0] - p[0], c.centre[1] - p[1], c.centre[2] - p[2]};
+        const double r = distance(c.centre, p), gap = r - c.radius;
+        if (gap > kFarRadii * c.radius) {
+            // The solid angle's kernel n.(x - p)/|x - p|^3 to first order in x about the centre,
+            // integrated over each triangle: its area vector seen from the centre, plus its
+            // moment through the kernel's gradient, I/r^3 - 3 d d^T/r^5.
+            const double r2 = r * r, r3 = r2 * r, r5 = r3 * r2;
+            double dmd = 0;
+            for (int a = 0; a < 3; ++a)
+                for (int b = 0; b < 3; ++b) dmd += d[a] * c.moment[3 * a + b] * d[b];
+            const double trace = c.moment[0] + c.moment[4] + c.moment[8];
+            sum +=
+                (c.area_normal[0] * d[0] + c.area_normal[1] * d[1] + c.area_normal[2] * d[2]) / r3 +
+                trace / r3 - 3 * dmd / r5;
+            error += 3 * c.area * c.radius * c.radius / (gap * gap * gap * gap);
+            i = c.skip;
+            continue;
+        }
+        if (c.leaf)
+            for (size_t t = c.first; t < c.first + c.count; ++t)
+                sum += weight[t] * solid_angle_double(&triangles[t][0], &triangles[t][3],
+                                                      &triangles[t][6], p.data());
+        ++i;  // a leaf's next node is past it; an inner node's is its first child
+    }
+    // Plus the rounding of this sum and of winding(p)'s, generously: a sum of n terms in double
+    // is within n 2^-53 of the sum of their magnitudes, each solid angle at most 2 pi times its
+    // weight, and atan2 and the terms' arithmetic add a few ulps each.
+    return {sum / (4 * M_PI),
+            error / (4 * M_PI) + 1e-15 * double(triangles.size() + 1) * (1 + total_weight)};
+}
+
 double BoundaryFans::bound(const Vec3d& p, double reach) const {
     return sum_over_ball(
         p, reach, [](double area, double gap) { return area / (gap * gap); },
@@ -103,15 +138,53 @@ double BoundaryFans::distance(const Vec3d& p, const Vec3d& q) {
 
 namespace {
 
-constexpr size_t kFanTrianglesPerChunk = 16;
+constexpr size_t kFanTrianglesPerLeaf = 16;
 
-// Groups fan triangles [lo, hi) into chunks by recursive median splits of their centroids.
-void build_chunks(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size_t hi) {
+// A node over fan triangles order[lo .. hi): the mean of their centroids, the ball around it
+// holding their vertices, their weighted area, area vectors and moments.
+BoundaryFans::Node node_over(const BoundaryFans& fans, const std::vector<size_t>& order, size_t lo,
+                             size_t hi) {
     auto centroid = [&](size_t t, int k) {
         const auto& v = fans.triangles[t];
         return (v[k] + v[3 + k] + v[6 + k]) / 3;
     };
-    if (hi - lo > kFanTrianglesPerChunk) {
+    BoundaryFans::Node node{
+        {0, 0, 0}, 0, 0, lo, hi - lo, {0, 0, 0}, {}, 0, hi - lo <= kFanTrianglesPerLeaf};
+    for (size_t i = lo; i < hi; ++i)
+        for (int k = 0; k < 3; ++k) node.centre[k] += centroid(order[i], k) / double(hi - lo);
+    for (size_t i = lo; i < hi; ++i) {
+        const auto& v = fans.triangles[order[i]];
+        const double weight = fans.weight[order[i]];
+        for (int c = 0; c < 3; ++c)
+            node.radius = std::max(
+                node.radius,
+                BoundaryFans::distance(node.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
+        node.area += weight * fans.area_of(order[i]);
+        // The area vector (b - a) x (c - a) / 2, the orientation of the solid angle's sign.
+        const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+        const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+        const double n[3] = {(e1[1] * e2[2] - e1[2] * e2[1]) / 2,
+                             (e1[2] * e2[0] - e1[0] * e2[2]) / 2,
+                             (e1[0] * e2[1] - e1[1] * e2[0]) / 2};
+        for (int a = 0; a < 3; ++a) {
+            node.area_normal[a] += weight * n[a];
+            for (int b = 0; b < 3; ++b)
+                node.moment[3 * a + b] += weight * n[a] * (centroid(order[i], b) - node.centre[b]);
+        }
+    }
+    return node;
+}
+
+// The tree over fan triangles order[lo .. hi), depth first: a node, then (unless it is a leaf)
+// the trees over the halves of a median split of their centroids along their widest axis.
+void build_nodes(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size_t hi) {
+    const size_t index = fans.nodes.size();
+    fans.nodes.push_back(node_over(fans, order, lo, hi));
+    if (!fans.nodes[index].leaf) {
+        auto centroid = [&](size_t t, int k) {
+            const auto& v = fans.triangles[t];
+            return (v[k] + v[3 + k] + v[6 + k]) / 3;
+        };
         double extent[3];
         for (int k = 0; k < 3; ++k) {
             double mn = INFINITY, mx = -INFINITY;
@@ -125,22 +198,10 @@ void build_chunks(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, siz
         const size_t mid = lo + (hi - lo) / 2;
         std::nth_element(order.begin() + lo, order.begin() + mid, order.begin() + hi,
                          [&](size_t x, size_t y) { return centroid(x, axis) < centroid(y, axis); });
-        build_chunks(fans, order, lo, mid);
-        build_chunks(fans, order, mid, hi);
-        return;
+        build_nodes(fans, order, lo, mid);
+        build_nodes(fans, order, mid, hi);
     }
-    BoundaryFans::Chunk chunk{{0, 0, 0}, 0, 0, lo, hi - lo};
-    for (size_t i = lo; i < hi; ++i)
-        for (int k = 0; k < 3; ++k) chunk.centre[k] += centroid(order[i], k) / double(hi - lo);
-    for (size_t i = lo; i < hi; ++i) {
-        const auto& v = fans.triangles[order[i]];
-        for (int c = 0; c < 3; ++c)
-            chunk.radius = std::max(
-                chunk.radius,
-                BoundaryFans::distance(chunk.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
-        chunk.area += fans.weight[order[i]] * fans.area_of(order[i]);
-    }
-    fans.chunks.push_back(chunk);
+    fans.nodes[index].skip = fans.nodes.size();
 }
 
 }  // namespace
@@ -188,13 +249,14 @@ BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid) {
     }
     std::vector<size_t> order(fans.triangles.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    build_chunks(fans, order, 0, order.size());
-    // Store the triangles in chunk order.
+    build_nodes(fans, order, 0, order.size());
+    // Store the triangles in the tree's order.
     BoundaryFans sorted;
-    sorted.chunks = std::move(fans.chunks);
+    sorted.nodes = std::move(fans.nodes);
     for (size_t i : order) {
         sorted.triangles.push_back(fans.triangles[i]);
         sorted.weight.push_back(fans.weight[i]);
+        sorted.total_weight += fans.weight[i];
     }
     return sorted;
 }

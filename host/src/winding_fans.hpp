@@ -22,15 +22,37 @@ namespace oclvox::detail {
 struct BoundaryFans {
     std::vector<std::array<double, 9>> triangles;  // grid coordinates (voxel units)
     std::vector<double> weight;                    // how many times each counts
-    struct Chunk {
+    double total_weight = 0;
+    // A tree over the triangles, depth first, each node over triangles [first, first + count):
+    // a leaf over a few (16 at most) near each other, an inner node over its two children's.
+    struct Node {
         Vec3d centre;
-        double radius, area;  // ball holding the chunk's triangles; their weighted area
+        double radius, area;  // ball holding the node's triangles; their weighted area
         size_t first, count;
+        // Their weighted area vectors' sum, and the sum of each one times its triangle's
+        // centroid offset from the centre (moment[3 * i + j]: area vector i, offset j).
+        Vec3d area_normal;
+        std::array<double, 9> moment;
+        size_t skip;  // the node just past this one's subtree
+        bool leaf;
     };
-    std::vector<Chunk> chunks;
+    std::vector<Node> nodes;
 
-    // w of the fans at p, in double.
+    // w of the fans at p, in double: every fan triangle's solid angle.
     double winding(const Vec3d& p) const;
+
+    // w of the fans at p within `error` of winding(p), its rounding included, at a fraction of
+    // the cost where fans have many triangles: a node of the tree farther off than kFarRadii of
+    // its radii counts as the second-order expansion of its triangles' solid angles about its
+    // centre (as the kernel's tree, after Barill et al. 2018), with a remainder of at most
+    // 3 area radius^2 / gap^4 (the third derivatives of 1/|x| have norm at most 6/|x|^4); the
+    // others count triangle by triangle. A decision that the error leaves open can still ask
+    // winding(p).
+    struct Estimate {
+        double value, error;
+    };
+    static constexpr double kFarRadii = 4;
+    Estimate winding_estimate(const Vec3d& p) const;
 
     // An upper bound on |w of the fans| over the ball of radius `reach` around p: a triangle's
     // solid angle is at most its area over its least distance squared, and at most 2 pi.
@@ -53,15 +75,16 @@ struct BoundaryFans {
 
   private:
     // The sum over the fans of a term of area and distance from the ball of radius `reach`
-    // around p, over 4 pi: a chunk whose ball is farther off than its radius as one term,
-    // far(its weighted area, the gap between the balls), which must bound the sum of its
+    // around p, over 4 pi, leaf by leaf: a leaf whose ball is farther off than its radius as one
+    // term, far(its weighted area, the gap between the balls), which must bound the sum of its
     // triangles' terms; every other triangle as near(its area, d) times its weight, d its least
     // distance less `reach` (shrunk a little so that rounding cannot make it larger than the
     // true distance; 0 or less when the triangle comes within the ball).
     template <class Far, class Near>
     double sum_over_ball(const Vec3d& p, double reach, Far far, Near near) const {
         double sum = 0;
-        for (const Chunk& c : chunks) {
+        for (const Node& c : nodes) {
+            if (!c.leaf) continue;
             const double gap = distance(p, c.centre) - c.radius - reach;
             if (gap > c.radius) {
                 sum += far(c.area, gap);
