@@ -1035,29 +1035,30 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                 // In a tile that no fan touches, w_fans at a voxel is within its distance from
                 // the tile's centre times `gradient` (a bound over the tile's ball) of its value
                 // at the centre.
+                // The fans' w at the centre is estimated; where its error leaves a voxel's
+                // decision open that the exact sum would settle, the exact sum is taken. All of
+                // it is worked out at the tile's first settled voxel: a tile of unsettled voxels
+                // needs none of it (in a model open everywhere, every tile's voxels may be).
                 const Vec3d tile_centre = centre_of(tile);
                 const double reach = tile_reach(tile);
-                const bool near_fans =
-                    !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
-                // The fans' w at the centre is estimated; where its error leaves a voxel's
-                // decision open that the exact sum would settle, the exact sum is taken.
+                bool fans_known = false, near_fans = false, fan_centre_exact = true;
                 BoundaryFans::Estimate fan_centre{0, 0};
-                bool fan_centre_exact = true;
                 double gradient = INFINITY;
-                if (near_fans &&
-                    !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel, tile.lo[1] >> kFinestTileLevel,
-                                     tile.lo[2] >> kFinestTileLevel)) {
-                    fan_centre = fans.winding_estimate(tile_centre);
-                    fan_centre_exact = false;
-                    gradient = fans.gradient_bound(tile_centre, reach);
-                }
+                auto know_fans = [&] {
+                    fans_known = true;
+                    near_fans = !fans.triangles.empty() && !(fans.bound(tile_centre, reach) < 0.5);
+                    if (near_fans && !fan_pyramid.get(tile.lo[0] >> kFinestTileLevel,
+                                                      tile.lo[1] >> kFinestTileLevel,
+                                                      tile.lo[2] >> kFinestTileLevel)) {
+                        fan_centre = fans.winding_estimate(tile_centre);
+                        fan_centre_exact = false;
+                        gradient = fans.gradient_bound(tile_centre, reach);
+                    }
+                };
                 for (int64_t z = tile.lo[2]; z <= tile.hi[2]; ++z)
                     for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                         for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
                             const uint64_t i = inside.index(x, y, z);
-                            // Away from the fans a settled state, n + kZero, already says what
-                            // the inside bits below read from it: inside iff n != 0.
-                            if (state[i] != kUnknown && !near_fans) continue;
                             const Vec3d centre{double(box.lo[0] + x) + 0.5,
                                                double(box.lo[1] + y) + 0.5,
                                                double(box.lo[2] + z) + 0.5};
@@ -1066,6 +1067,10 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                                 for (double v : centre) out.points.push_back(float(v));
                                 continue;
                             }
+                            // Away from the fans a settled state, n + kZero, already says what
+                            // the inside bits below read from it: inside iff n != 0.
+                            if (!fans_known) know_fans();
+                            if (!near_fans) continue;
                             // Near the fans the state is rewritten to say inside (kZero + 1) or
                             // not, or not yet (kZero: decided below, from w_fans summed on the
                             // device).
