@@ -536,6 +536,8 @@ constexpr int kFinestTileLevel = 3;
 constexpr float kTileNodeTolerance = 1e-2f;
 // Slack for float rounding in a tile's w (a few hundred terms of relative error 2^-24 or so).
 constexpr double kTileRounding = 1e-3;
+// Rounds of seeds for the pockets the flood cannot reach (phase 3); few pockets need a second.
+constexpr int kSeedRounds = 4;
 
 struct Tile {
     int64_t lo[3], hi[3];  // box-relative voxel range, inclusive
@@ -611,7 +613,8 @@ WeldedEdges weld_edges(const Mesh& mesh) {
 //    centre; if the fans' w is certainly below 1/2 over the tile, n decides it (inside iff
 //    n != 0); any other tile splits;
 // 3. the voxels of undecided tiles take n from a neighbour across the segment between their
-//    centres when no triangle of the mesh or a fan meets it (a flood from the decided tiles);
+//    centres when no triangle of the mesh or a fan meets it (a flood from the decided tiles,
+//    then from seeds in the pockets it cannot reach, each seed's n from one tree evaluation);
 //    each decides |n + w_fans| > 1/2, with w_fans in double where its bound does not settle it;
 // 4. the voxels still without n take |w| > 1/2 at their centres from the tree;
 // 5. the inside bits into bricks.
@@ -698,6 +701,22 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                 }
                 pending.push_back(tile);
             }
+    // n + kZero at a point from the tree's w there and its error bound, where n is certain,
+    // else kUnknown. The fans' w is estimated, unless the estimate's error leaves open what their
+    // exact sum would decide: then it is that sum (so the decision is always the exact sum's).
+    auto certain_state = [&](float w_tree, float w_error, const Vec3d& centre) {
+        const double spread = double(w_error) + kTileRounding;
+        BoundaryFans::Estimate fan{0, 0};
+        if (!fans.triangles.empty()) fan = fans.winding_estimate(centre);
+        double cycle = double(w_tree) - fan.value, whole = std::round(cycle);
+        bool certain = std::fabs(cycle - whole) + spread + fan.error < 0.5;
+        if (!certain && std::fabs(cycle - whole) + spread - fan.error < 0.5) {
+            cycle = double(w_tree) - fans.winding(centre);
+            whole = std::round(cycle);
+            certain = std::fabs(cycle - whole) + spread < 0.5;
+        }
+        return certain && std::fabs(whole) < kZero ? uint8_t(int(whole) + kZero) : kUnknown;
+    };
     FilledLaterVector<float> points;
     std::vector<float> w, error;
     for (int level = kTopLevel; level >= kFinestTileLevel; --level) {
@@ -733,24 +752,11 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         tbb::parallel_for(size_t(0), evaluated.size(), [&](size_t i) {
             const Tile& tile = evaluated[i];
             const Vec3d centre = centre_of(tile);
-            const double reach = tile_reach(tile);
-            // n from the fans' estimated w, unless its error leaves open what their exact sum
-            // would decide: then from that sum (so the decision is always the exact sum's).
-            const double spread = double(error[i]) + kTileRounding;
-            BoundaryFans::Estimate fan{0, 0};
-            if (!fans.triangles.empty()) fan = fans.winding_estimate(centre);
-            double cycle = double(w[i]) - fan.value, whole = std::round(cycle);
-            bool certain = std::fabs(cycle - whole) + spread + fan.error < 0.5;
-            if (!certain && std::fabs(cycle - whole) + spread - fan.error < 0.5) {
-                cycle = double(w[i]) - fans.winding(centre);
-                whole = std::round(cycle);
-                certain = std::fabs(cycle - whole) + spread < 0.5;
-            }
-            certain = certain && std::fabs(whole) < kZero;
-            tile_state[i] =
-                !certain || (!fans.triangles.empty() && !(fans.bound(centre, reach) < 0.5))
-                    ? kUnknown
-                    : uint8_t(int(whole) + kZero);
+            const uint8_t n_state = certain_state(w[i], error[i], centre);
+            tile_state[i] = n_state == kUnknown || (!fans.triangles.empty() &&
+                                                    !(fans.bound(centre, tile_reach(tile)) < 0.5))
+                                ? kUnknown
+                                : n_state;
         });
         // Decided tiles fill their own voxels' states (disjoint, so in parallel); the others split.
         tbb::parallel_for(size_t(0), evaluated.size(), [&](size_t i) {
@@ -963,49 +969,100 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                     }
         }
     });
-    for (auto frontier = store(lists); !frontier.empty(); frontier = store(lists)) {
-        // What a round takes but cannot settle may settle in a later one.
-        tbb::enumerable_thread_specific<std::vector<uint64_t>> unsettled_lists;
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 64), [&](const auto& r) {
-            auto& out = lists.local();
-            auto& unsettled = unsettled_lists.local();
-            auto visit_neighbours = [&](const int64_t* k) {
-                const uint64_t ki = inside.index(k[0], k[1], k[2]);
-                for (int axis = 0; axis < 3; ++axis)
-                    for (int dir = -1; dir <= 1; dir += 2) {
-                        if (k[axis] + dir < 0 || k[axis] + dir >= n[axis]) continue;
-                        const uint64_t j = dir > 0 ? ki + step[axis] : ki - step[axis];
-                        if (state[j] != kUnknown) continue;
-                        int64_t jv[3] = {k[0], k[1], k[2]};
-                        jv[axis] += dir;
-                        if (surface.bits.get(j)) {
-                            if (take(j) && !try_settle_voxel(out, j, jv)) unsettled.push_back(j);
-                            continue;
+    auto flood = [&](FilledLaterVector<Settled> frontier) {
+        for (; !frontier.empty(); frontier = store(lists)) {
+            // What a round takes but cannot settle may settle in a later one.
+            tbb::enumerable_thread_specific<std::vector<uint64_t>> unsettled_lists;
+            tbb::parallel_for(
+                tbb::blocked_range<size_t>(0, frontier.size(), 64), [&](const auto& r) {
+                    auto& out = lists.local();
+                    auto& unsettled = unsettled_lists.local();
+                    auto visit_neighbours = [&](const int64_t* k) {
+                        const uint64_t ki = inside.index(k[0], k[1], k[2]);
+                        for (int axis = 0; axis < 3; ++axis)
+                            for (int dir = -1; dir <= 1; dir += 2) {
+                                if (k[axis] + dir < 0 || k[axis] + dir >= n[axis]) continue;
+                                const uint64_t j = dir > 0 ? ki + step[axis] : ki - step[axis];
+                                if (state[j] != kUnknown) continue;
+                                int64_t jv[3] = {k[0], k[1], k[2]};
+                                jv[axis] += dir;
+                                if (surface.bits.get(j)) {
+                                    if (take(j) && !try_settle_voxel(out, j, jv))
+                                        unsettled.push_back(j);
+                                    continue;
+                                }
+                                // A region is taken at its first voxel.
+                                int64_t lo[3];
+                                const uint64_t region = region_of(jv, lo);
+                                const auto first = first_voxel(lo, region);
+                                const uint64_t key = inside.index(first[0], first[1], first[2]);
+                                if (take(key) && !try_settle_region(out, lo, region))
+                                    unsettled.push_back(key);
+                            }
+                        return true;
+                    };
+                    for (size_t f = r.begin(); f != r.end(); ++f) {
+                        const int64_t k[3] = {frontier[f].voxel[0], frontier[f].voxel[1],
+                                              frontier[f].voxel[2]};
+                        if (frontier[f].region) {
+                            int64_t lo[3];
+                            for_each_region_voxel(lo, region_of(k, lo), visit_neighbours);
+                        } else {
+                            visit_neighbours(k);
                         }
-                        // A region is taken at its first voxel.
-                        int64_t lo[3];
-                        const uint64_t region = region_of(jv, lo);
-                        const auto first = first_voxel(lo, region);
-                        const uint64_t key = inside.index(first[0], first[1], first[2]);
-                        if (take(key) && !try_settle_region(out, lo, region))
-                            unsettled.push_back(key);
                     }
-                return true;
-            };
-            for (size_t f = r.begin(); f != r.end(); ++f) {
-                const int64_t k[3] = {frontier[f].voxel[0], frontier[f].voxel[1],
-                                      frontier[f].voxel[2]};
-                if (frontier[f].region) {
-                    int64_t lo[3];
-                    for_each_region_voxel(lo, region_of(k, lo), visit_neighbours);
-                } else {
-                    visit_neighbours(k);
-                }
+                });
+            for (const auto& list : unsettled_lists)
+                for (const uint64_t key : list)
+                    queued[key >> 6].fetch_and(~(uint64_t(1) << (key & 63)),
+                                               std::memory_order_relaxed);
+        }
+    };
+    flood(store(lists));
+    // Pockets the flood cannot reach from the decided tiles (the inside of a building whose walls
+    // leave no whole tile clear of the surface, at a coarse grid) would leave every voxel in them
+    // to a tree evaluation of its own. So, in rounds while it settles any: each pending tile's
+    // first region still without n is a seed, which takes n from one tree evaluation at its
+    // first voxel where n is certain there (as a tile's), and the flood goes on from the seeds.
+    // Seeds and rounds do not depend on the threads.
+    for (int round = 0; round < kSeedRounds; ++round) {
+        auto centre_of_voxel = [&](const std::array<int64_t, 3>& v) {
+            return Vec3d{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
+                         double(box.lo[2] + v[2]) + 0.5};
+        };
+        // A seed near the fans would flood n into voxels that each need the fans' sums: those
+        // are left to their own evaluations, as before seeds.
+        constexpr std::array<int64_t, 3> kNone{-1, -1, -1};
+        std::vector<std::array<int64_t, 3>> seeds(pending.size(), kNone);
+        tbb::parallel_for(size_t(0), pending.size(), [&](size_t p) {
+            const uint64_t t = tile_number(pending[p].lo);
+            for (uint32_t region = region_first[t]; region < region_first[t + 1]; ++region) {
+                const auto first = first_voxel(pending[p].lo, region_mask[region]);
+                if (state[inside.index(first[0], first[1], first[2])] != kUnknown) continue;
+                if (fans.triangles.empty() || fans.below_half_at(centre_of_voxel(first)))
+                    seeds[p] = first;
+                return;
             }
         });
-        for (const auto& list : unsettled_lists)
-            for (const uint64_t key : list)
-                queued[key >> 6].fetch_and(~(uint64_t(1) << (key & 63)), std::memory_order_relaxed);
+        seeds.erase(std::remove(seeds.begin(), seeds.end(), kNone), seeds.end());
+        if (seeds.empty()) break;
+        points.clear();
+        for (const auto& seed : seeds)
+            for (double c : centre_of_voxel(seed)) points.push_back(float(c));
+        evaluator.evaluate(points, OVS_WINDING_FAR, kTileNodeTolerance, w, error);
+        std::vector<uint8_t> seed_state(seeds.size());
+        tbb::parallel_for(size_t(0), seeds.size(), [&](size_t i) {
+            seed_state[i] = certain_state(w[i], error[i], centre_of_voxel(seeds[i]));
+        });
+        for (size_t i = 0; i < seeds.size(); ++i)
+            if (seed_state[i] != kUnknown)
+                lists.local().push_back(
+                    {{int32_t(seeds[i][0]), int32_t(seeds[i][1]), int32_t(seeds[i][2])},
+                     seed_state[i],
+                     true});
+        auto frontier = store(lists);
+        if (frontier.empty()) break;
+        flood(std::move(frontier));
     }
     // Each pending tile's voxels: settled ones inside or not (near a fan, from the fans' winding
     // at the tile's centre and its spread, or later on the device), unsettled ones to evaluate.

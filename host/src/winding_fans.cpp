@@ -92,6 +92,28 @@ double BoundaryFans::gradient_bound(const Vec3d& p, double reach) const {
         });
 }
 
+bool BoundaryFans::below_half_at(const Vec3d& p) const {
+    const double limit = 0.5 * 4 * M_PI;
+    double sum = 0;
+    for (size_t i = 0; i < nodes.size() && sum < limit;) {
+        const Node& c = nodes[i];
+        const double gap = distance(p, c.centre) - c.radius;
+        if (gap > c.radius) {
+            sum += c.area / (gap * gap);
+            i = c.skip;
+        } else if (c.leaf) {
+            for (size_t t = c.first; t < c.first + c.count; ++t) {
+                const double d = least_distance(t, p) * (1 - 1e-9);
+                sum += weight[t] * (d > 0 ? std::min(2 * M_PI, area_of(t) / (d * d)) : 2 * M_PI);
+            }
+            i = c.skip;
+        } else {
+            ++i;
+        }
+    }
+    return sum < limit;
+}
+
 double BoundaryFans::least_distance(size_t t, const Vec3d& p) const {
     const auto& v = triangles[t];
     const Vec3d a{v[0], v[1], v[2]}, b{v[3], v[4], v[5]}, c{v[6], v[7], v[8]};

@@ -66,6 +66,13 @@ struct BoundaryFans {
     // voxel near it undecided. A near triangle's d is its least distance, not its ball's.
     double gradient_bound(const Vec3d& p, double reach) const;
 
+    // Whether |w of the fans| at p is certainly below 1/2 by a sum like bound(p, 0)'s, taken
+    // over the tree: a node farther off than its radius counts as its weighted area over its gap
+    // squared (none of its triangles is nearer), so it can say "not below" where bound would
+    // not, never "below" where bound would not. Stops once the sum passes 1/2: cheap where fans
+    // are many and near.
+    bool below_half_at(const Vec3d& p) const;
+
     // The least distance from p to fan triangle t, in double.
     double least_distance(size_t t, const Vec3d& p) const;
 
