@@ -1025,11 +1025,11 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     // first region still without n is a seed, which takes n from one tree evaluation at its
     // first voxel where n is certain there (as a tile's), and the flood goes on from the seeds.
     // Seeds and rounds do not depend on the threads.
+    auto centre_of_voxel = [&](const std::array<int64_t, 3>& v) {
+        return Vec3d{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
+                     double(box.lo[2] + v[2]) + 0.5};
+    };
     for (int round = 0; round < kSeedRounds; ++round) {
-        auto centre_of_voxel = [&](const std::array<int64_t, 3>& v) {
-            return Vec3d{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
-                         double(box.lo[2] + v[2]) + 0.5};
-        };
         // A seed near the fans would flood n into voxels that each need the fans' sums: those
         // are left to their own evaluations, as before seeds.
         constexpr std::array<int64_t, 3> kNone{-1, -1, -1};
