@@ -31,8 +31,13 @@ __kernel __attribute__((reqd_work_group_size(64, 1, 1))) void band_leaf_samples(
     int8 i = (int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     float8 best = (float8)(band2);
     for (uint p = slot_first_pair[slot]; p < slot_first_pair[slot + 1]; ++p) {
-        OvSdfTriangle t = triangles[pair_triangle[p]];
-        if (j < t.lo[1] || j > t.hi[1] || k < t.lo[2] || k > t.hi[2]) continue;
+        // Most of a leaf's triangles miss most of its rows (three quarters of the pairs on a mesh
+        // of many small triangles): their voxel ranges are read alone first, the whole triangle
+        // only for the rows they reach.
+        __global const OvSdfTriangle* listed = triangles + pair_triangle[p];
+        if (j < listed->lo[1] || j > listed->hi[1] || k < listed->lo[2] || k > listed->hi[2])
+            continue;
+        OvSdfTriangle t = *listed;
         if (!ov_row_near(&t, i0, j, k, band)) continue;
         float8 d2 = ov_row_distance2(&t, i0, j, k);
         best = select(best, fmin(best, d2), (i >= t.lo[0]) & (i <= t.hi[0]));
