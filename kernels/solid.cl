@@ -54,8 +54,7 @@ __kernel void parity_blocks(__global const uint* bits, uint slots, int brick_siz
     __global const uint* columns =
         bits + (size_t)slot * words * layer + (size_t)gy * 4 * brick_size + (size_t)gx * 4;
     // Row y's 4 columns as the lanes of carry[y]: each one's parity below the current word (0 or
-    // 1). Lane-wise, the prefix below is ovs_prefix_xor; a row's 4 words are neighbours, read as
-    // one vector.
+    // 1). A row's 4 words are neighbours, read as one vector.
     uint4 carry[4] = {(uint4)(0u), (uint4)(0u), (uint4)(0u), (uint4)(0u)};
     // The column's bricks may reach above its last word: those block rows are written clear.
     for (int word = 0; 8 * word < rows; ++word) {
@@ -67,12 +66,7 @@ __kernel void parity_blocks(__global const uint* bits, uint slots, int brick_siz
             uint4 parity = valid
                                ? vload4(0, columns + (size_t)word * layer + (size_t)y * brick_size)
                                : (uint4)(0u);
-            parity ^= parity << 1;
-            parity ^= parity << 2;
-            parity ^= parity << 4;
-            parity ^= parity << 8;
-            parity ^= parity << 16;
-            parity ^= (uint4)(0u) - carry[y];  // complemented where the parity below is odd
+            parity = ovs_prefix_xor4(parity, carry[y]);
             carry[y] = parity >> 31;
             parity &= (uint4)(valid);
             column_bits[4 * y] = parity.s0;

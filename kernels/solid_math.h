@@ -322,15 +322,22 @@ OVS_FN int ovs_parity_flip(const OvParityTriangle* t, int i, int j, int nz) {
 }
 
 // Inclusive prefix XOR of the 32 bits of `word` (bit 0 first), continuing the parity `carry`
-// (0 or 1) of the bits below it.
-OVS_FN unsigned int ovs_prefix_xor(unsigned int word, unsigned int carry) {
-    word ^= word << 1;
-    word ^= word << 2;
-    word ^= word << 4;
-    word ^= word << 8;
-    word ^= word << 16;
-    return carry ? ~word : word;
-}
+// (0 or 1) of the bits below it: complemented where that parity is odd. Written once for the
+// reference's single words (ovs_prefix_xor) and the kernel's rows of four (ovs_prefix_xor4, lane
+// by lane the same steps).
+#define OVS_PREFIX_XOR(NAME, WORD)            \
+    OVS_FN WORD NAME(WORD word, WORD carry) { \
+        word ^= word << 1;                    \
+        word ^= word << 2;                    \
+        word ^= word << 4;                    \
+        word ^= word << 8;                    \
+        word ^= word << 16;                   \
+        return word ^ ((WORD)(0u) - carry);   \
+    }
+OVS_PREFIX_XOR(ovs_prefix_xor, unsigned int)
+#ifdef __OPENCL_VERSION__
+OVS_PREFIX_XOR(ovs_prefix_xor4, uint4)
+#endif
 
 // A node of the winding-number tree (after Barill et al. 2018). Nodes are in depth-first order:
 // an inner node's first child follows it and `skip` is the index just past its subtree, so the
