@@ -31,13 +31,22 @@ double solid_angle_double(const double* a_, const double* b_, const double* c_, 
     return 2 * std::atan2(det, den);
 }
 
+// A solid angle's bound from its triangle's area and least distance d: at most area / d^2, and
+// at most 2 pi (also where d is not positive).
+double solid_angle_bound(double area, double d) {
+    return d > 0 ? std::min(2 * M_PI, area / (d * d)) : 2 * M_PI;
+}
+
 }  // namespace
+
+double BoundaryFans::weighted_solid_angle(size_t t, const Vec3d& p) const {
+    return weight[t] *
+           solid_angle_double(&triangles[t][0], &triangles[t][3], &triangles[t][6], p.data());
+}
 
 double BoundaryFans::winding(const Vec3d& p) const {
     double sum = 0;
-    for (size_t t = 0; t < triangles.size(); ++t)
-        sum += weight[t] *
-               solid_angle_double(&triangles[t][0], &triangles[t][3], &triangles[t][6], p.data());
+    for (size_t t = 0; t < triangles.size(); ++t) sum += weighted_solid_angle(t, p);
     return sum / (4 * M_PI);
 }
 
@@ -64,9 +73,7 @@ BoundaryFans::Estimate BoundaryFans::winding_estimate(const Vec3d& p) const {
             continue;
         }
         if (c.leaf)
-            for (size_t t = c.first; t < c.first + c.count; ++t)
-                sum += weight[t] * solid_angle_double(&triangles[t][0], &triangles[t][3],
-                                                      &triangles[t][6], p.data());
+            for (size_t t = c.first; t < c.first + c.count; ++t) sum += weighted_solid_angle(t, p);
         ++i;  // a leaf's next node is past it; an inner node's is its first child
     }
     // Plus the rounding of this sum and of winding(p)'s, generously: a sum of n terms in double
@@ -78,10 +85,7 @@ BoundaryFans::Estimate BoundaryFans::winding_estimate(const Vec3d& p) const {
 
 double BoundaryFans::bound(const Vec3d& p, double reach) const {
     return sum_over_ball(
-        p, reach, [](double area, double gap) { return area / (gap * gap); },
-        [](double area, double d) {
-            return d > 0 ? std::min(2 * M_PI, area / (d * d)) : 2 * M_PI;
-        });
+        p, reach, [](double area, double gap) { return area / (gap * gap); }, solid_angle_bound);
 }
 
 double BoundaryFans::gradient_bound(const Vec3d& p, double reach) const {
@@ -102,10 +106,8 @@ bool BoundaryFans::below_half_at(const Vec3d& p) const {
             sum += c.area / (gap * gap);
             i = c.skip;
         } else if (c.leaf) {
-            for (size_t t = c.first; t < c.first + c.count; ++t) {
-                const double d = least_distance(t, p) * (1 - 1e-9);
-                sum += weight[t] * (d > 0 ? std::min(2 * M_PI, area_of(t) / (d * d)) : 2 * M_PI);
-            }
+            for (size_t t = c.first; t < c.first + c.count; ++t)
+                sum += weight[t] * solid_angle_bound(area_of(t), least_distance(t, p) * (1 - 1e-9));
             i = c.skip;
         } else {
             ++i;
@@ -144,13 +146,17 @@ double BoundaryFans::least_distance(size_t t, const Vec3d& p) const {
     return std::min({segment(a, b), segment(b, c), segment(c, a)});
 }
 
-double BoundaryFans::area_of(size_t t) const {
+Vec3d BoundaryFans::area_vector(size_t t) const {
     const auto& v = triangles[t];
     const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
     const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
-    const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                         e1[0] * e2[1] - e1[1] * e2[0]};
-    return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) / 2;
+    return {(e1[1] * e2[2] - e1[2] * e2[1]) / 2, (e1[2] * e2[0] - e1[0] * e2[2]) / 2,
+            (e1[0] * e2[1] - e1[1] * e2[0]) / 2};
+}
+
+double BoundaryFans::area_of(size_t t) const {
+    const Vec3d n = area_vector(t);
+    return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
 }
 
 double BoundaryFans::distance(const Vec3d& p, const Vec3d& q) {
@@ -162,18 +168,20 @@ namespace {
 
 constexpr size_t kFanTrianglesPerLeaf = 16;
 
+// Coordinate k of fan triangle t's centroid.
+double centroid(const BoundaryFans& fans, size_t t, int k) {
+    const auto& v = fans.triangles[t];
+    return (v[k] + v[3 + k] + v[6 + k]) / 3;
+}
+
 // A node over fan triangles order[lo .. hi): the mean of their centroids, the ball around it
 // holding their vertices, their weighted area, area vectors and moments.
 BoundaryFans::Node node_over(const BoundaryFans& fans, const std::vector<size_t>& order, size_t lo,
                              size_t hi) {
-    auto centroid = [&](size_t t, int k) {
-        const auto& v = fans.triangles[t];
-        return (v[k] + v[3 + k] + v[6 + k]) / 3;
-    };
     BoundaryFans::Node node{
         {0, 0, 0}, 0, 0, lo, hi - lo, {0, 0, 0}, {}, 0, hi - lo <= kFanTrianglesPerLeaf};
     for (size_t i = lo; i < hi; ++i)
-        for (int k = 0; k < 3; ++k) node.centre[k] += centroid(order[i], k) / double(hi - lo);
+        for (int k = 0; k < 3; ++k) node.centre[k] += centroid(fans, order[i], k) / double(hi - lo);
     for (size_t i = lo; i < hi; ++i) {
         const auto& v = fans.triangles[order[i]];
         const double weight = fans.weight[order[i]];
@@ -182,16 +190,12 @@ BoundaryFans::Node node_over(const BoundaryFans& fans, const std::vector<size_t>
                 node.radius,
                 BoundaryFans::distance(node.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
         node.area += weight * fans.area_of(order[i]);
-        // The area vector (b - a) x (c - a) / 2, the orientation of the solid angle's sign.
-        const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
-        const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
-        const double n[3] = {(e1[1] * e2[2] - e1[2] * e2[1]) / 2,
-                             (e1[2] * e2[0] - e1[0] * e2[2]) / 2,
-                             (e1[0] * e2[1] - e1[1] * e2[0]) / 2};
+        const Vec3d n = fans.area_vector(order[i]);
         for (int a = 0; a < 3; ++a) {
             node.area_normal[a] += weight * n[a];
             for (int b = 0; b < 3; ++b)
-                node.moment[3 * a + b] += weight * n[a] * (centroid(order[i], b) - node.centre[b]);
+                node.moment[3 * a + b] +=
+                    weight * n[a] * (centroid(fans, order[i], b) - node.centre[b]);
         }
     }
     return node;
@@ -203,23 +207,20 @@ void build_nodes(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size
     const size_t index = fans.nodes.size();
     fans.nodes.push_back(node_over(fans, order, lo, hi));
     if (!fans.nodes[index].leaf) {
-        auto centroid = [&](size_t t, int k) {
-            const auto& v = fans.triangles[t];
-            return (v[k] + v[3 + k] + v[6 + k]) / 3;
-        };
         double extent[3];
         for (int k = 0; k < 3; ++k) {
             double mn = INFINITY, mx = -INFINITY;
             for (size_t i = lo; i < hi; ++i) {
-                mn = std::min(mn, centroid(order[i], k));
-                mx = std::max(mx, centroid(order[i], k));
+                mn = std::min(mn, centroid(fans, order[i], k));
+                mx = std::max(mx, centroid(fans, order[i], k));
             }
             extent[k] = mx - mn;
         }
         const int axis = int(std::max_element(extent, extent + 3) - extent);
         const size_t mid = lo + (hi - lo) / 2;
-        std::nth_element(order.begin() + lo, order.begin() + mid, order.begin() + hi,
-                         [&](size_t x, size_t y) { return centroid(x, axis) < centroid(y, axis); });
+        std::nth_element(
+            order.begin() + lo, order.begin() + mid, order.begin() + hi,
+            [&](size_t x, size_t y) { return centroid(fans, x, axis) < centroid(fans, y, axis); });
         build_nodes(fans, order, lo, mid);
         build_nodes(fans, order, mid, hi);
     }

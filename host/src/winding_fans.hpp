@@ -76,11 +76,16 @@ struct BoundaryFans {
     // The least distance from p to fan triangle t, in double.
     double least_distance(size_t t, const Vec3d& p) const;
 
-    // Area of fan triangle t; the distance between two points.
+    // Fan triangle t's area vector (b - a) x (c - a) / 2 (its direction gives the solid angle's
+    // sign) and its area; the distance between two points.
+    Vec3d area_vector(size_t t) const;
     double area_of(size_t t) const;
     static double distance(const Vec3d& p, const Vec3d& q);
 
   private:
+    // Fan triangle t's solid angle seen from p, times its weight.
+    double weighted_solid_angle(size_t t, const Vec3d& p) const;
+
     // The sum over the fans of a term of area and distance from the ball of radius `reach`
     // around p, over 4 pi, leaf by leaf: a leaf whose ball is farther off than its radius as one
     // term, far(its weighted area, the gap between the balls), which must bound the sum of its
