@@ -668,6 +668,11 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
             c[k] = double(box.lo[k]) + (tile.lo[k] + tile.hi[k]) / 2.0 + 0.5;
         return c;
     };
+    // The centre of the box-relative voxel v.
+    auto centre_of_voxel = [&](const int64_t* v) {
+        return Vec3d{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
+                     double(box.lo[2] + v[2]) + 0.5};
+    };
 
     // The farthest a voxel centre of the tile lies from the tile's centre.
     auto tile_reach = [](const Tile& tile) {
@@ -778,8 +783,7 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     // Whether no triangle (mesh or fan) meets the segment from the centre of voxel i (at v) one
     // step up `axis`: any that does touches one of the two voxels.
     auto clear = [&](uint64_t i, const int64_t* v, int axis) {
-        const Vec3d p{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
-                      double(box.lo[2] + v[2]) + 0.5};
+        const Vec3d p = centre_of_voxel(v);
         for (uint64_t end : {i, i + step[axis]}) {
             const auto [first, last] = surface.pairs_of(end);
             for (size_t pair = first; pair < last; ++pair)
@@ -1025,10 +1029,6 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
     // first region still without n is a seed, which takes n from one tree evaluation at its
     // first voxel where n is certain there (as a tile's), and the flood goes on from the seeds.
     // Seeds and rounds do not depend on the threads.
-    auto centre_of_voxel = [&](const std::array<int64_t, 3>& v) {
-        return Vec3d{double(box.lo[0] + v[0]) + 0.5, double(box.lo[1] + v[1]) + 0.5,
-                     double(box.lo[2] + v[2]) + 0.5};
-    };
     for (int round = 0; round < kSeedRounds; ++round) {
         // A seed near the fans would flood n into voxels that each need the fans' sums: those
         // are left to their own evaluations, as before seeds.
@@ -1039,7 +1039,7 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
             for (uint32_t region = region_first[t]; region < region_first[t + 1]; ++region) {
                 const auto first = first_voxel(pending[p].lo, region_mask[region]);
                 if (state[inside.index(first[0], first[1], first[2])] != kUnknown) continue;
-                if (fans.triangles.empty() || fans.below_half_at(centre_of_voxel(first)))
+                if (fans.triangles.empty() || fans.below_half_at(centre_of_voxel(first.data())))
                     seeds[p] = first;
                 return;
             }
@@ -1048,11 +1048,11 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
         if (seeds.empty()) break;
         points.clear();
         for (const auto& seed : seeds)
-            for (double c : centre_of_voxel(seed)) points.push_back(float(c));
+            for (double c : centre_of_voxel(seed.data())) points.push_back(float(c));
         evaluator.evaluate(points, OVS_WINDING_FAR, kTileNodeTolerance, w, error);
         std::vector<uint8_t> seed_state(seeds.size());
         tbb::parallel_for(size_t(0), seeds.size(), [&](size_t i) {
-            seed_state[i] = certain_state(w[i], error[i], centre_of_voxel(seeds[i]));
+            seed_state[i] = certain_state(w[i], error[i], centre_of_voxel(seeds[i].data()));
         });
         for (size_t i = 0; i < seeds.size(); ++i)
             if (seed_state[i] != kUnknown)
@@ -1116,9 +1116,8 @@ void winding_device(Device::Impl& cl, const Mesh& mesh, SparseVoxels& result,
                     for (int64_t y = tile.lo[1]; y <= tile.hi[1]; ++y)
                         for (int64_t x = tile.lo[0]; x <= tile.hi[0]; ++x) {
                             const uint64_t i = inside.index(x, y, z);
-                            const Vec3d centre{double(box.lo[0] + x) + 0.5,
-                                               double(box.lo[1] + y) + 0.5,
-                                               double(box.lo[2] + z) + 0.5};
+                            const int64_t v[3] = {x, y, z};
+                            const Vec3d centre = centre_of_voxel(v);
                             if (state[i] == kUnknown) {
                                 out.unsettled.push_back(i);
                                 for (double v : centre) out.points.push_back(float(v));
