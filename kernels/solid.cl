@@ -108,61 +108,16 @@ __kernel void parity_blocks(__global const uint* bits, uint slots, int brick_siz
     }
 }
 
-// Signed solid angle of triangle (a, b, c) seen from the origin (Van Oosterom & Strackee 1983):
-// tan(omega / 2) = det[a b c] / (|a||b||c| + (a.b)|c| + (b.c)|a| + (c.a)|b|). Positive when the
-// origin lies behind the triangle (opposite its normal (b - a) x (c - a)), so a closed,
-// outward-facing mesh sums to 4 pi inside.
-static float solid_angle(float3 a, float3 b, float3 c) {
-    float det = dot(a, cross(b, c));
-    float la = length(a), lb = length(b), lc = length(c);
-    float den = la * lb * lc + dot(a, b) * lc + dot(b, c) * la + dot(c, a) * lb;
-    return 2.0f * ovs_atan2(det, den);
-}
-
 // Generalized winding number w at points (x, y, z in voxel units relative to the grid origin),
-// walking the winding tree: subtrees farther than far_ratio radii count as their second-order
-// expansion (solid_math.h), near leaves triangle by triangle (vertices in leaf order). Writes w
-// and a bound on the error of the expansions (not counting float rounding); far_ratio = INFINITY
-// sums every triangle exactly.
+// and the bound on its expansions' error: ovs_winding_at (solid_math.h) at each.
 __kernel void winding_points(__global const float* vertices, __global const OvWindingNode* nodes,
                              uint node_count, __global const float* points, uint item_base,
                              uint item_end, float far_ratio, float node_tolerance,
                              __global float* w, __global float* error) {
     uint item = item_base + (uint)get_global_id(0);
     if (item >= item_end) return;
-    float3 p = vload3(item, points);
-    float sum = 0.0f, bound = 0.0f;
-    for (uint i = 0; i < node_count;) {
-        __global const OvWindingNode* n = nodes + i;
-        float3 d = (float3)(n->centre[0], n->centre[1], n->centre[2]) - p;
-        float dist2 = dot(d, d);
-        float reach = far_ratio * n->radius;
-        float gap = sqrt(dist2) - n->radius;
-        float node_bound = 3.0f * n->abs_area * n->radius * n->radius / (gap * gap * gap * gap);
-        if (dist2 > reach * reach && gap > 0.0f && node_bound <= node_tolerance) {
-            float3 an = (float3)(n->area_normal[0], n->area_normal[1], n->area_normal[2]);
-            float3 md = (float3)(n->moment[0] * d.x + n->moment[1] * d.y + n->moment[2] * d.z,
-                                 n->moment[3] * d.x + n->moment[4] * d.y + n->moment[5] * d.z,
-                                 n->moment[6] * d.x + n->moment[7] * d.y + n->moment[8] * d.z);
-            float trace = n->moment[0] + n->moment[4] + n->moment[8];
-            float dist = sqrt(dist2);
-            float inv3 = 1.0f / (dist2 * dist);
-            sum += (dot(an, d) + trace) * inv3 - 3.0f * dot(d, md) * inv3 / dist2;
-            bound += node_bound;
-            i = n->skip;
-        } else if (n->count) {
-            for (uint t = n->first; t < n->first + n->count; ++t) {
-                __global const float* v = vertices + 9 * (size_t)t;
-                float3 a = (float3)(v[0], v[1], v[2]) - p;
-                float3 b = (float3)(v[3], v[4], v[5]) - p;
-                float3 c = (float3)(v[6], v[7], v[8]) - p;
-                sum += solid_angle(a, b, c);
-            }
-            i = n->skip;
-        } else {
-            ++i;
-        }
-    }
-    w[item] = sum / (4.0f * M_PI_F);
-    error[item] = bound / (4.0f * M_PI_F);
+    float item_error;
+    w[item] = ovs_winding_at(vertices, nodes, node_count, vload3(item, points), far_ratio,
+                             node_tolerance, &item_error);
+    error[item] = item_error;
 }

@@ -32,6 +32,8 @@ typedef ulong ovs_ulong;
 #define OVS_FMIN fmin
 #define OVS_SIGNBIT signbit
 #define OVS_COPYSIGN copysign
+#define OVS_SQRT sqrt
+#define OVS_GLOBAL __global
 #else
 #include <cmath>
 #include <cstdint>
@@ -41,6 +43,8 @@ typedef ulong ovs_ulong;
 #define OVS_FMIN std::fmin
 #define OVS_SIGNBIT std::signbit
 #define OVS_COPYSIGN std::copysign
+#define OVS_SQRT std::sqrt
+#define OVS_GLOBAL
 namespace oclvox::detail {
 typedef int64_t ovs_long;
 typedef uint64_t ovs_ulong;
@@ -389,6 +393,98 @@ OVS_FN float ovs_atan2(float y, float x) {
     r = ay > ax ? 1.57079637f - r : r;         // pi / 2 in float
     r = OVS_SIGNBIT(x) ? 3.14159274f - r : r;  // pi in float
     return OVS_COPYSIGN(r, y);
+}
+
+// Winding number: three-component float vectors, OpenCL's float3 in a kernel (whose arithmetic
+// a CPU device runs as vector instructions) and a struct on the host, with - and * component by
+// component and dot and cross products written out, in the same order on both sides (OpenCL's
+// own dot, cross and length may fuse or reorder).
+#ifdef __OPENCL_VERSION__
+typedef float3 OvFloat3;
+#define OVS_FLOAT3(x, y, z) ((float3)((x), (y), (z)))
+#else
+struct OvFloat3 {
+    float x, y, z;
+};
+OVS_FN OvFloat3 operator-(OvFloat3 a, OvFloat3 b) {
+    return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+OVS_FN OvFloat3 operator*(OvFloat3 a, OvFloat3 b) {
+    return {a.x * b.x, a.y * b.y, a.z * b.z};
+}
+#define OVS_FLOAT3(x, y, z) (OvFloat3{(x), (y), (z)})
+#endif
+OVS_FN float ovs_dot3(OvFloat3 a, OvFloat3 b) {
+    const OvFloat3 t = a * b;
+    return t.x + t.y + t.z;
+}
+OVS_FN OvFloat3 ovs_cross3(OvFloat3 a, OvFloat3 b) {
+    return OVS_FLOAT3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+
+// Winding number: the signed solid angle of triangle (a, b, c) seen from the origin (Van
+// Oosterom & Strackee 1983): tan(omega / 2) = det[a b c] / (|a||b||c| + (a.b)|c| + (b.c)|a| +
+// (c.a)|b|). Positive when the origin lies behind the triangle (opposite its normal
+// (b - a) x (c - a)), so a closed, outward-facing mesh sums to 4 pi inside.
+OVS_FN float ovs_solid_angle(OvFloat3 a, OvFloat3 b, OvFloat3 c) {
+    const float det = ovs_dot3(a, ovs_cross3(b, c));
+    const float la = OVS_SQRT(ovs_dot3(a, a)), lb = OVS_SQRT(ovs_dot3(b, b)),
+                lc = OVS_SQRT(ovs_dot3(c, c));
+    const float den =
+        la * lb * lc + ovs_dot3(a, b) * lc + ovs_dot3(b, c) * la + ovs_dot3(c, a) * lb;
+    return 2.0f * ovs_atan2(det, den);
+}
+
+// Generalized winding number w at point p (voxel units relative to the grid origin), walking the
+// winding tree: subtrees farther than far_ratio radii whose remainder bound is at most
+// node_tolerance count as their second-order expansion, near leaves triangle by triangle
+// (vertices in leaf order, 9 floats each). Sets *error to the sum of the accepted expansions'
+// remainder bounds over 4 pi (float rounding not counted); far_ratio = INFINITY sums every
+// triangle exactly.
+//
+// The same bits on the host and on every device whose division and sqrt are correctly rounded:
+// single-precision + - * / and sqrt in the order written, FP_CONTRACT OFF (the host's division
+// and sqrt are IEEE; a device is built with -cl-fp32-correctly-rounded-divide-sqrt where it
+// reports support, as PoCL and NVIDIA's driver do). So the winding solid's voxels do not depend
+// on such a device.
+OVS_FN float ovs_winding_at(const OVS_GLOBAL float* vertices, const OVS_GLOBAL OvWindingNode* nodes,
+                            unsigned int node_count, OvFloat3 p, float far_ratio,
+                            float node_tolerance, float* error) {
+    float sum = 0.0f, bound = 0.0f;
+    for (unsigned int i = 0; i < node_count;) {
+        const OVS_GLOBAL OvWindingNode* n = nodes + i;
+        const OvFloat3 d = OVS_FLOAT3(n->centre[0], n->centre[1], n->centre[2]) - p;
+        const float dist2 = ovs_dot3(d, d);
+        const float reach = far_ratio * n->radius;
+        const float dist = OVS_SQRT(dist2);
+        const float gap = dist - n->radius;
+        const float node_bound =
+            3.0f * n->abs_area * n->radius * n->radius / (gap * gap * gap * gap);
+        if (dist2 > reach * reach && gap > 0.0f && node_bound <= node_tolerance) {
+            const OVS_GLOBAL float* m = n->moment;
+            const OvFloat3 an = OVS_FLOAT3(n->area_normal[0], n->area_normal[1], n->area_normal[2]);
+            const OvFloat3 md = OVS_FLOAT3(ovs_dot3(OVS_FLOAT3(m[0], m[1], m[2]), d),
+                                           ovs_dot3(OVS_FLOAT3(m[3], m[4], m[5]), d),
+                                           ovs_dot3(OVS_FLOAT3(m[6], m[7], m[8]), d));
+            const float trace = m[0] + m[4] + m[8];
+            const float inv3 = 1.0f / (dist2 * dist);
+            sum += (ovs_dot3(an, d) + trace) * inv3 - 3.0f * ovs_dot3(d, md) * inv3 / dist2;
+            bound += node_bound;
+            i = n->skip;
+        } else if (n->count) {
+            for (unsigned int t = n->first; t < n->first + n->count; ++t) {
+                const OVS_GLOBAL float* v = vertices + 9 * (size_t)t;
+                sum += ovs_solid_angle(OVS_FLOAT3(v[0], v[1], v[2]) - p,
+                                       OVS_FLOAT3(v[3], v[4], v[5]) - p,
+                                       OVS_FLOAT3(v[6], v[7], v[8]) - p);
+            }
+            i = n->skip;
+        } else {
+            ++i;
+        }
+    }
+    *error = bound / (4.0f * 3.14159274f);
+    return sum / (4.0f * 3.14159274f);
 }
 
 #ifndef __OPENCL_VERSION__

@@ -6,30 +6,11 @@
 #include <map>
 
 #include "solid_internal.hpp"
+#include "winding_tree.hpp"
 
 namespace oclvox::detail {
 
 namespace {
-
-// Signed solid angle of triangle (a, b, c) seen from p, in double (Van Oosterom & Strackee, as
-// in the kernel): positive when p lies behind the triangle.
-double solid_angle_double(const double* a_, const double* b_, const double* c_, const double* p) {
-    double a[3], b[3], c[3];
-    for (int k = 0; k < 3; ++k) {
-        a[k] = a_[k] - p[k];
-        b[k] = b_[k] - p[k];
-        c[k] = c_[k] - p[k];
-    }
-    const double det = a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
-                       a[2] * (b[0] * c[1] - b[1] * c[0]);
-    const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    const double lb = std::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
-    const double lc = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-    const double den = la * lb * lc + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * lc +
-                       (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) * la +
-                       (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]) * lb;
-    return 2 * std::atan2(det, den);
-}
 
 // A solid angle's bound from its triangle's area and least distance d: at most area / d^2, and
 // at most 2 pi (also where d is not positive).
