@@ -60,19 +60,23 @@ fi
 # Part 2: the GPU's voxels against PoCL's, byte for byte.
 : > "$out/same.txt"
 work=$(mktemp -d)
+# `oclvox ARGS... -o FILE` on the GPU and through PoCL: "same" where the two files are equal.
+same_as_pocl() {
+    local label=$1 extension=$2
+    shift 2
+    timeout 60 "$B/oclvox" "$@" -o "$work/gpu.$extension" --quiet &&
+        OCLVOX_DEVICE=Portable timeout 120 "$B/oclvox" "$@" -o "$work/pocl.$extension" --quiet &&
+        cmp -s "$work/gpu.$extension" "$work/pocl.$extension"
+    local status=$?
+    echo "$label: $([[ $status == 0 ]] && echo same || echo DIFFERENT)" | tee -a "$out/same.txt"
+}
 for mesh in stanford-bunny.obj buildings.obj TR12J_OCC.stl bunny00.off; do
     [[ -f $meshes/$mesh ]] || continue
     for mode in "--test sat" "--test pef" "--mode thin" "--test sat --boundary half-open" \
         "--mode solid --inside parity"; do
         [[ $mode == *solid* && $mesh != bunny00.off ]] && continue  # parity needs a closed mesh
         # shellcheck disable=SC2086  # $mode is several words
-        timeout 60 "$B/oclvox" voxelize "$meshes/$mesh" -r 700 $mode -o "$work/gpu.binvox" --quiet &&
-            OCLVOX_DEVICE=Portable timeout 120 "$B/oclvox" voxelize "$meshes/$mesh" -r 700 $mode \
-                -o "$work/pocl.binvox" --quiet &&
-            cmp -s "$work/gpu.binvox" "$work/pocl.binvox"
-        status=$?
-        echo "$mesh 700 $mode: $([[ $status == 0 ]] && echo same || echo DIFFERENT)" |
-            tee -a "$out/same.txt"
+        same_as_pocl "$mesh 700 $mode" binvox voxelize "$meshes/$mesh" -r 700 $mode
     done
 done
 # The winding-number solid and the band SDF promise the same bits too (on devices with correctly
@@ -82,24 +86,12 @@ done
 for case in "stanford-bunny.obj 512" "Sterngarten_Wien_innerArea.obj 256" "mug.obj 200"; do
     read -r mesh resolution <<< "$case"
     [[ -f $meshes/$mesh ]] || continue
-    timeout 60 "$B/oclvox" voxelize "$meshes/$mesh" -r "$resolution" --mode solid --inside winding \
-        -o "$work/gpu.binvox" --quiet &&
-        OCLVOX_DEVICE=Portable timeout 120 "$B/oclvox" voxelize "$meshes/$mesh" -r "$resolution" \
-            --mode solid --inside winding -o "$work/pocl.binvox" --quiet &&
-        cmp -s "$work/gpu.binvox" "$work/pocl.binvox"
-    status=$?
-    echo "$mesh $resolution --mode solid --inside winding: $([[ $status == 0 ]] && echo same || echo DIFFERENT)" |
-        tee -a "$out/same.txt"
+    same_as_pocl "$mesh $resolution --mode solid --inside winding" binvox voxelize \
+        "$meshes/$mesh" -r "$resolution" --mode solid --inside winding
 done
 for mesh in bunny00.off buildings.obj; do
     [[ -f $meshes/$mesh ]] || continue
-    timeout 60 "$B/oclvox" sdf "$meshes/$mesh" -r 256 --band 3 -o "$work/gpu.npy" --quiet &&
-        OCLVOX_DEVICE=Portable timeout 120 "$B/oclvox" sdf "$meshes/$mesh" -r 256 --band 3 \
-            -o "$work/pocl.npy" --quiet &&
-        cmp -s "$work/gpu.npy" "$work/pocl.npy"
-    status=$?
-    echo "$mesh 256 sdf --band 3: $([[ $status == 0 ]] && echo same || echo DIFFERENT)" |
-        tee -a "$out/same.txt"
+    same_as_pocl "$mesh 256 sdf --band 3" npy sdf "$meshes/$mesh" -r 256 --band 3
 done
 rm -rf "$work"
 
