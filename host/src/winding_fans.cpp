@@ -34,7 +34,7 @@ double BoundaryFans::winding(const Vec3d& p) const {
 BoundaryFans::Estimate BoundaryFans::winding_estimate(const Vec3d& p) const {
     double sum = 0, error = 0;
     for (size_t i = 0; i < nodes.size();) {
-        const Node& c = nodes[i];
+        const WindingNode& c = nodes[i];
         const Vec3d d{c.centre[0] - p[0], c.centre[1] - p[1], c.centre[2] - p[2]};
         const double r = distance(c.centre, p), gap = r - c.radius;
         if (gap > kFarRadii * c.radius) {
@@ -81,7 +81,7 @@ bool BoundaryFans::below_half_at(const Vec3d& p) const {
     const double limit = 0.5 * 4 * M_PI;
     double sum = 0;
     for (size_t i = 0; i < nodes.size() && sum < limit;) {
-        const Node& c = nodes[i];
+        const WindingNode& c = nodes[i];
         const double gap = distance(p, c.centre) - c.radius;
         if (gap > c.radius) {
             sum += c.area / (gap * gap);
@@ -149,65 +149,6 @@ namespace {
 
 constexpr size_t kFanTrianglesPerLeaf = 16;
 
-// Coordinate k of fan triangle t's centroid.
-double centroid(const BoundaryFans& fans, size_t t, int k) {
-    const auto& v = fans.triangles[t];
-    return (v[k] + v[3 + k] + v[6 + k]) / 3;
-}
-
-// A node over fan triangles order[lo .. hi): the mean of their centroids, the ball around it
-// holding their vertices, their weighted area, area vectors and moments.
-BoundaryFans::Node node_over(const BoundaryFans& fans, const std::vector<size_t>& order, size_t lo,
-                             size_t hi) {
-    BoundaryFans::Node node{
-        {0, 0, 0}, 0, 0, lo, hi - lo, {0, 0, 0}, {}, 0, hi - lo <= kFanTrianglesPerLeaf};
-    for (size_t i = lo; i < hi; ++i)
-        for (int k = 0; k < 3; ++k) node.centre[k] += centroid(fans, order[i], k) / double(hi - lo);
-    for (size_t i = lo; i < hi; ++i) {
-        const auto& v = fans.triangles[order[i]];
-        const double weight = fans.weight[order[i]];
-        for (int c = 0; c < 3; ++c)
-            node.radius = std::max(
-                node.radius,
-                BoundaryFans::distance(node.centre, {v[3 * c], v[3 * c + 1], v[3 * c + 2]}));
-        node.area += weight * fans.area_of(order[i]);
-        const Vec3d n = fans.area_vector(order[i]);
-        for (int a = 0; a < 3; ++a) {
-            node.area_normal[a] += weight * n[a];
-            for (int b = 0; b < 3; ++b)
-                node.moment[3 * a + b] +=
-                    weight * n[a] * (centroid(fans, order[i], b) - node.centre[b]);
-        }
-    }
-    return node;
-}
-
-// The tree over fan triangles order[lo .. hi), depth first: a node, then (unless it is a leaf)
-// the trees over the halves of a median split of their centroids along their widest axis.
-void build_nodes(BoundaryFans& fans, std::vector<size_t>& order, size_t lo, size_t hi) {
-    const size_t index = fans.nodes.size();
-    fans.nodes.push_back(node_over(fans, order, lo, hi));
-    if (!fans.nodes[index].leaf) {
-        double extent[3];
-        for (int k = 0; k < 3; ++k) {
-            double mn = INFINITY, mx = -INFINITY;
-            for (size_t i = lo; i < hi; ++i) {
-                mn = std::min(mn, centroid(fans, order[i], k));
-                mx = std::max(mx, centroid(fans, order[i], k));
-            }
-            extent[k] = mx - mn;
-        }
-        const int axis = int(std::max_element(extent, extent + 3) - extent);
-        const size_t mid = lo + (hi - lo) / 2;
-        std::nth_element(
-            order.begin() + lo, order.begin() + mid, order.begin() + hi,
-            [&](size_t x, size_t y) { return centroid(fans, x, axis) < centroid(fans, y, axis); });
-        build_nodes(fans, order, lo, mid);
-        build_nodes(fans, order, mid, hi);
-    }
-    fans.nodes[index].skip = fans.nodes.size();
-}
-
 }  // namespace
 
 BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid) {
@@ -251,13 +192,11 @@ BoundaryFans boundary_fans(const Mesh& mesh, const Grid& grid) {
         fans.triangles.push_back(t);
         fans.weight.push_back(double(net > 0 ? net : -net));
     }
-    std::vector<size_t> order(fans.triangles.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    build_nodes(fans, order, 0, order.size());
     // Store the triangles in the tree's order.
+    WindingNodes tree = build_winding_nodes(fans.triangles, fans.weight, kFanTrianglesPerLeaf);
     BoundaryFans sorted;
-    sorted.nodes = std::move(fans.nodes);
-    for (size_t i : order) {
+    sorted.nodes = std::move(tree.nodes);
+    for (uint32_t i : tree.order) {
         sorted.triangles.push_back(fans.triangles[i]);
         sorted.weight.push_back(fans.weight[i]);
         sorted.total_weight += fans.weight[i];

@@ -10,6 +10,7 @@
 
 #include "oclvox/oclvox.hpp"
 #include "overlap_double.hpp"
+#include "winding_tree.hpp"
 
 namespace oclvox::detail {
 
@@ -23,20 +24,9 @@ struct BoundaryFans {
     std::vector<std::array<double, 9>> triangles;  // grid coordinates (voxel units)
     std::vector<double> weight;                    // how many times each counts
     double total_weight = 0;
-    // A tree over the triangles, depth first, each node over triangles [first, first + count):
-    // a leaf over a few (16 at most) near each other, an inner node over its two children's.
-    struct Node {
-        Vec3d centre;
-        double radius, area;  // ball holding the node's triangles; their weighted area
-        size_t first, count;
-        // Their weighted area vectors' sum, and the sum of each one times its triangle's
-        // centroid offset from the centre (moment[3 * i + j]: area vector i, offset j).
-        Vec3d area_normal;
-        std::array<double, 9> moment;
-        size_t skip;  // the node just past this one's subtree
-        bool leaf;
-    };
-    std::vector<Node> nodes;
+    // The tree over the triangles (build_winding_nodes, their weights counted), leaves of 16
+    // triangles at most; the triangles are stored in its order.
+    std::vector<WindingNode> nodes;
 
     // w of the fans at p, in double: every fan triangle's solid angle.
     double winding(const Vec3d& p) const;
@@ -95,7 +85,7 @@ struct BoundaryFans {
     template <class Far, class Near>
     double sum_over_ball(const Vec3d& p, double reach, Far far, Near near) const {
         double sum = 0;
-        for (const Node& c : nodes) {
+        for (const WindingNode& c : nodes) {
             if (!c.leaf) continue;
             const double gap = distance(p, c.centre) - c.radius - reach;
             if (gap > c.radius) {

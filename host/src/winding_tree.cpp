@@ -25,18 +25,23 @@ constexpr size_t kParallelSubtree = 4096;
 
 struct TreeBuilder {
     const std::vector<std::array<double, 9>>& tri;  // grid coordinates in voxel units
+    const std::vector<double>& weight;              // empty: every triangle counts once
+    const size_t leaf_triangles;
     // Per triangle, worked out once (every level of the tree reads them).
     std::vector<std::array<double, 3>> centroid, area_normal;
     std::vector<double> area;
     std::vector<uint32_t> order;
-    std::vector<OvWindingNode> nodes;
+    std::vector<WindingNode> nodes;
     // The node count of a subtree of n triangles, for every n the build meets: median splits make
     // a subtree's shape depend on n alone, so each node's index is known before its subtrees are
     // built, and they can be built at once.
     std::map<size_t, size_t> subtree_nodes;
 
-    explicit TreeBuilder(const std::vector<std::array<double, 9>>& triangles)
+    TreeBuilder(const std::vector<std::array<double, 9>>& triangles,
+                const std::vector<double>& weights, size_t leaf_size)
         : tri(triangles),
+          weight(weights),
+          leaf_triangles(leaf_size),
           centroid(tri.size()),
           area_normal(tri.size()),
           area(tri.size()),
@@ -62,7 +67,7 @@ struct TreeBuilder {
         if (const auto known = subtree_nodes.find(n); known != subtree_nodes.end())
             return known->second;
         const size_t count =
-            n <= kLeafTriangles ? 1 : 1 + count_nodes(n / 2) + count_nodes(n - n / 2);
+            n <= leaf_triangles ? 1 : 1 + count_nodes(n / 2) + count_nodes(n - n / 2);
         subtree_nodes[n] = count;
         return count;
     }
@@ -76,50 +81,47 @@ struct TreeBuilder {
                box_hi[3] = {-INFINITY, -INFINITY, -INFINITY};
         for (size_t i = lo; i < hi; ++i) {
             const uint32_t t = order[i];
+            const double w = weight.empty() ? 1 : weight[t];
             const auto& n = area_normal[t];
             const auto& c = centroid[t];
             for (int k = 0; k < 3; ++k) {
-                normal[k] += n[k];
-                weighted[k] += area[t] * c[k];
+                normal[k] += w * n[k];
+                weighted[k] += w * area[t] * c[k];
                 plain[k] += c[k];
                 box_lo[k] = std::min(box_lo[k], c[k]);
                 box_hi[k] = std::max(box_hi[k], c[k]);
             }
-            total += area[t];
+            total += w * area[t];
         }
-        double centre[3], radius = 0, moment[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
-        for (int k = 0; k < 3; ++k)
-            centre[k] = total > 0 ? weighted[k] / total : plain[k] / double(hi - lo);
+        WindingNode node{};
+        for (int k = 0; k < 3; ++k) {
+            node.centre[k] = total > 0 ? weighted[k] / total : plain[k] / double(hi - lo);
+            node.area_normal[k] = normal[k];
+        }
+        node.area = total;
         for (size_t i = lo; i < hi; ++i) {
             const uint32_t t = order[i];
+            const double w = weight.empty() ? 1 : weight[t];
             const auto& p = tri[t];
             for (int v = 0; v < 3; ++v) {
-                const double dx = p[3 * v] - centre[0], dy = p[3 * v + 1] - centre[1],
-                             dz = p[3 * v + 2] - centre[2];
-                radius = std::max(radius, std::sqrt(dx * dx + dy * dy + dz * dz));
+                const double dx = p[3 * v] - node.centre[0], dy = p[3 * v + 1] - node.centre[1],
+                             dz = p[3 * v + 2] - node.centre[2];
+                node.radius = std::max(node.radius, std::sqrt(dx * dx + dy * dy + dz * dz));
             }
             const auto& n = area_normal[t];
             const auto& c = centroid[t];
             for (int r = 0; r < 3; ++r)
-                for (int k = 0; k < 3; ++k) moment[3 * r + k] += n[r] * (c[k] - centre[k]);
+                for (int k = 0; k < 3; ++k)
+                    node.moment[3 * r + k] += w * n[r] * (c[k] - node.centre[k]);
         }
-        OvWindingNode node{};
-        for (int k = 0; k < 3; ++k) {
-            node.centre[k] = float(centre[k]);
-            node.area_normal[k] = float(normal[k]);
-        }
-        for (int k = 0; k < 9; ++k) node.moment[k] = float(moment[k]);
-        // Rounded up a little, so the float ball still holds every vertex and the error bound
-        // stays an upper bound.
-        node.radius = float(radius * (1 + 1e-6) + 1e-6);
-        node.abs_area = float(total * (1 + 1e-6));
-        node.skip = uint32_t(index + subtree_nodes.at(hi - lo));
+        node.first = lo;
+        node.count = hi - lo;
+        node.skip = index + subtree_nodes.at(hi - lo);
+        node.leaf = hi - lo <= leaf_triangles;
 
-        // Leaf, or split at the median centroid along the longest axis of the centroids' box.
-        if (hi - lo <= kLeafTriangles) {
-            node.first = uint32_t(lo);
-            node.count = uint32_t(hi - lo);
-        } else {
+        // Unless a leaf, split at the median centroid along the longest axis of the centroids'
+        // box.
+        if (!node.leaf) {
             int axis = 0;
             for (int k = 1; k < 3; ++k)
                 if (box_hi[k] - box_lo[k] > box_hi[axis] - box_lo[axis]) axis = k;
@@ -172,15 +174,38 @@ std::vector<std::array<double, 9>> grid_triangles(const Mesh& mesh, const Grid& 
     return tri;
 }
 
+WindingNodes build_winding_nodes(const std::vector<std::array<double, 9>>& triangles,
+                                 const std::vector<double>& weights, size_t leaf_triangles) {
+    if (triangles.empty()) return {};
+    TreeBuilder builder(triangles, weights, leaf_triangles);
+    builder.build(0, 0, triangles.size());
+    return {std::move(builder.nodes), std::move(builder.order)};
+}
+
 WindingTree build_winding_tree(const std::vector<std::array<double, 9>>& tri) {
-    TreeBuilder builder(tri);
-    builder.build(0, 0, tri.size());
+    const WindingNodes built = build_winding_nodes(tri, {}, kLeafTriangles);
     WindingTree tree;
-    tree.nodes = std::move(builder.nodes);
+    tree.nodes.resize(built.nodes.size());
+    tbb::parallel_for(size_t(0), built.nodes.size(), [&](size_t i) {
+        const WindingNode& from = built.nodes[i];
+        OvWindingNode& node = tree.nodes[i];
+        for (int k = 0; k < 3; ++k) {
+            node.centre[k] = float(from.centre[k]);
+            node.area_normal[k] = float(from.area_normal[k]);
+        }
+        for (int k = 0; k < 9; ++k) node.moment[k] = float(from.moment[k]);
+        // Rounded up a little, so the float ball still holds every vertex and the error bound
+        // stays an upper bound.
+        node.radius = float(from.radius * (1 + 1e-6) + 1e-6);
+        node.abs_area = float(from.area * (1 + 1e-6));
+        node.skip = uint32_t(from.skip);
+        node.first = from.leaf ? uint32_t(from.first) : 0;
+        node.count = from.leaf ? uint32_t(from.count) : 0;
+    });
     tree.vertices.resize(tri.size() * 9);
     tbb::parallel_for(size_t(0), tri.size(), [&](size_t i) {
         for (int k = 0; k < 9; ++k)
-            tree.vertices[9 * i + size_t(k)] = float(tri[builder.order[i]][k]);
+            tree.vertices[9 * i + size_t(k)] = float(tri[built.order[i]][k]);
     });
     return tree;
 }

@@ -9,6 +9,7 @@
 
 #include "host_memory.hpp"
 #include "opencl_runtime.hpp"
+#include "overlap_double.hpp"
 #include "solid_math.h"
 
 namespace oclvox::detail {
@@ -20,14 +21,41 @@ double solid_angle_double(const double* a, const double* b, const double* c, con
 // Triangles in grid coordinates (voxel units), double.
 std::vector<std::array<double, 9>> grid_triangles(const Mesh& mesh, const Grid& grid);
 
-// The winding tree: triangles in leaf order (float voxel units) and the nodes over them.
+// A winding tree in double (after Barill et al. 2018), depth first: a node over triangles
+// [first, first + count) of `order`, then, unless it is a leaf, the trees over the halves of a
+// median split of their centroids along the widest axis; `skip` is the node just past its
+// subtree. A node holds the area-weighted centroid of its triangles (the expansion centre), the
+// ball around it holding their vertices, and, each triangle times its weight, their area, area
+// vectors' sum and moment: sum of area vector i times centroid offset j (moment[3 * i + j]).
+struct WindingNode {
+    Vec3d centre;
+    double radius, area;
+    size_t first, count;
+    Vec3d area_normal;
+    std::array<double, 9> moment;
+    size_t skip;
+    bool leaf;
+};
+struct WindingNodes {
+    std::vector<WindingNode> nodes;
+    std::vector<uint32_t> order;  // the triangles in the tree's order
+};
+
+// The tree over `triangles` (grid coordinates), each counting weights[t] times (every one once
+// where `weights` is empty), with leaves of at most leaf_triangles; none for no triangles. The
+// same tree for any number of threads.
+WindingNodes build_winding_nodes(const std::vector<std::array<double, 9>>& triangles,
+                                 const std::vector<double>& weights, size_t leaf_triangles);
+
+// The winding tree for the kernel: triangles in leaf order (float voxel units) and the nodes over
+// them.
 struct WindingTree {
     std::vector<float> vertices;  // 9 per triangle
     std::vector<OvWindingNode> nodes;
 };
 
-// The tree over `triangles` (grid coordinates): leaves of at most 8 triangles near each other,
-// split at the median centroid; the same tree for any number of threads.
+// The kernel's tree over `triangles` (grid coordinates): build_winding_nodes with leaves of at
+// most 8 triangles, in float, its balls and areas rounded up.
 WindingTree build_winding_tree(const std::vector<std::array<double, 9>>& triangles);
 
 // Evaluates the winding number at points on the device, in launches short enough for a GPU's
