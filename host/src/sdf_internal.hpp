@@ -196,10 +196,13 @@ LeafSet empty_leaf_set(const Grid& grid, const SdfOptions& options);
 // The leaves of a sparse field, and for each set leaf (by slot) the triangles whose block cull
 // keeps a block of it: triangles[first[slot] .. first[slot + 1]), ascending. The culls are
 // conservative, so every sample within the band of a triangle lies in a leaf that lists it.
+// rows[p], beside triangles[p]: the leaf's rows (bits 0-7, by y) and layers (bits 8-15, by z)
+// that the triangle's voxel range reaches (leaf_rows).
 struct BandLeaves {
     LeafSet leaves;
     std::vector<uint32_t> first;  // one per slot, and the end
     std::vector<uint32_t> triangles;
+    std::vector<uint16_t> rows;
 };
 
 // The band's leaves of the prepared triangles on `grid` (the field's), binned on the host's cores

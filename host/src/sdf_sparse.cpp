@@ -215,6 +215,32 @@ LeafSet empty_leaf_set(const Grid& grid, const SdfOptions& options) {
     return leaves;
 }
 
+namespace {
+
+// The rows along y (bits 0-7) and layers along z (bits 8-15) of the leaf with lowest voxel
+// `origin` that the triangle's voxel range reaches. band_leaf_samples tests a row against these
+// bits, read in list order from a few kilobytes, instead of against the triangle's range, read
+// from the triangle itself: on a mesh of many small triangles three quarters of a leaf's (row,
+// triangle) pairs fail the test, and those reads, each from another triangle, were half the
+// kernel's time.
+uint16_t leaf_rows(const OvSdfTriangle& t, const std::array<int64_t, 3>& origin) {
+    auto bits = [](int64_t lo, int64_t hi) {  // bits lo..hi of 0..7
+        lo = std::max<int64_t>(lo, 0);
+        hi = std::min<int64_t>(hi, kLeaf - 1);
+        return lo > hi ? 0u : (2u << hi) - (1u << lo);
+    };
+    return uint16_t(bits(t.lo[1] - origin[1], t.hi[1] - origin[1]) |
+                    bits(t.lo[2] - origin[2], t.hi[2] - origin[2]) << 8);
+}
+
+struct LeafPair {
+    uint64_t leaf;
+    uint32_t triangle;
+    uint16_t rows;  // leaf_rows
+};
+
+}  // namespace
+
 BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const SdfOptions& options,
                        const std::function<void(uint64_t done, uint64_t total)>& report) {
     BandLeaves out;
@@ -229,7 +255,7 @@ BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const Sdf
     // come between rounds of chunks, on this thread.
     constexpr size_t kChunk = 2048, kRound = 32;
     const size_t chunks = (n + kChunk - 1) / kChunk;
-    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> chunk_pairs(chunks);
+    std::vector<std::vector<LeafPair>> chunk_pairs(chunks);
     uint64_t pairs = 0;
     for (size_t round = 0; round < chunks; round += kRound) {
         const size_t round_end = std::min(chunks, round + kRound);
@@ -244,12 +270,14 @@ BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const Sdf
                                     });
                 std::sort(own.begin(), own.end());
                 own.erase(std::unique(own.begin(), own.end()), own.end());
-                for (const uint64_t leaf : own) chunk.emplace_back(leaf, uint32_t(index));
+                for (const uint64_t leaf : own)
+                    chunk.push_back({leaf, uint32_t(index),
+                                     leaf_rows(prepared.triangles[index], leaves.origin(leaf))});
             }
         });
         for (size_t c = round; c < round_end; ++c) pairs += chunk_pairs[c].size();
-        check_host_memory(pairs * (sizeof(chunk_pairs[0][0]) + 2 * sizeof(uint32_t)), budget,
-                          "the triangle lists of the leaves of a sparse distance field");
+        check_host_memory(pairs * (sizeof(LeafPair) + 2 * sizeof(uint32_t) + sizeof(uint16_t)),
+                          budget, "the triangle lists of the leaves of a sparse distance field");
         if (report) report(round_end, chunks);
     }
     if (pairs >= (uint64_t(1) << 32))
@@ -259,17 +287,23 @@ BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const Sdf
     // Phase 2: the leaf bits and their ranks, then the lists by slot (a counting sort, stable, so
     // each list stays ascending).
     for (const auto& chunk : chunk_pairs)
-        for (const auto& [leaf, index] : chunk) leaves.bits[size_t(leaf >> 5)] |= 1u << (leaf & 31);
+        for (const LeafPair& pair : chunk)
+            leaves.bits[size_t(pair.leaf >> 5)] |= 1u << (pair.leaf & 31);
     leaves.rank_bits();
     out.first.assign(size_t(leaves.count) + 1, 0);
     for (const auto& chunk : chunk_pairs)
-        for (const auto& pair : chunk) ++out.first[size_t(leaves.slot(pair.first)) + 1];
+        for (const LeafPair& pair : chunk) ++out.first[size_t(leaves.slot(pair.leaf)) + 1];
     for (size_t slot = 0; slot < leaves.count; ++slot) out.first[slot + 1] += out.first[slot];
     out.triangles.resize(size_t(pairs));
+    out.rows.resize(size_t(pairs));
     std::vector<uint32_t> next(out.first.begin(), out.first.end() - 1);
     for (auto& chunk : chunk_pairs) {
-        for (const auto& [leaf, index] : chunk) out.triangles[next[leaves.slot(leaf)]++] = index;
-        std::vector<std::pair<uint64_t, uint32_t>>().swap(chunk);
+        for (const LeafPair& pair : chunk) {
+            const uint32_t place = next[leaves.slot(pair.leaf)]++;
+            out.triangles[place] = pair.triangle;
+            out.rows[place] = pair.rows;
+        }
+        std::vector<LeafPair>().swap(chunk);
     }
     return out;
 }

@@ -38,6 +38,7 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
         const cl::Buffer triangles = read_in_place(cl, prepared.triangles);
         const cl::Buffer first = read_in_place(cl, band.first);
         const cl::Buffer lists = read_in_place(cl, band.triangles);
+        const cl::Buffer rows = read_in_place(cl, band.rows);
         const cl::Buffer leaf_of_slot = read_in_place(cl, slot_leaf);
         cl.queue.finish();
         stats.seconds_upload += seconds_since(t);
@@ -47,8 +48,8 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             throw DeviceError(cl.info.name + " cannot run work groups of " +
                               std::to_string(kLeafGroup) +
                               " items, which the sparse distance field needs");
-        set_args(kernel, 0, triangles, first, lists, leaf_of_slot);
-        set_args(kernel, 7, cl_int(leaves.dims[0]), cl_int(leaves.dims[1]), prepared.band,
+        set_args(kernel, 0, triangles, first, lists, rows, leaf_of_slot);
+        set_args(kernel, 8, cl_int(leaves.dims[0]), cl_int(leaves.dims[1]), prepared.band,
                  prepared.band2);
 
         // Phase 2: batches of consecutive slots as the budget allows, each leaf a work group that
@@ -64,8 +65,8 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             const uint64_t count = std::min<uint64_t>(max_slots, leaves.count - first_slot);
             t = Clock::now();
             const cl::Buffer& buffer = samples.get(cl.context, max_slots);
-            set_args(kernel, 4, cl_uint(first_slot), cl_uint(0), cl_uint(first_slot + count));
-            kernel.setArg(11, buffer);
+            set_args(kernel, 5, cl_uint(first_slot), cl_uint(0), cl_uint(first_slot + count));
+            kernel.setArg(12, buffer);
             std::function<void(uint64_t, uint64_t)> report;
             if (options.progress)
                 report = [&](uint64_t done, uint64_t total) {
@@ -75,7 +76,7 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             run_sliced(
                 cl.queue, count * kLeafGroup, kLeafGroup,
                 [&](uint64_t first_item, uint64_t items) {
-                    kernel.setArg(5, cl_uint(first_item / kLeafGroup));
+                    kernel.setArg(6, cl_uint(first_item / kLeafGroup));
                     launch(cl.queue, kernel, items, kLeafGroup);
                 },
                 report);
