@@ -99,6 +99,9 @@ struct TreeBuilder {
             node.area_normal[k] = normal[k];
         }
         node.area = total;
+        // The radius is the root of the largest squared distance: the square root is correctly
+        // rounded, so monotonic, and the root of the largest is the largest root.
+        double radius2 = 0;
         for (size_t i = lo; i < hi; ++i) {
             const uint32_t t = order[i];
             const double w = weight.empty() ? 1 : weight[t];
@@ -106,7 +109,7 @@ struct TreeBuilder {
             for (int v = 0; v < 3; ++v) {
                 const double dx = p[3 * v] - node.centre[0], dy = p[3 * v + 1] - node.centre[1],
                              dz = p[3 * v + 2] - node.centre[2];
-                node.radius = std::max(node.radius, std::sqrt(dx * dx + dy * dy + dz * dz));
+                radius2 = std::max(radius2, dx * dx + dy * dy + dz * dz);
             }
             const auto& n = area_normal[t];
             const auto& c = centroid[t];
@@ -114,6 +117,7 @@ struct TreeBuilder {
                 for (int k = 0; k < 3; ++k)
                     node.moment[3 * r + k] += w * n[r] * (c[k] - node.centre[k]);
         }
+        node.radius = std::sqrt(radius2);
         node.first = lo;
         node.count = hi - lo;
         node.skip = index + subtree_nodes.at(hi - lo);
