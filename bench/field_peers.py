@@ -2,7 +2,7 @@
 """Distance fields and meshing, oclvox beside its peers, on the same mesh, grid and cores.
 
 Usage: /usr/bin/python3 bench/field_peers.py (Debian's Python, which sees the Debian peers)
-       [--oclvox build/oclvox] [--mesh MESH.off] [--band 3]
+       [--oclvox build/oclvox] [--mesh MESH.off|MESH.obj] [--band 3]
                                     [--repeat 3] [--out TABLE.md] RES [RES ...]
 
 For each resolution R it runs, interleaved repeat by repeat (ours, then each peer, again and
@@ -50,6 +50,33 @@ def read_off(path):
     return points, np.array(triangles, dtype=np.int32)
 
 
+def read_obj(path):
+    """Vertices and triangles of an OBJ file's `v` and `f` lines (polygons fanned; texture and
+    normal indices and negative, relative indices as the format allows)."""
+    points, triangles = [], []
+    with open(path) as f:
+        for line in f:
+            words = line.split()
+            if not words:
+                continue
+            if words[0] == "v":
+                points.append([float(w) for w in words[1:4]])
+            elif words[0] == "f":
+                face = [int(w.split("/")[0]) for w in words[1:]]
+                face = [i - 1 if i > 0 else len(points) + i for i in face]
+                triangles += [(face[0], face[i], face[i + 1]) for i in range(1, len(face) - 1)]
+    return np.array(points, dtype=np.float64), np.array(triangles, dtype=np.int32)
+
+
+def read_mesh(path):
+    """An OFF or OBJ mesh, by its extension, as OpenVDB's arrays."""
+    if path.lower().endswith(".obj"):
+        return read_obj(path)
+    if path.lower().endswith(".off"):
+        return read_off(path)
+    sys.exit(f"{path}: field_peers.py reads .off and .obj meshes")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("resolutions", type=int, nargs="+")
@@ -77,7 +104,7 @@ def main():
     print(f"peers found: {', '.join(found) or 'none'}"
           + (f"; not installed: {', '.join(missing)}" if missing else ""), file=sys.stderr)
 
-    points, triangles = read_off(args.mesh)
+    points, triangles = read_mesh(args.mesh)
     cores = len(os.sched_getaffinity(0))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
