@@ -343,8 +343,12 @@ class SparseMesher {
     void emit(const Slab& slab, const Slab* below, const Slab* above, Mesh& mesh) const {
         std::vector<uint32_t> vertex_sample(slab.end_vertex - slab.first_vertex);
         std::vector<float> vertex_local(3 * vertex_sample.size());
-        std::vector<uint32_t> triangles(3 * size_t(slab.end_triangle - slab.first_triangle));
         mesh.positions.resize(slab.end_vertex);
+        // The slab's triangles are written where they stay: a triangle is three uint32_t.
+        static_assert(sizeof(std::array<uint32_t, 3>) == 3 * sizeof(uint32_t));
+        mesh.triangles.resize(slab.end_triangle);
+        uint32_t* const triangles =
+            reinterpret_cast<uint32_t*>(mesh.triangles.data() + slab.first_triangle);
         struct BoxOffsets {
             std::vector<uint32_t> vertex, triangle;
         };
@@ -377,13 +381,13 @@ class SparseMesher {
                                                box_base, box.vertex.data(), box.triangle.data(),
                                                slab.first_vertex, slab.first_triangle,
                                                vertex_sample.data(), vertex_local.data(),
-                                               triangles.data());
+                                               triangles);
                         else
                             detail::om_mc_emit(block.box.data(), table_, local, lx, ly, lz, tiling,
                                                box_base, box.vertex.data(), box.triangle.data(),
                                                slab.first_vertex, slab.first_triangle,
                                                vertex_sample.data(), vertex_local.data(),
-                                               triangles.data());
+                                               triangles);
                         // The sample's vertex records as world positions.
                         const size_t s = b * kBlockSamples + owner;
                         const uint32_t first = slab.vertex_offset[s];
@@ -394,14 +398,6 @@ class SparseMesher {
                     }
                 }
             });
-        const size_t first = mesh.triangles.size();
-        mesh.triangles.resize(first + triangles.size() / 3);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, triangles.size() / 3, 4096),
-                          [&](const auto& range) {
-                              for (size_t t = range.begin(); t != range.end(); ++t)
-                                  mesh.triangles[first + t] = {
-                                      triangles[3 * t], triangles[3 * t + 1], triangles[3 * t + 2]};
-                          });
     }
 
   private:
@@ -427,10 +423,16 @@ class SparseMesher {
                       ey = std::min<int64_t>(kBlock, n_[1] - o[1]),
                       ez = std::min<int64_t>(kBlock, n_[2] - o[2]);
         const uint32_t block_bits = ((1u << ex) - 1u) << x0;
+        // Each row once: a row of cells takes four rows, and each row serves four rows of cells.
+        uint32_t rows[kBlock + 1][kBlock + 1];
+        for (int64_t z = 0; z <= ez; ++z)
+            for (int64_t y = 0; y <= ey; ++y) rows[z][y] = row(y0 + y, z0 + z);
         for (int64_t z = z0; z < z0 + ez; ++z)
             for (int64_t y = y0; y < y0 + ey; ++y) {
-                const uint32_t r00 = row(y, z), r10 = row(y + 1, z), r01 = row(y, z + 1),
-                               r11 = row(y + 1, z + 1);
+                const uint32_t* below = rows[z - z0];
+                const uint32_t* above = rows[z - z0 + 1];
+                const uint32_t r00 = below[y - y0], r10 = below[y - y0 + 1], r01 = above[y - y0],
+                               r11 = above[y - y0 + 1];
                 const uint32_t all = r00 & r10 & r01 & r11, any = r00 | r10 | r01 | r11;
                 uint32_t changing = ~((all & (all >> 1)) | ~(any | (any >> 1))) & block_bits;
                 while (changing) {
@@ -588,6 +590,12 @@ Mesh mesh_sparse(const SparseField& field, float iso, detail::MeshingMethod meth
     // Phase 1: candidates.
     const std::vector<uint64_t> candidates = candidate_blocks(field, iso, who);
     progress.report(phases.scan, 1, 1);
+
+    // Room for the mesh, so that it does not grow by copies: a candidate block owns about 64
+    // vertices and 128 triangles (bunny00 and buildings, either mesher); pages not written cost
+    // nothing, and a mesh that needs more still grows.
+    mesh.positions.reserve(candidates.size() * 80);
+    mesh.triangles.reserve(candidates.size() * 160);
 
     // Phases 2 to 4, a slab at a time: slab i is emitted once slab i + 1 is counted.
     SparseMesher mesher(field, iso, method, who);
