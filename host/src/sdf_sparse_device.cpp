@@ -48,6 +48,15 @@ void leaf_distance2_device(Device& device, const SdfTriangles& prepared, const B
             throw DeviceError(cl.info.name + " cannot run work groups of " +
                               std::to_string(kLeafGroup) +
                               " items, which the sparse distance field needs");
+        // Its tile of triangles (band_leaf_samples): more local memory than a device must have
+        // (OpenCL's embedded profile promises 1 KB), so said before the launch would fail.
+        const cl_ulong local_needed = kernel.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(cl.device),
+                       local_there = cl.device.getInfo<CL_DEVICE_LOCAL_MEM_SIZE>();
+        if (local_needed > local_there)
+            throw DeviceError(cl.info.name + " has " + std::to_string(local_there) +
+                              " bytes of local memory, and the sparse distance field's kernel "
+                              "needs " +
+                              std::to_string(local_needed));
         set_args(kernel, 0, triangles, first, lists, rows, leaf_of_slot);
         set_args(kernel, 8, cl_int(leaves.dims[0]), cl_int(leaves.dims[1]), prepared.band,
                  prepared.band2);
