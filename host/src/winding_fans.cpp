@@ -127,16 +127,12 @@ double BoundaryFans::least_distance(size_t t, const Vec3d& p) const {
     return std::min({segment(a, b), segment(b, c), segment(c, a)});
 }
 
-Vec3d BoundaryFans::area_vector(size_t t) const {
+double BoundaryFans::area_of(size_t t) const {
     const auto& v = triangles[t];
     const double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
     const double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
-    return {(e1[1] * e2[2] - e1[2] * e2[1]) / 2, (e1[2] * e2[0] - e1[0] * e2[2]) / 2,
-            (e1[0] * e2[1] - e1[1] * e2[0]) / 2};
-}
-
-double BoundaryFans::area_of(size_t t) const {
-    const Vec3d n = area_vector(t);
+    const double n[3] = {(e1[1] * e2[2] - e1[2] * e2[1]) / 2, (e1[2] * e2[0] - e1[0] * e2[2]) / 2,
+                         (e1[0] * e2[1] - e1[1] * e2[0]) / 2};
     return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
 }
 

@@ -66,9 +66,7 @@ struct BoundaryFans {
     // The least distance from p to fan triangle t, in double.
     double least_distance(size_t t, const Vec3d& p) const;
 
-    // Fan triangle t's area vector (b - a) x (c - a) / 2 (its direction gives the solid angle's
-    // sign) and its area; the distance between two points.
-    Vec3d area_vector(size_t t) const;
+    // Area of fan triangle t; the distance between two points.
     double area_of(size_t t) const;
     static double distance(const Vec3d& p, const Vec3d& q);
 
