@@ -922,7 +922,8 @@ TEST_F(WriterTest, StreamedNpyAndBinvoxEqualTheDenseDefinitionForAnySlabAndBrick
         const SparseVoxels voxels = mixed_voxels(brick);
         const std::string npy = npy_data_by_definition(voxels);
         const std::string binvox = binvox_data_by_definition(voxels);
-        // 1 byte: one layer per slab; 3000: a few layers, not a multiple of 4; default: one slab.
+        // 1 byte: the thinnest slabs (.npy: a block's 4 layers, the last one layer; .binvox: one
+        // plane); 3000: .binvox 3 planes, not a multiple of 4; kSlabBytes: one slab.
         for (uint64_t slab : {uint64_t(1), uint64_t(3000), oclvox::detail::kSlabBytes}) {
             SCOPED_TRACE("brick " + std::to_string(brick) + ", slab " + std::to_string(slab));
             oclvox::detail::ProgressPhases none({}, "writing");
@@ -948,19 +949,24 @@ uint64_t allocated_bytes(const std::string& file) {
 // that keeps holes, probed first) it takes far less space than its size.
 TEST_F(WriterTest, NpyLeavesLongEmptyRunsAsHolesAndReadsAsTheDenseDefinition) {
     const Grid grid = make_grid({128, 128, 64});  // 16 KiB a layer, 1 MiB in all
-    // Voxels at the start, a few in the middle, near the end; then also in the very last byte,
-    // and none at all.
+    // Voxels at the start, a few in the middle, near the end; then also in the very last byte;
+    // then also five whole layers, over 64 KiB of ones (pages of equal bytes are not empty); and
+    // none at all.
     const VoxelSet scattered = {{0, 0, 0}, {5, 7, 1}, {100, 3, 30}, {64, 64, 31}, {1, 120, 50}};
     VoxelSet to_the_end = scattered;
     to_the_end.insert({127, 127, 63});
+    VoxelSet full_pages = scattered;
+    for (int64_t k = 40; k < 45; ++k)
+        for (int64_t j = 0; j < 128; ++j)
+            for (int64_t i = 0; i < 128; ++i) full_pages.insert({i, j, k});
     {
         std::ofstream probe(path("probe"), std::ios::binary);
         probe.seekp(std::streamoff(1) << 20);
         probe.put(0);
     }
     const bool keeps_holes = allocated_bytes(path("probe")) < (uint64_t(1) << 19);
-    for (const VoxelSet& set : {scattered, to_the_end, VoxelSet{}})
-        for (uint64_t slab : {uint64_t(1), uint64_t(70000), oclvox::detail::kSlabBytes}) {
+    for (const VoxelSet& set : {scattered, to_the_end, full_pages, VoxelSet{}})
+        for (uint64_t slab : {uint64_t(1), uint64_t(200000), oclvox::detail::kCachedSlabBytes}) {
             SCOPED_TRACE(std::to_string(set.size()) + " voxels, slab " + std::to_string(slab));
             const SparseVoxels voxels = make_voxels(grid, set, 16);
             oclvox::detail::ProgressPhases none({}, "writing");
@@ -1013,9 +1019,9 @@ TEST_F(WriterTest, StreamedWritersReportEverySlab) {
         },
         "writing");
     oclvox::detail::write_npy(path("s.npy"), voxels, progress, 1);
-    // One report per z layer (the first passes at once, the others after the sleep), plus the
-    // last.
-    EXPECT_EQ(done_per_call.size(), size_t(voxels.grid().dims[2]) + 1);
+    // One report per slab of the thinnest kind, a block's 4 z layers (the first passes at once,
+    // the others after the sleep), plus the last.
+    EXPECT_EQ(done_per_call.size(), size_t(voxels.grid().dims[2] + 3) / 4 + 1);
     EXPECT_TRUE(std::is_sorted(done_per_call.begin(), done_per_call.end()));
     EXPECT_EQ(done_per_call.back(), oclvox::detail::kPhasedProgressTotal);
 }

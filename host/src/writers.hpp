@@ -22,7 +22,7 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, ProgressP
 // NumPy .npy (dense uint8, arr[i, j, k] is voxel (x=i, y=j, z=k)) plus `<path>.json` describing
 // where the voxels are in space.
 void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress,
-               uint64_t slab_bytes = kSlabBytes);
+               uint64_t slab_bytes = kCachedSlabBytes);
 
 // MagicaVoxel .vox: models of at most 256^3 voxels, placed by a scene graph.
 void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress);
