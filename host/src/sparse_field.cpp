@@ -1,9 +1,12 @@
 // Sparse narrow-band fields: leaves of 8x8x8 samples kept sorted by leaf index, and the inside
 // voxels that sign every sample outside them. Reading a box finds each leaf it touches once per
 // row of leaves, so any slab, the border or the whole grid costs one step per sample.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <vector>
 
 #include "host_memory.hpp"
 #include "oclvox/field.hpp"
@@ -13,6 +16,9 @@ namespace oclvox {
 namespace {
 
 constexpr int64_t kLeaf = SparseField::kLeaf;
+
+// Samples of a box from which copy_box reads its rows of leaves in parallel.
+constexpr int64_t kParallelBox = 1 << 16;
 
 }  // namespace
 
@@ -103,46 +109,59 @@ void SparseField::copy_box(const std::array<int64_t, 3>& lo, const std::array<in
     const int64_t wx = hi[0] - lo[0], wy = hi[1] - lo[1];
     if (wx == 0 || wy == 0 || hi[2] == lo[2]) return;
 
-    // Leaf by leaf over the box: a stored leaf's rows are copied; elsewhere the background,
-    // signed by the inside voxels (marked only there, since leaves are most of a box near the
-    // surface). The leaves of a row (fixed ly, lz) are consecutive in index order, so one search
-    // finds the first of them.
+    // Row of leaves by row of leaves (fixed ly, lz: consecutive in index order, so one search
+    // finds the first stored one): a stored leaf's rows are copied; elsewhere the background,
+    // signed by the inside voxels, marked once for each run of leaves not stored (a mark for each
+    // such leaf cost more than copying the samples: the per-call work of finding bricks). Rows
+    // write disjoint parts of the box: in parallel when the box is large (a small one, as the
+    // meshers read, is not worth the tasks).
     const auto n = leaf_dims();
-    uint8_t inside[kLeafSamples];
-    for (int64_t lz = lo[2] / kLeaf; lz <= (hi[2] - 1) / kLeaf; ++lz)
-        for (int64_t ly = lo[1] / kLeaf; ly <= (hi[1] - 1) / kLeaf; ++ly) {
-            const uint64_t row = uint64_t(n[0]) * (uint64_t(ly) + uint64_t(n[1]) * uint64_t(lz));
-            auto it = std::lower_bound(leaf_keys_.begin(), leaf_keys_.end(),
-                                       row + uint64_t(lo[0] / kLeaf));
-            for (int64_t lx = lo[0] / kLeaf; lx <= (hi[0] - 1) / kLeaf; ++lx) {
-                const int64_t ox = lx * kLeaf, oy = ly * kLeaf, oz = lz * kLeaf;
-                const std::array<int64_t, 3> a = {std::max(lo[0], ox), std::max(lo[1], oy),
-                                                  std::max(lo[2], oz)};
-                const std::array<int64_t, 3> b = {std::min(hi[0], ox + kLeaf),
-                                                  std::min(hi[1], oy + kLeaf),
-                                                  std::min(hi[2], oz + kLeaf)};
-                float* first = out + (a[0] - lo[0]) + wx * ((a[1] - lo[1]) + wy * (a[2] - lo[2]));
-                const int64_t sx = b[0] - a[0], sy = b[1] - a[1], sz = b[2] - a[2];
-                if (it != leaf_keys_.end() && *it == row + uint64_t(lx)) {
-                    const float* leaf = leaf_samples(size_t(it - leaf_keys_.begin()));
-                    for (int64_t z = 0; z < sz; ++z)
-                        for (int64_t y = 0; y < sy; ++y)
-                            std::memcpy(first + wx * (y + wy * z),
-                                        leaf + (a[0] - ox) +
-                                            kLeaf * ((a[1] - oy + y) + kLeaf * (a[2] - oz + z)),
-                                        size_t(sx) * sizeof(float));
-                    ++it;
-                    continue;
-                }
-                std::fill_n(inside, size_t(sx * sy * sz), uint8_t(0));
-                inside_.mark_box(a, b, {1, sx, sx * sy}, inside);
+    const int64_t ly_first = lo[1] / kLeaf, ly_count = (hi[1] - 1) / kLeaf + 1 - ly_first;
+    const int64_t lz_first = lo[2] / kLeaf, lz_count = (hi[2] - 1) / kLeaf + 1 - lz_first;
+    const int64_t lx_first = lo[0] / kLeaf, lx_end = (hi[0] - 1) / kLeaf + 1;
+    auto copy_row = [&](int64_t row_number) {
+        const int64_t ly = ly_first + row_number % ly_count, lz = lz_first + row_number / ly_count;
+        const int64_t oy = ly * kLeaf, oz = lz * kLeaf;
+        const int64_t ay = std::max(lo[1], oy), az = std::max(lo[2], oz);
+        const int64_t sy = std::min(hi[1], oy + kLeaf) - ay, sz = std::min(hi[2], oz + kLeaf) - az;
+        float* first = out + wx * ((ay - lo[1]) + wy * (az - lo[2]));
+        const uint64_t row = uint64_t(n[0]) * (uint64_t(ly) + uint64_t(n[1]) * uint64_t(lz));
+        auto it = std::lower_bound(leaf_keys_.begin(), leaf_keys_.end(), row + uint64_t(lx_first));
+        std::vector<uint8_t> inside;
+        for (int64_t lx = lx_first; lx < lx_end;) {
+            // The leaves [lx, next) are not stored; leaf `next` is, if inside the box.
+            const int64_t next = it != leaf_keys_.end() && *it < row + uint64_t(lx_end)
+                                     ? int64_t(*it - row)
+                                     : lx_end;
+            const int64_t ax = std::max(lo[0], lx * kLeaf);
+            if (next > lx) {
+                const int64_t sx = std::min(hi[0], next * kLeaf) - ax;
+                inside.assign(size_t(sx * sy * sz), 0);
+                inside_.mark_box({ax, ay, az}, {ax + sx, ay + sy, az + sz}, {1, sx, sx * sy},
+                                 inside.data());
                 for (int64_t z = 0; z < sz; ++z)
                     for (int64_t y = 0; y < sy; ++y)
                         for (int64_t x = 0; x < sx; ++x)
-                            first[x + wx * (y + wy * z)] =
+                            first[(ax - lo[0]) + x + wx * (y + wy * z)] =
                                 inside[size_t(x + sx * (y + sy * z))] ? -background_ : background_;
+                lx = next;
+                continue;
             }
+            const int64_t ox = lx * kLeaf, sx = std::min(hi[0], ox + kLeaf) - ax;
+            const float* leaf = leaf_samples(size_t(it - leaf_keys_.begin()));
+            for (int64_t z = 0; z < sz; ++z)
+                for (int64_t y = 0; y < sy; ++y)
+                    std::memcpy(first + (ax - lo[0]) + wx * (y + wy * z),
+                                leaf + (ax - ox) + kLeaf * ((ay - oy + y) + kLeaf * (az - oz + z)),
+                                size_t(sx) * sizeof(float));
+            ++it;
+            ++lx;
         }
+    };
+    if (wx * wy * (hi[2] - lo[2]) < kParallelBox)
+        for (int64_t r = 0; r < ly_count * lz_count; ++r) copy_row(r);
+    else
+        tbb::parallel_for(int64_t(0), ly_count * lz_count, copy_row);
 }
 
 void SparseField::copy_leaf(uint64_t leaf_index, float* samples) const {
