@@ -18,6 +18,8 @@ cases=(
   "binvox-1024|1024|binvox|"
   "binvox-2048|2048|binvox|"
   "binvox-solid-1024|1024|binvox|--mode solid --inside parity"
+  "npy-512|512|npy|"
+  "npy-solid-512|512|npy|--mode solid --inside parity"
   "npy-1536|1536|npy|"
   "vdb-4096|4096|vdb|"
   "vdb-8192|8192|vdb|"
@@ -27,6 +29,8 @@ cases=(
   "obj-solid-512|512|obj|--mode solid --inside parity"
   "ply-solid-512|512|ply|--mode solid --inside parity"
   "stl-solid-512|512|stl|--mode solid --inside parity"
+  "vox-512|512|vox|"
+  "vox-solid-512|512|vox|--mode solid --inside parity"
 )
 wanted=("$@")
 

@@ -46,27 +46,44 @@ double inferred_band(const ScalarField& field) {
     return double(largest) / field.grid.voxel_size;
 }
 
-// Writes the samples a layer at a time, as layer(k, out) gives them. Only one layer is held,
-// whatever the field. band_voxels <= 0: the largest |value| written, in voxels (the sidecar is
-// made after the samples).
+// Layers [first, end) of a field, written to `samples` in x-fastest order.
+using FieldSlab = std::function<void(int64_t first, int64_t end, float* samples)>;
+
+// Writes the samples a slab of layers at a time, as slab_of gives them (at least `min_thickness`
+// layers a slab where the grid has them: a sparse field's leaves are 8 layers deep). Only two slabs
+// are held, whatever the field. band_voxels <= 0: the largest |value| written, in voxels (the
+// sidecar is made after the samples).
 void write_npy_field(const std::string& path, const Grid& grid, double band_voxels,
-                     detail::ProgressPhases& progress, const FieldLayer& layer) {
+                     detail::ProgressPhases& progress, const FieldSlab& slab_of,
+                     int64_t min_thickness = 1) {
     detail::check_dense_size(path, grid.voxel_count() * sizeof(float), "a float32 .npy");
     const size_t samples = progress.add(1);
     float largest = 0;
     auto write_samples = [&](std::ostream& out) {
         const size_t per_layer = size_t(grid.dims[0]) * size_t(grid.dims[1]);
-        std::vector<float> values(per_layer);
-        std::vector<char> bytes(per_layer * 4);
-        for (int64_t k = 0; k < grid.dims[2]; ++k) {
-            layer(k, values.data());
-            for (size_t v = 0; v < per_layer; ++v) {
-                largest = std::max(largest, std::abs(values[v]));
-                detail::store_le(&bytes[v * 4], values[v]);
-            }
-            out.write(bytes.data(), std::streamsize(bytes.size()));
-            progress.report(samples, uint64_t(k) + 1, uint64_t(grid.dims[2]));
-        }
+        const uint64_t layer_bytes = per_layer * sizeof(float);
+        const int64_t thickness = detail::slab_thickness(
+            layer_bytes, grid.dims[2],
+            std::max(detail::kCachedSlabBytes, uint64_t(min_thickness) * layer_bytes));
+        // "<f4" is the host's float on the little-endian hosts oclvox builds for, so the samples
+        // are written as they are.
+        static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "npy's <f4 is the host's float");
+        detail::stream_slabs<std::vector<float>>(
+            grid.dims[2], thickness,
+            [&](std::vector<float>& slab, int64_t first, int64_t end) {
+                slab.resize(per_layer * size_t(thickness));
+                slab_of(first, end, slab.data());
+                if (!(band_voxels > 0))
+                    for (size_t v = 0; v < per_layer * size_t(end - first); ++v)
+                        largest = std::max(largest, std::abs(slab[v]));
+            },
+            [&](const std::vector<float>& slab, int64_t first, int64_t end) {
+                out.write(reinterpret_cast<const char*>(slab.data()),
+                          std::streamsize(layer_bytes * uint64_t(end - first)));
+            },
+            [&](int64_t first) {
+                progress.report(samples, uint64_t(first), uint64_t(grid.dims[2]));
+            });
         progress.finish();
     };
     auto sidecar = [&] {
@@ -583,7 +600,14 @@ void write_field(const std::string& path, const Grid& grid, double band_voxels,
     validate_grid(grid);
     const std::string extension = detail::lowercase_extension(path);
     detail::ProgressPhases phases(progress, "writing " + path);
-    if (extension == ".npy") return write_npy_field(path, grid, band_voxels, phases, layer);
+    if (extension == ".npy") {
+        const size_t per_layer = size_t(grid.dims[0]) * size_t(grid.dims[1]);
+        return write_npy_field(path, grid, band_voxels, phases,
+                               [&](int64_t first, int64_t end, float* samples) {
+                                   for (int64_t k = first; k < end; ++k)
+                                       layer(k, samples + size_t(k - first) * per_layer);
+                               });
+    }
     if (extension == ".vdb") return detail::write_field_vdb(path, grid, band_voxels, layer, phases);
     unknown_field_extension(path, extension);
 }
@@ -595,10 +619,12 @@ void write_field(const std::string& path, const SparseField& field,
     detail::ProgressPhases phases(progress, "writing " + path);
     const auto& d = field.grid().dims;
     if (extension == ".npy")
-        return write_npy_field(path, field.grid(), field.band_voxels(), phases,
-                               [&](int64_t k, float* out) {
-                                   field.copy_box({0, 0, k}, {d[0], d[1], k + 1}, out);
-                               });
+        return write_npy_field(
+            path, field.grid(), field.band_voxels(), phases,
+            [&](int64_t first, int64_t end, float* samples) {
+                field.copy_box({0, 0, first}, {d[0], d[1], end}, samples);
+            },
+            SparseField::kLeaf);
     if (extension == ".vdb") return detail::write_field_vdb(path, field, phases);
     unknown_field_extension(path, extension);
 }

@@ -3,6 +3,8 @@
 // whole blocks from the bricks.
 #pragma once
 
+#include <tbb/task_group.h>
+
 #include <algorithm>
 #include <cstdint>
 #include <string>
@@ -24,6 +26,26 @@ inline int64_t slab_thickness(uint64_t layer_bytes, int64_t layers, uint64_t sla
     int64_t thickness = int64_t(slab_bytes / std::max<uint64_t>(layer_bytes, 1));
     if (thickness >= 4) thickness -= thickness % 4;
     return std::clamp<int64_t>(thickness, 1, std::max<int64_t>(layers, 1));
+}
+
+// Streams `layers` layers a slab of `thickness` at a time through two Slab buffers: fill(slab,
+// first, end) makes layers [first, end) on this thread (and the cores it spreads to) while a task
+// writes the slab before with write(slab, first, end), so the copy into the page cache overlaps
+// the making of the next slab. Writes come in order; report(first) is called on this thread before
+// each slab's write starts (it may throw, as a cancel does: the write under way is waited for).
+template <class Slab, class Fill, class Write, class Report>
+void stream_slabs(int64_t layers, int64_t thickness, Fill&& fill, Write&& write, Report&& report) {
+    Slab slabs[2];
+    tbb::task_group writing;  // destroyed first: it waits for a write still under way
+    for (int64_t first = 0, i = 0; first < layers; first += thickness, ++i) {
+        const int64_t end = std::min(layers, first + thickness);
+        Slab& slab = slabs[i % 2];
+        fill(slab, first, end);
+        writing.wait();  // the slab before is written, and the other buffer free
+        report(first);
+        writing.run([&write, &slab, first, end] { write(slab, first, end); });
+    }
+    writing.wait();
 }
 
 // Dense formats cost a byte or more per voxel on disk; past this many bytes (64 GiB) a sparse

@@ -15,7 +15,6 @@
 // records origin, voxel size, dims and axis order. Appending ".json" to the full name, rather
 // than replacing ".npy", keeps it from colliding with another output called out.json.
 #include <tbb/parallel_for.h>
-#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cstring>
@@ -120,31 +119,25 @@ void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         // block of the bricks more than once (bunny00 at 1024^3: 2-layer slabs took 2.2x as long).
         const int64_t thickness = slab_thickness(
             uint64_t(layer), nz, std::max<uint64_t>(slab_bytes, 4 * uint64_t(layer)));
-        // Two slabs: the cores mark one from the bricks and find its pages with data while a
-        // task copies the other into the file (the copy into the page cache is the longer part).
+        // The cores mark a slab from the bricks and find its pages with data while a task copies
+        // the slab before into the file (the copy into the page cache is the longer part).
         struct Slab {
             std::vector<uint8_t> bytes, pages_with_data;
         };
-        Slab slabs[2];
-        for (Slab& slab : slabs) slab.bytes.resize(size_t(layer * thickness));
         HoleSkippingWriter file(out);
         const uint64_t data_start = file.position();
-        tbb::task_group writing;  // destroyed first: it waits for a write still under way
-        for (int64_t z = 0, i = 0; z < nz; z += thickness, ++i) {
-            const int64_t depth = std::min(thickness, nz - z);
-            const size_t size = size_t(layer * depth);
-            Slab& slab = slabs[i % 2];
-            std::fill(slab.bytes.begin(), slab.bytes.end(), uint8_t(0));
-            voxels.mark_box({0, 0, z}, {nx, ny, z + depth}, {1, nx, layer}, slab.bytes.data());
-            find_pages_with_data(slab.bytes.data(), size, data_start + uint64_t(z * layer),
-                                 slab.pages_with_data);
-            writing.wait();  // the slab before is in the file, and the other buffer free
-            progress.report(layers, uint64_t(z), uint64_t(nz));
-            writing.run([&file, &slab, size] {
-                file.write(slab.bytes.data(), size, slab.pages_with_data);
-            });
-        }
-        writing.wait();
+        stream_slabs<Slab>(
+            nz, thickness,
+            [&](Slab& slab, int64_t first, int64_t end) {
+                slab.bytes.assign(size_t(layer * thickness), 0);
+                voxels.mark_box({0, 0, first}, {nx, ny, end}, {1, nx, layer}, slab.bytes.data());
+                find_pages_with_data(slab.bytes.data(), size_t(layer * (end - first)),
+                                     data_start + uint64_t(first * layer), slab.pages_with_data);
+            },
+            [&](const Slab& slab, int64_t first, int64_t end) {
+                file.write(slab.bytes.data(), size_t(layer * (end - first)), slab.pages_with_data);
+            },
+            [&](int64_t first) { progress.report(layers, uint64_t(first), uint64_t(nz)); });
         file.finish();
         progress.finish();
     };
