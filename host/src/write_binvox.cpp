@@ -203,27 +203,29 @@ void write_binvox(const std::string& path, const SparseVoxels& voxels, ProgressP
 
         // Phase 2: the planes x in file order, each padded to the cube, then the padding planes
         // beyond nx. A slab of planes (as many as `slab_bytes` of dense bytes would hold) is
-        // encoded in parallel, each plane into its own runs, written in plane order: the runs are
-        // the same as one pass's.
+        // encoded in parallel, each plane into its own runs, while a task writes the slab before
+        // in plane order: the runs are the same as one pass's.
         const int64_t nx = grid.dims[0];
         const int64_t thickness =
             slab_thickness(uint64_t(grid.dims[1] * grid.dims[2]), nx, slab_bytes);
         RunWriter runs(out);
-        std::vector<Runs> plane_runs;
-        for (int64_t x0 = 0; x0 < nx; x0 += thickness) {
-            const int64_t depth = std::min(thickness, nx - x0);
-            plane_runs.assign(size_t(depth), Runs());
-            // One task per column of blocks the slab's planes meet (up to 4 planes of it).
-            std::vector<int64_t> firsts;
-            for (int64_t x = x0; x < x0 + depth; x = (x / 4 + 1) * 4) firsts.push_back(x);
-            tbb::parallel_for(size_t(0), firsts.size(), [&](size_t group) {
-                const int64_t first = firsts[group];
-                const int64_t count = std::min((first / 4 + 1) * 4, x0 + depth) - first;
-                encode_planes(voxels, first, count, dim, &plane_runs[size_t(first - x0)]);
-            });
-            for (const Runs& plane_run : plane_runs) runs.add(plane_run);
-            progress.report(planes, uint64_t(x0 + depth), uint64_t(nx));
-        }
+        stream_slabs<std::vector<Runs>>(
+            nx, thickness,
+            [&](std::vector<Runs>& plane_runs, int64_t x0, int64_t x_end) {
+                plane_runs.assign(size_t(x_end - x0), Runs());
+                // One task per column of blocks the slab's planes meet (up to 4 planes of it).
+                std::vector<int64_t> firsts;
+                for (int64_t x = x0; x < x_end; x = (x / 4 + 1) * 4) firsts.push_back(x);
+                tbb::parallel_for(size_t(0), firsts.size(), [&](size_t group) {
+                    const int64_t first = firsts[group];
+                    const int64_t count = std::min((first / 4 + 1) * 4, x_end) - first;
+                    encode_planes(voxels, first, count, dim, &plane_runs[size_t(first - x0)]);
+                });
+            },
+            [&](const std::vector<Runs>& plane_runs, int64_t, int64_t) {
+                for (const Runs& plane_run : plane_runs) runs.add(plane_run);
+            },
+            [&](int64_t x0) { progress.report(planes, uint64_t(x0), uint64_t(nx)); });
         runs.add(0, uint64_t(dim - nx) * uint64_t(dim) * uint64_t(dim));
         runs.finish();
         progress.finish();
