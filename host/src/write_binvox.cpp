@@ -85,9 +85,13 @@ void encode_planes(const SparseVoxels& voxels, int64_t x, int64_t count, int64_t
     const int64_t b = voxels.brick_size(), per_axis = voxels.blocks_per_brick_axis();
     const auto nbricks = voxels.brick_dims();
     const int64_t wx = x % b / 4, words_per_row = (nbricks[1] * b + 63) / 64;
-    // The bricks along y at (x, z), and the bits along y of rows (x + i, z + j), row 4j + i.
+    // The bricks along y at (x, z), and the bits along y of rows (x + i, z + j), row 4j + i, with
+    // the words each row's set bits reach (first > last: none). Only those words are scanned for
+    // runs and cleared again: most rows of a surface's grid are empty, and scanning and clearing
+    // whole rows was most of the writing.
     std::vector<const uint64_t*> bricks(static_cast<size_t>(nbricks[1]));
-    std::vector<uint64_t> rows(static_cast<size_t>(16 * words_per_row));
+    std::vector<uint64_t> rows(static_cast<size_t>(16 * words_per_row), 0);
+    int64_t first_word[16], last_word[16];
     for (int64_t z = 0; z < nz; z += 4) {
         const int64_t rows_z = std::min<int64_t>(4, nz - z);
         if (z % b == 0) {  // the next layer of bricks
@@ -95,7 +99,8 @@ void encode_planes(const SparseVoxels& voxels, int64_t x, int64_t count, int64_t
                 bricks[size_t(by)] =
                     voxels.brick_blocks(uint64_t(x / b + nbricks[0] * (by + nbricks[1] * (z / b))));
         }
-        std::fill(rows.begin(), rows.end(), 0);
+        std::fill_n(first_word, 16, words_per_row);
+        std::fill_n(last_word, 16, -1);
         const int64_t wz = z % b / 4;
         for (int64_t by = 0; by < nbricks[1]; ++by) {
             const uint64_t* blocks = bricks[size_t(by)];
@@ -107,15 +112,29 @@ void encode_planes(const SparseVoxels& voxels, int64_t x, int64_t count, int64_t
                 for (int64_t j = 0; j < rows_z; ++j)
                     for (int64_t i = 0; i < count; ++i) {
                         const uint64_t bits = word >> ((x + i) % 4 + 16 * j) & 0x1111;
-                        rows[size_t((4 * j + i) * words_per_row + y / 64)] |=
-                            (bits * 0x1248 >> 12 & 0xF) << (y % 64);
+                        if (!bits) continue;
+                        const int64_t row = 4 * j + i;
+                        rows[size_t(row * words_per_row + y / 64)] |= (bits * 0x1248 >> 12 & 0xF)
+                                                                      << (y % 64);
+                        first_word[row] = std::min(first_word[row], y / 64);
+                        last_word[row] = std::max(last_word[row], y / 64);
                     }
             }
         }
         for (int64_t i = 0; i < count; ++i)
             for (int64_t j = 0; j < rows_z; ++j) {
-                runs[i].take_bits(&rows[size_t((4 * j + i) * words_per_row)], uint64_t(ny));
-                runs[i].add(0, uint64_t(dim - ny));
+                const int64_t row = 4 * j + i;
+                if (first_word[row] > last_word[row]) {
+                    runs[i].add(0, uint64_t(dim));
+                    continue;
+                }
+                uint64_t* words = &rows[size_t(row * words_per_row + first_word[row])];
+                const int64_t from = 64 * first_word[row];
+                const int64_t to = std::min(ny, 64 * (last_word[row] + 1));
+                runs[i].add(0, uint64_t(from));
+                runs[i].take_bits(words, uint64_t(to - from));
+                runs[i].add(0, uint64_t(dim - to));
+                std::fill(words, words + (last_word[row] - first_word[row] + 1), 0);
             }
     }
     for (int64_t i = 0; i < count; ++i) runs[i].add(0, uint64_t(dim - nz) * uint64_t(dim));
