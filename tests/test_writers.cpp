@@ -937,6 +937,33 @@ TEST_F(WriterTest, StreamedNpyAndBinvoxEqualTheDenseDefinitionForAnySlabAndBrick
     }
 }
 
+// Rows along y of several 64-bit words, whose set voxels start and end in any word (or there are
+// none): the binvox writer scans only the words a row's voxels reach, and the file is still the
+// dense definition's, for bricks that hold a row in one word and in several.
+TEST_F(WriterTest, BinvoxRowsOfSeveralWordsEqualTheDenseDefinition) {
+    const Grid grid = make_grid({9, 150, 13});  // rows of 3 words along y
+    VoxelSet set;
+    uint32_t state = 777;
+    for (int64_t k = 0; k < 13; ++k)
+        for (int64_t i = 0; i < 9; ++i) {
+            // Each (x, z) row: empty, one word's voxels (the first, middle or last word), or a
+            // span from one word into another.
+            state = state * 1664525u + 1013904223u;
+            const int64_t kind = (state >> 24) % 5;
+            if (kind == 0) continue;
+            const int64_t from = kind == 1 ? 3 : kind == 2 ? 70 : kind == 3 ? 130 : 60;
+            const int64_t to = kind == 1 ? 40 : kind == 2 ? 100 : kind == 3 ? 149 : 135;
+            for (int64_t j = from; j <= to; j += 1 + int64_t(state >> 28)) set.insert({i, j, k});
+        }
+    for (int brick : {4, 16, 64}) {
+        SCOPED_TRACE("brick " + std::to_string(brick));
+        const SparseVoxels voxels = make_voxels(grid, set, brick);
+        oclvox::detail::ProgressPhases none({}, "writing");
+        oclvox::detail::write_binvox(path("r.binvox"), voxels, none);
+        EXPECT_EQ(after(read_bytes(path("r.binvox")), "data\n"), binvox_data_by_definition(voxels));
+    }
+}
+
 // Bytes a file takes on its file system (holes take none).
 uint64_t allocated_bytes(const std::string& file) {
     struct stat info;
