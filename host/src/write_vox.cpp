@@ -219,17 +219,31 @@ std::array<int64_t, 3> tile_size(const Grid& grid, const Tile& tile) {
 }
 
 // XYZI content: the count, then x, y, z, colour per voxel (a little-endian 32-bit word each).
+// A voxel's word is its block's word plus its place in the block (no byte carries: a tile
+// coordinate is at most 255), so a full block, most of a solid, is 64 sums written at once.
 void write_tile_voxels(std::ostream& out, const std::vector<TileBlock>& blocks) {
-    BlockWriter w(out);
-    for (const TileBlock& block : blocks) {
-        const int64_t x = int64_t(block.position % kBlocksPerTileAxis) * 4;
-        const int64_t y = int64_t(block.position / kBlocksPerTileAxis % kBlocksPerTileAxis) * 4;
-        const int64_t z = int64_t(block.position / (kBlocksPerTileAxis * kBlocksPerTileAxis)) * 4;
-        for (uint64_t mask = block.bits; mask; mask &= mask - 1) {
-            const auto v = voxel_in_block(__builtin_ctzll(mask));
-            w.little_endian(uint32_t(x + v[0]) | uint32_t(y + v[1]) << 8 |
-                            uint32_t(z + v[2]) << 16 | uint32_t(kColorIndex) << 24);
+    static const std::array<uint32_t, 64> in_block = [] {
+        std::array<uint32_t, 64> words{};
+        for (int bit = 0; bit < 64; ++bit) {
+            const auto v = voxel_in_block(bit);
+            words[size_t(bit)] = uint32_t(v[0]) | uint32_t(v[1]) << 8 | uint32_t(v[2]) << 16;
         }
+        return words;
+    }();
+    BlockWriter w(out);
+    char full[64 * 4];
+    for (const TileBlock& block : blocks) {
+        const uint32_t x = block.position % kBlocksPerTileAxis * 4;
+        const uint32_t y = block.position / kBlocksPerTileAxis % kBlocksPerTileAxis * 4;
+        const uint32_t z = block.position / (kBlocksPerTileAxis * kBlocksPerTileAxis) * 4;
+        const uint32_t base = x | y << 8 | z << 16 | uint32_t(kColorIndex) << 24;
+        if (block.bits == ~uint64_t(0)) {
+            for (size_t bit = 0; bit < 64; ++bit) store_le(full + 4 * bit, base + in_block[bit]);
+            w.bytes(full, sizeof full);
+            continue;
+        }
+        for (uint64_t mask = block.bits; mask; mask &= mask - 1)
+            w.little_endian(base + in_block[size_t(__builtin_ctzll(mask))]);
     }
     w.flush();
 }
