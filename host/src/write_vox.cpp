@@ -172,8 +172,8 @@ class TileWalker {
             tiles.back().bricks.push_back(tile_of_brick[e].second);
         }
         for (Tile& tile : tiles)
-            for (const TileBlock& block : blocks(tile))
-                tile.voxels += uint64_t(popcount64(block.bits));
+            for_each_block(
+                tile, [&](uint32_t, uint64_t bits) { tile.voxels += uint64_t(popcount64(bits)); });
         tiles.erase(
             std::remove_if(tiles.begin(), tiles.end(), [](const Tile& t) { return t.voxels == 0; }),
             tiles.end());
@@ -183,6 +183,17 @@ class TileWalker {
     // The tile's set blocks in position order.
     std::vector<TileBlock> blocks(const Tile& tile) const {
         std::vector<TileBlock> found;
+        for_each_block(tile, [&](uint32_t position, uint64_t bits) {
+            found.push_back({position, bits});
+        });
+        std::sort(found.begin(), found.end());
+        return found;
+    }
+
+  private:
+    // Calls f(position, bits) for each set block of the tile, in the bricks' order.
+    template <class F>
+    void for_each_block(const Tile& tile, F&& f) const {
         for (const uint64_t brick : tile.bricks) {
             const uint64_t* words = voxels_.brick_blocks(brick);
             for (size_t w = 0; w < layout_.blocks_per_brick(); ++w) {
@@ -196,17 +207,13 @@ class TileWalker {
                         inside && o[a] >= tile.coords[a] * kTile && local[a] < kBlocksPerTileAxis;
                 }
                 if (!inside) continue;
-                found.push_back(
-                    {uint32_t(local[0] +
-                              kBlocksPerTileAxis * (local[1] + kBlocksPerTileAxis * local[2])),
-                     words[w]});
+                f(uint32_t(local[0] +
+                           kBlocksPerTileAxis * (local[1] + kBlocksPerTileAxis * local[2])),
+                  words[w]);
             }
         }
-        std::sort(found.begin(), found.end());
-        return found;
     }
 
-  private:
     const SparseVoxels& voxels_;
     BrickLayout layout_;
     int64_t brick_size_;
