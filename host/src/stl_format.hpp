@@ -8,15 +8,19 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <ios>
 #include <string>
 
 #include "block_writer.hpp"
 
 namespace oclvox::detail {
 
+// Where the triangle count lies in the file: after the 80-byte header text.
+constexpr std::streamoff kStlCountOffset = 80;
+
 // The header: `text`, cut to 80 bytes and padded with zero bytes, then the triangle count.
 inline void write_stl_header(BlockWriter& w, const std::string& text, uint32_t triangles) {
-    char header[80] = {};
+    char header[kStlCountOffset] = {};
     std::memcpy(header, text.data(), std::min(text.size(), sizeof header));
     w.bytes(header, sizeof header);
     w.little_endian(triangles);

@@ -427,22 +427,29 @@ void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
     });
 }
 
-// STL has no shared vertices: each exposed face is two triangles written as it comes, after a
-// first walk that counts the faces for the header.
+// STL has no shared vertices: each exposed face is two triangles written as it comes, and the
+// count, known at the end, is written into the header then. A grid whose faces could pass STL's
+// 32-bit count (more than 2^32 / 12 voxels: 6 faces each, 2 triangles a face) is counted in a
+// walk of its own first, so that one over the limit is refused before its file is written.
 void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
                          ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
-    const size_t counting = progress.add(1), face_pass = progress.add(1);
-    uint64_t faces = 0;
-    for_each_exposed_face(
-        voxels, progress, counting, [&](int64_t, int64_t, int64_t, int) { ++faces; }, [] {});
-    if (2 * faces > std::numeric_limits<uint32_t>::max())
-        throw OutputError("cannot write " + path + ": the surface has more than 2^32 triangles");
+    const uint64_t voxel_count = voxels.count();
+    const bool may_pass_limit = 12 * voxel_count > std::numeric_limits<uint32_t>::max();
+    const size_t counting = may_pass_limit ? progress.add(1) : 0, face_pass = progress.add(1);
+    if (may_pass_limit) {
+        uint64_t faces = 0;
+        for_each_exposed_face(
+            voxels, progress, counting, [&](int64_t, int64_t, int64_t, int) { ++faces; }, [] {});
+        if (2 * faces > std::numeric_limits<uint32_t>::max())
+            throw OutputError("cannot write " + path +
+                              ": the surface has more than 2^32 triangles");
+    }
     write_file_atomically(path, [&](std::ostream& out) {
         BlockWriter w(out);
-        write_stl_header(w,
-                         "oclvox: exposed faces of " + std::to_string(voxels.count()) + " voxels",
-                         uint32_t(2 * faces));
+        write_stl_header(w, "oclvox: exposed faces of " + std::to_string(voxel_count) + " voxels",
+                         0);
+        uint64_t faces = 0;
         for_each_exposed_face(
             voxels, progress, face_pass,
             [&](int64_t x, int64_t y, int64_t z, int direction) {
@@ -459,6 +466,7 @@ void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
                     return world;
                 };
                 const auto a = corner(0, 0), b = corner(1, 0), c = corner(1, 1), d = corner(0, 1);
+                ++faces;
                 if (positive) {
                     write_stl_facet(w, a, b, c);
                     write_stl_facet(w, a, c, d);
@@ -469,6 +477,8 @@ void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
             },
             [] {});
         w.flush();
+        out.seekp(kStlCountOffset);
+        write_le(out, uint32_t(2 * faces));
         progress.finish();
     });
 }
