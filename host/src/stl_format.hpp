@@ -26,19 +26,26 @@ inline void write_stl_header(BlockWriter& w, const std::string& text, uint32_t t
     w.little_endian(triangles);
 }
 
-// Triangle (a, b, c): the normal from its corners in double (zero for a degenerate one), then
-// everything rounded to float.
-inline void write_stl_facet(BlockWriter& w, const std::array<double, 3>& a,
-                            const std::array<double, 3>& b, const std::array<double, 3>& c) {
-    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-    const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
-    const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    for (double& x : n) x = length > 0 ? x / length : 0.0;
+// Triangle (a, b, c) with its unit normal n, everything rounded to float.
+inline void write_stl_facet(BlockWriter& w, const std::array<double, 3>& n,
+                            const std::array<double, 3>& a, const std::array<double, 3>& b,
+                            const std::array<double, 3>& c) {
     for (double x : n) w.little_endian(float(x));
     for (const auto* p : {&a, &b, &c})
         for (double x : *p) w.little_endian(float(x));
     w.little_endian(uint16_t(0));
+}
+
+// Triangle (a, b, c) with the normal from its corners in double (zero for a degenerate one).
+inline void write_stl_facet(BlockWriter& w, const std::array<double, 3>& a,
+                            const std::array<double, 3>& b, const std::array<double, 3>& c) {
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    std::array<double, 3> n = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                               u[0] * v[1] - u[1] * v[0]};
+    const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (double& x : n) x = length > 0 ? x / length : 0.0;
+    write_stl_facet(w, n, a, b, c);
 }
 
 }  // namespace oclvox::detail

@@ -467,12 +467,16 @@ void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
                 };
                 const auto a = corner(0, 0), b = corner(1, 0), c = corner(1, 1), d = corner(0, 1);
                 ++faces;
+                // The face's normal, +-axis: what the corners give, exactly (their differences
+                // are +0 or positive, so the products are, and the length is the one component).
+                std::array<double, 3> n{};
+                n[size_t(axis)] = positive ? 1.0 : -1.0;
                 if (positive) {
-                    write_stl_facet(w, a, b, c);
-                    write_stl_facet(w, a, c, d);
+                    write_stl_facet(w, n, a, b, c);
+                    write_stl_facet(w, n, a, c, d);
                 } else {
-                    write_stl_facet(w, a, d, c);
-                    write_stl_facet(w, a, c, b);
+                    write_stl_facet(w, n, a, d, c);
+                    write_stl_facet(w, n, a, c, b);
                 }
             },
             [] {});
