@@ -30,8 +30,8 @@ namespace {
 constexpr uint64_t kPage = 4096;
 
 // The file pages that bytes [at, at + size) of a file fall in, piece by piece (the first and last
-// may be partial): whether each holds a byte other than zero. Pages in parallel: this is half of
-// the work of writing them.
+// may be partial): whether each holds a byte other than zero. Found on the cores that marked the
+// slab, in parallel, so that the thread writing the file does nothing but write.
 void find_pages_with_data(const uint8_t* data, size_t size, uint64_t at,
                           std::vector<uint8_t>& with_data) {
     const size_t first = size_t(at / kPage), end = size_t((at + size + kPage - 1) / kPage);
