@@ -14,10 +14,11 @@
 // row. Vertices are numbered in order of first use; a vertex is a lattice point of the layer's
 // bottom or top plane, found in that plane's table (the top plane's becomes the next layer's
 // bottom), so the largest buffers are one brick layer's rows of three planes and one layer's
-// faces. OBJ takes each voxel layer's new vertices and quads in turn; PLY, which needs the counts
-// first and all vertices before any face, walks the layers three times (count, vertices, faces),
-// each walk numbering the vertices identically; STL walks them twice (count, triangles). The file
-// does not depend on the brick size or hash order.
+// faces. OBJ takes each voxel layer's new vertices and quads in turn; PLY, which needs all
+// vertices before any face, walks the layers twice (vertices, faces), each walk numbering the
+// vertices identically, and writes its header's counts, known only then, at the end; STL walks
+// them once, its count too written at the end. The file does not depend on the brick size or
+// hash order.
 #include <algorithm>
 #include <charconv>
 #include <functional>
@@ -393,25 +394,44 @@ void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels,
     });
 }
 
+// The PLY header of a mesh of `vertices` and `quads`, its comment line padded with spaces to the
+// length of the header of the largest counts, so that the header of the counts found by the walks
+// replaces the one written before them byte for byte.
+std::string cube_mesh_ply_header(uint64_t voxels, uint64_t vertices, uint64_t quads) {
+    auto header = [&](const std::string& comment, uint64_t v, uint64_t q) {
+        return "ply\nformat binary_little_endian 1.0\n" + comment + "\nelement vertex " +
+               std::to_string(v) +
+               "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+               std::to_string(q) + "\nproperty list uchar int vertex_indices\nend_header\n";
+    };
+    const std::string comment =
+        "comment oclvox: exposed faces of " + std::to_string(voxels) + " voxels";
+    const size_t longest =
+        header(comment, uint64_t(std::numeric_limits<int32_t>::max()), ~uint64_t(0)).size();
+    const size_t length = header(comment, vertices, quads).size();
+    return header(comment + std::string(longest - length, ' '), vertices, quads);
+}
+
 void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
                          ProgressPhases& progress) {
     const Grid& grid = voxels.grid();
-    // Three passes over the layers: counting (the header comes first), vertices, faces.
-    const size_t counting = progress.add(1), vertex_pass = progress.add(1),
+    const uint64_t voxel_count = voxels.count();
+    // Two walks over the layers (vertices, faces) after a header with room for any counts, which
+    // are written into it at the end. A grid whose vertices could pass PLY's signed 32-bit
+    // indices (over 2^31 / 8 voxels) is walked once more first, so that one over the limit is
+    // refused (by for_each_layer_mesh) before its file is written.
+    const bool may_pass_limit = 8 * voxel_count >= uint64_t(std::numeric_limits<int32_t>::max());
+    const size_t checking = may_pass_limit ? progress.add(1) : 0, vertex_pass = progress.add(1),
                  face_pass = progress.add(1);
-    uint64_t vertices = 0, quads = 0;
-    for_each_layer_mesh(path, voxels, progress, counting, [&](const LayerMesh& layer) {
-        vertices += layer.new_points.size();
-        quads += layer.quads.size();
-    });
+    if (may_pass_limit)
+        for_each_layer_mesh(path, voxels, progress, checking, [](const LayerMesh&) {});
     write_file_atomically(path, [&](std::ostream& out) {
         BlockWriter w(out);
-        w.text("ply\nformat binary_little_endian 1.0\ncomment oclvox: exposed faces of " +
-               std::to_string(voxels.count()) + " voxels\nelement vertex " +
-               std::to_string(vertices) +
-               "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
-               std::to_string(quads) + "\nproperty list uchar int vertex_indices\nend_header\n");
+        w.text(cube_mesh_ply_header(voxel_count, 0, 0));
+        uint64_t vertices = 0, quads = 0;
         for_each_layer_mesh(path, voxels, progress, vertex_pass, [&](const LayerMesh& layer) {
+            vertices += layer.new_points.size();
+            quads += layer.quads.size();
             for (const auto& p : layer.new_points)
                 for (int axis = 0; axis < 3; ++axis)
                     w.little_endian(world_coordinate(grid, axis, p[size_t(axis)]));
@@ -423,6 +443,8 @@ void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
             }
         });
         w.flush();
+        out.seekp(0);
+        out << cube_mesh_ply_header(voxel_count, vertices, quads);
         progress.finish();
     });
 }
