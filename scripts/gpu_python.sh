@@ -2,7 +2,8 @@
 # The Python package's tests on the lent GPU machine, which has neither Debian's python3.11 nor
 # numpy, pytest or Dask. Three parts:
 #   bash scripts/gpu_python.sh pack   here, after scripts/build.sh with -DOCLVOX_BUILD_PYTHON=ON and
-#                                     ../shared/tools/gpu/pack.sh: writes .gpu/python.tar.xz
+#                                     ../shared/tools/gpu/pack.sh: adds OpenVDB's module
+#                                     (liboclvox_vdb.so) to pack.sh's bundle, writes .gpu/python.tar.xz
 #                                     (python3.11 with its standard library, Debian's numpy, pytest
 #                                     and Dask, the libraries they link, our built package and its
 #                                     tests; about 19 MB, so .gpu stays within the 64 MiB a call
@@ -38,6 +39,16 @@ pack() {
         awk '$3 ~ /^\// {print $3}' | sort -u |
         grep -vE '/(libc|libm|libgcc_s|libstdc\+\+|ld-linux|libpthread|libdl|librt|libapt-pkg|libdbus-1|libsystemd|libudev|libglib-2.0|liboclvox|libopenvdb|libOpenCL)\.so' |
         while read -r l; do cp -L "$l" "$py/so/"; done
+    # OpenVDB's module, which liboclvox loads from its own folder on the first .vdb (so the ldd
+    # of pack.sh does not find it), into the bundle's lib/ beside liboclvox.
+    if [[ -f $build/liboclvox_vdb.so && -f .gpu/bundle.tar.xz ]]; then
+        local bundle
+        bundle=$(mktemp -d)
+        tar -C "$bundle" -xJf .gpu/bundle.tar.xz
+        cp -L "$build/liboclvox_vdb.so" "$bundle/oclvox-gpu/lib/"
+        tar -C "$bundle" -cJf .gpu/bundle.tar.xz oclvox-gpu
+        rm -rf "$bundle"
+    fi
     cp -r "$build/python/oclvox" "$py/"
     cp -r python/tests "$py/tests"
     mkdir -p .gpu

@@ -19,13 +19,13 @@
 #include <optional>
 #include <variant>
 
-#include "field_vdb.hpp"
 #include "file_names.hpp"
 #include "host_memory.hpp"
 #include "little_endian.hpp"
 #include "npy_format.hpp"
 #include "oclvox/sdf.hpp"
 #include "slabs.hpp"
+#include "vdb_module.hpp"
 
 namespace oclvox {
 
@@ -608,7 +608,9 @@ void write_field(const std::string& path, const Grid& grid, double band_voxels,
                                        layer(k, samples + size_t(k - first) * per_layer);
                                });
     }
-    if (extension == ".vdb") return detail::write_field_vdb(path, grid, band_voxels, layer, phases);
+    if (extension == ".vdb")
+        return detail::vdb_functions_to_write(path).write_field(path, grid, band_voxels, layer,
+                                                                phases);
     unknown_field_extension(path, extension);
 }
 
@@ -625,7 +627,8 @@ void write_field(const std::string& path, const SparseField& field,
                 field.copy_box({0, 0, first}, {d[0], d[1], end}, samples);
             },
             SparseField::kLeaf);
-    if (extension == ".vdb") return detail::write_field_vdb(path, field, phases);
+    if (extension == ".vdb")
+        return detail::vdb_functions_to_write(path).write_sparse_field(path, field, phases);
     unknown_field_extension(path, extension);
 }
 
@@ -651,12 +654,12 @@ void require_vdb_extension(const std::string& path) {
 
 SparseField read_sparse_field(const std::string& path) {
     require_vdb_extension(path);
-    return detail::read_field_vdb(path);
+    return detail::vdb_functions_to_read(path).read_field(path);
 }
 
 SparseField read_sparse_field(const std::string& path, const Grid& lattice, double band_voxels) {
     require_vdb_extension(path);
-    return detail::read_field_vdb(path, lattice, band_voxels);
+    return detail::vdb_functions_to_read(path).read_field_onto(path, lattice, band_voxels);
 }
 
 }  // namespace oclvox

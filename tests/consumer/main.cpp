@@ -1,7 +1,13 @@
-// Voxelizes a unit cube through the installed library and checks the hand-worked count. The
-// public header compiles without any OpenCL header on the include path.
+// Voxelizes a unit cube through the installed library and checks the hand-worked count, then
+// writes it as a .vdb, which the installed library does through its OpenVDB module (loaded from
+// its own folder on the first .vdb). The public header compiles without any OpenCL header on the
+// include path.
+#include <unistd.h>
+
 #include <cstdio>
+#include <filesystem>
 #include <oclvox/oclvox.hpp>
+#include <string>
 
 int main() {
     oclvox::Mesh cube;
@@ -22,6 +28,15 @@ int main() {
                      static_cast<unsigned long long>(voxels.count()));
         return 1;
     }
-    std::printf("consumer: find_package(oclvox) works, 208 voxels as expected\n");
+    const std::filesystem::path vdb =
+        std::filesystem::temp_directory_path() / ("consumer-" + std::to_string(getpid()) + ".vdb");
+    oclvox::write_voxels(vdb.string(), voxels);
+    const auto bytes = std::filesystem::file_size(vdb);
+    std::filesystem::remove(vdb);
+    if (bytes == 0) {
+        std::fprintf(stderr, "consumer: the .vdb written is empty\n");
+        return 1;
+    }
+    std::printf("consumer: find_package(oclvox) works, 208 voxels as expected, .vdb written\n");
     return 0;
 }

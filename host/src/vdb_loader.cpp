@@ -1,0 +1,71 @@
+// The shared liboclvox loads OpenVDB's functions on the first .vdb (see vdb_module.hpp): the
+// module liboclvox_vdb from the folder liboclvox was loaded from (the build tree, or the installed
+// library's folder), else wherever the dynamic loader finds it.
+#include <dlfcn.h>
+
+#include <mutex>
+
+#include "vdb_module.hpp"
+
+namespace oclvox::detail {
+
+namespace {
+
+struct Loaded {
+    const VdbFunctions* functions = nullptr;
+    std::string why;  // the reason functions is null
+};
+
+std::string folder_of_this_library() {
+    Dl_info info{};
+    if (dladdr(reinterpret_cast<void*>(&folder_of_this_library), &info) == 0 || !info.dli_fname)
+        return "";
+    const std::string file = info.dli_fname;
+    const size_t slash = file.find_last_of('/');
+    return slash == std::string::npos ? "" : file.substr(0, slash + 1);
+}
+
+const Loaded& loaded() {
+    static Loaded result;
+    static std::once_flag once;
+    std::call_once(once, [] {
+        const std::string beside = folder_of_this_library() + OCLVOX_VDB_MODULE_FILE;
+        void* module = dlopen(beside.c_str(), RTLD_NOW | RTLD_LOCAL);
+        std::string why = module ? "" : std::string(dlerror());
+        if (!module) {
+            module = dlopen(OCLVOX_VDB_MODULE_FILE, RTLD_NOW | RTLD_LOCAL);
+            if (!module) why += "; " + std::string(dlerror());
+        }
+        if (!module) {
+            result.why = "OpenVDB support, the module " OCLVOX_VDB_MODULE_FILE
+                         " beside liboclvox, could not be loaded: " +
+                         why;
+            return;
+        }
+        using Entry = const VdbFunctions* (*)();
+        const auto entry = reinterpret_cast<Entry>(dlsym(module, "oclvox_vdb_functions"));
+        if (!entry) {
+            result.why = "the module " OCLVOX_VDB_MODULE_FILE
+                         " has no entry oclvox_vdb_functions (from another build of oclvox?)";
+            return;
+        }
+        result.functions = entry();
+    });
+    return result;
+}
+
+}  // namespace
+
+const VdbFunctions& vdb_functions_to_write(const std::string& path) {
+    const Loaded& module = loaded();
+    if (!module.functions) throw OutputError("cannot write " + path + ": " + module.why);
+    return *module.functions;
+}
+
+const VdbFunctions& vdb_functions_to_read(const std::string& path) {
+    const Loaded& module = loaded();
+    if (!module.functions) throw InputError("cannot read " + path + ": " + module.why);
+    return *module.functions;
+}
+
+}  // namespace oclvox::detail
