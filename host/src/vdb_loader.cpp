@@ -43,10 +43,10 @@ const Loaded& loaded() {
             return;
         }
         using Entry = const VdbFunctions* (*)();
-        const auto entry = reinterpret_cast<Entry>(dlsym(module, "oclvox_vdb_functions"));
+        const auto entry = reinterpret_cast<Entry>(dlsym(module, OCLVOX_VDB_ENTRY_NAME));
         if (!entry) {
-            result.why = "the module " OCLVOX_VDB_MODULE_FILE
-                         " has no entry oclvox_vdb_functions (from another build of oclvox?)";
+            result.why = "the module " OCLVOX_VDB_MODULE_FILE " has no " OCLVOX_VDB_ENTRY_NAME
+                         ": it is from another version of oclvox";
             return;
         }
         result.functions = entry();
