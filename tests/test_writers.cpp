@@ -964,6 +964,63 @@ TEST_F(WriterTest, BinvoxRowsOfSeveralWordsEqualTheDenseDefinition) {
     }
 }
 
+// The dense writers' slab stream: every slab is made and written once, in order, with the layers
+// it covers (the last one short); the write of a slab never overlaps the making of the buffer it
+// reads from; and a failing write, or a report that throws (as a cancel does), stops the stream
+// with that exception only once no write is under way.
+TEST(SlabStream, WritesEverySlabInOrderAndStopsAtAFailureOnlyWhenNoWriteIsUnderWay) {
+    struct Slab {
+        int64_t first = -1, end = -1;
+        bool being_written = false;
+    };
+    std::vector<std::pair<int64_t, int64_t>> written;
+    bool overlapped = false;
+    oclvox::detail::stream_slabs<Slab>(
+        10, 3,
+        [&](Slab& slab, int64_t first, int64_t end) {
+            overlapped = overlapped || slab.being_written;
+            slab.first = first;
+            slab.end = end;
+        },
+        [&](Slab& slab, int64_t first, int64_t end) {
+            slab.being_written = true;
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+            if (slab.first != first || slab.end != end) written.push_back({-1, -1});
+            written.push_back({first, end});
+            slab.being_written = false;
+        },
+        [](int64_t) {});
+    const std::vector<std::pair<int64_t, int64_t>> expected = {{0, 3}, {3, 6}, {6, 9}, {9, 10}};
+    EXPECT_EQ(written, expected);
+    EXPECT_FALSE(overlapped);
+
+    // A write that throws: its exception, and no slab after it is written.
+    written.clear();
+    EXPECT_THROW(oclvox::detail::stream_slabs<Slab>(
+                     10, 3, [](Slab&, int64_t, int64_t) {},
+                     [&](const Slab&, int64_t first, int64_t end) {
+                         if (first == 3) throw std::runtime_error("disk gone");
+                         written.push_back({first, end});
+                     },
+                     [](int64_t) {}),
+                 std::runtime_error);
+    EXPECT_EQ(written, (std::vector<std::pair<int64_t, int64_t>>{{0, 3}}));
+
+    // A report that throws while a slab is being written: the exception only once it is done.
+    bool finished = false;
+    EXPECT_THROW(oclvox::detail::stream_slabs<Slab>(
+                     10, 3, [](Slab&, int64_t, int64_t) {},
+                     [&](const Slab&, int64_t first, int64_t) {
+                         std::this_thread::sleep_for(std::chrono::milliseconds(20));
+                         finished = first == 0;
+                     },
+                     [&](int64_t first) {
+                         if (first == 3) throw oclvox::Cancelled("stopped");
+                     }),
+                 oclvox::Cancelled);
+    EXPECT_TRUE(finished);
+}
+
 // Bytes a file takes on its file system (holes take none).
 uint64_t allocated_bytes(const std::string& file) {
     struct stat info;
