@@ -22,6 +22,7 @@
 #include <mutex>
 #include <set>
 
+#include "file_names.hpp"
 #include "oclvox/oclvox.hpp"
 
 namespace oclvox::detail {
@@ -36,13 +37,6 @@ std::string temporary_name_for(const std::string& path) {
 // errno is not guaranteed to be set by iostreams; fall back to a generic reason.
 std::string last_system_error() {
     return errno != 0 ? std::strerror(errno) : "unknown I/O error";
-}
-
-// The folder a path's file lives in, as the user would name it.
-std::string folder_of(const std::string& path) {
-    const size_t slash = path.find_last_of('/');
-    if (slash == std::string::npos) return ".";
-    return slash == 0 ? "/" : path.substr(0, slash);
 }
 
 // The temporary files of this process's writes in progress, and whether writing was abandoned.

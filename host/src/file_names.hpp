@@ -1,4 +1,5 @@
-// File-name helpers shared by every reader and writer that picks a format by extension.
+// File-name helpers shared by every reader and writer that picks a format by extension, and by
+// whatever needs a file's folder.
 #pragma once
 
 #include <cctype>
@@ -25,6 +26,13 @@ inline std::string lowercase_extension(const std::string& path) {
 inline std::string file_name_of(const std::string& path) {
     const size_t slash = path.find_last_of("/\\");
     return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+// The folder a path's file lives in, as the user would name it: "." for a bare name.
+inline std::string folder_of(const std::string& path) {
+    const size_t slash = path.find_last_of('/');
+    if (slash == std::string::npos) return ".";
+    return slash == 0 ? "/" : path.substr(0, slash);
 }
 
 }  // namespace oclvox::detail

@@ -5,6 +5,7 @@
 
 #include <mutex>
 
+#include "file_names.hpp"
 #include "vdb_module.hpp"
 
 namespace oclvox::detail {
@@ -16,25 +17,24 @@ struct Loaded {
     std::string why;  // the reason functions is null
 };
 
-std::string folder_of_this_library() {
+// The module's path beside this library, or "" where the loader cannot say where it is.
+std::string module_beside_this_library() {
     Dl_info info{};
-    if (dladdr(reinterpret_cast<void*>(&folder_of_this_library), &info) == 0 || !info.dli_fname)
+    if (dladdr(reinterpret_cast<void*>(&module_beside_this_library), &info) == 0 || !info.dli_fname)
         return "";
-    const std::string file = info.dli_fname;
-    const size_t slash = file.find_last_of('/');
-    return slash == std::string::npos ? "" : file.substr(0, slash + 1);
+    return folder_of(info.dli_fname) + "/" OCLVOX_VDB_MODULE_FILE;
 }
 
 const Loaded& loaded() {
     static Loaded result;
     static std::once_flag once;
     std::call_once(once, [] {
-        const std::string beside = folder_of_this_library() + OCLVOX_VDB_MODULE_FILE;
-        void* module = dlopen(beside.c_str(), RTLD_NOW | RTLD_LOCAL);
-        std::string why = module ? "" : std::string(dlerror());
+        const std::string beside = module_beside_this_library();
+        void* module = beside.empty() ? nullptr : dlopen(beside.c_str(), RTLD_NOW | RTLD_LOCAL);
+        std::string why = module || beside.empty() ? "" : std::string(dlerror()) + "; ";
         if (!module) {
             module = dlopen(OCLVOX_VDB_MODULE_FILE, RTLD_NOW | RTLD_LOCAL);
-            if (!module) why += "; " + std::string(dlerror());
+            if (!module) why += dlerror();
         }
         if (!module) {
             result.why = "OpenVDB support, the module " OCLVOX_VDB_MODULE_FILE
