@@ -726,6 +726,43 @@ TEST_F(WriterTest, CubeMeshHasTheExposedFacesForEveryRowWidth) {
     check_exposed_face_mesh(read_obj(read_bytes(path("stairs.obj"))), make_grid({8, 8, 4}), stairs);
 }
 
+// The layers are made a slab at a time, each layer on its own, and numbered across the slabs'
+// boundaries: for slabs of 1, 2, 3 and 7 layers and the default, and bricks of 4 and 12, every
+// .obj and .ply has exactly the exposed faces on shared corners (a corner numbered again at a
+// slab boundary is a duplicate position), the .stl twice their count in triangles, and each
+// format is one file whatever the slabs.
+TEST_F(WriterTest, CubeMeshFilesDoNotDependOnTheSlabsTheLayersAreMadeIn) {
+    const Grid grid = make_grid({23, 17, 31}, {-1, 2, 0.5}, 0.5);
+    VoxelSet set;
+    std::mt19937 rng(11);
+    for (int64_t k = 0; k < 31; ++k)
+        for (int64_t j = 0; j < 17; ++j)
+            for (int64_t i = 0; i < 23; ++i)
+                if (rng() % 100 < (k % 9 < 3 ? 60u : k % 9 == 5 ? 0u : 15u)) set.insert({i, j, k});
+    const size_t faces = exposed_faces_by_brute_force(set).size();
+    std::map<std::string, std::string> first;
+    for (const int brick : {4, 12})
+        for (const int64_t slab : {int64_t(1), int64_t(2), int64_t(3), int64_t(7), int64_t(0)}) {
+            SCOPED_TRACE("brick " + std::to_string(brick) + ", slab " + std::to_string(slab));
+            const SparseVoxels voxels = make_voxels(grid, set, brick);
+            oclvox::detail::ProgressPhases none({}, "writing");
+            oclvox::detail::write_cube_mesh_obj(path("s.obj"), voxels, none, slab);
+            oclvox::detail::write_cube_mesh_ply(path("s.ply"), voxels, none, slab);
+            oclvox::detail::write_cube_mesh_stl(path("s.stl"), voxels, none, slab);
+            const std::map<std::string, std::string> files = {{"obj", read_bytes(path("s.obj"))},
+                                                              {"ply", read_bytes(path("s.ply"))},
+                                                              {"stl", read_bytes(path("s.stl"))}};
+            check_exposed_face_mesh(read_obj(files.at("obj")), grid, set);
+            check_exposed_face_mesh(read_ply(files.at("ply")), grid, set);
+            ByteReader stl{files.at("stl")};
+            stl.pos = 80;
+            EXPECT_EQ(stl.uint(4), 2 * faces);
+            if (first.empty()) first = files;
+            for (const auto& [format, bytes] : files)
+                EXPECT_TRUE(bytes == first.at(format)) << format;
+        }
+}
+
 TEST_F(WriterTest, GridWithNoSetVoxelsWritesValidEmptyFiles) {
     const SparseVoxels empty(make_grid({3, 4, 5}), 4);
     for (const char* name : {"e.binvox", "e.npy", "e.vox", "e.obj", "e.ply", "e.stl", "e.vdb"})

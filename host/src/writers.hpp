@@ -28,13 +28,14 @@ void write_npy(const std::string& path, const SparseVoxels& voxels, ProgressPhas
 void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress);
 
 // The exposed faces of the voxel cubes as a quad mesh in world coordinates (.stl: each quad as
-// two triangles).
+// two triangles), made a slab of `slab_layers` voxel layers at a time (0: as many as keep every
+// core busy; tests make it small to cross many slab boundaries).
 void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels,
-                         ProgressPhases& progress);
+                         ProgressPhases& progress, int64_t slab_layers = 0);
 void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
-                         ProgressPhases& progress);
+                         ProgressPhases& progress, int64_t slab_layers = 0);
 void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
-                         ProgressPhases& progress);
+                         ProgressPhases& progress, int64_t slab_layers = 0);
 
 // OpenVDB occupancy: a BoolGrid "occupancy", voxel (i,j,k) at index (i,j,k). See write_vdb.cpp.
 void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress);
