@@ -3,11 +3,16 @@
 // whole blocks from the bricks.
 #pragma once
 
+#include <tbb/task_arena.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cstdint>
+#include <ostream>
 #include <string>
+#include <vector>
+
+#include "block_writer.hpp"
 
 namespace oclvox::detail {
 
@@ -46,6 +51,38 @@ void stream_slabs(int64_t layers, int64_t thickness, Fill&& fill, Write&& write,
         writing.run([&write, &slab, first, end] { write(slab, first, end); });
     }
     writing.wait();
+}
+
+// A file's parts, each formatted on its own into bytes kept in memory (BlockWriter without a
+// stream), written to `out` in order (nothing without `out`: a walk that only counts):
+// stream_slabs with `slab_parts` parts a slab, where fill(slab, first, end) makes parts
+// [first, end) of `slab` on any core (slab.bytes[i] is part first + i, cleared before) while a
+// task writes the slab before. report as stream_slabs'.
+struct PartsSlab {
+    std::vector<BlockWriter> bytes;
+};
+template <class Slab, class Fill, class Report>
+void stream_parts(std::ostream* out, int64_t parts, int64_t slab_parts, Fill&& fill,
+                  Report&& report) {
+    stream_slabs<Slab>(
+        parts, slab_parts,
+        [&](Slab& slab, int64_t first, int64_t end) {
+            slab.bytes.resize(size_t(end - first));
+            for (BlockWriter& bytes : slab.bytes) bytes.clear();
+            fill(slab, first, end);
+        },
+        [&](const Slab& slab, int64_t, int64_t) {
+            if (out)
+                for (const BlockWriter& bytes : slab.bytes)
+                    out->write(bytes.data(), std::streamsize(bytes.size()));
+        },
+        report);
+}
+
+// Parts a slab for stream_parts: several for every core, so that parts of different sizes share
+// out evenly.
+inline int64_t parts_per_slab() {
+    return std::max<int64_t>(4 * int64_t(tbb::this_task_arena::max_concurrency()), 16);
 }
 
 // Dense formats cost a byte or more per voxel on disk; past this many bytes (64 GiB) a sparse

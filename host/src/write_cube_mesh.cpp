@@ -365,24 +365,22 @@ uint64_t number_of(const LayerMesh& below, const LayerMesh& mesh, uint32_t i) {
                                : mesh.first_number + origin;
 }
 
-// Layers per slab: several for every core (at least 16, to share out layers of different sizes),
-// but no more than keep a slab within about kMeshSlabBytes when each set voxel of an average
-// layer has six faces of 48 bytes (an overestimate for all but the thinnest shells), and never
-// fewer than two per core.
+// Layers per slab: parts_per_slab, but no more than keep a slab within about kMeshSlabBytes when
+// each set voxel of an average layer has six faces of 48 bytes (an overestimate for all but the
+// thinnest shells), and never fewer than two per core.
 constexpr double kMeshSlabBytes = double(uint64_t(256) << 20);
 int64_t slab_layers_for(const SparseVoxels& voxels) {
     const int64_t cores = tbb::this_task_arena::max_concurrency();
     const double layer_bytes = 6.0 * 48.0 * double(voxels.count()) / double(voxels.grid().dims[2]);
     const int64_t fit = int64_t(std::min(64.0, kMeshSlabBytes / std::max(layer_bytes, 1.0)));
-    return std::max(std::min(std::max<int64_t>(4 * cores, 16), fit),
-                    std::min<int64_t>(2 * cores, 64));
+    return std::max(std::min(parts_per_slab(), fit), std::min<int64_t>(2 * cores, 64));
 }
 
 enum class Corners { Numbered, None };
 
 struct MeshSlab {
-    std::vector<LayerMesh> meshes;
     std::vector<BlockWriter> bytes;
+    std::vector<LayerMesh> meshes;
     std::vector<uint64_t> faces;
 };
 
@@ -390,13 +388,14 @@ struct MeshCounts {
     uint64_t vertices = 0, faces = 0;
 };
 
-// Streams the voxel layers in slabs of `slab_layers` (stream_slabs; 0: slab_layers_for),
-// writing each layer's bytes to `out` in layer order (nothing without `out`: a walk that only
-// counts), and reports the layers done as phase `phase`. For each slab, on any core: make(bricks,
-// z, scratch, mesh, bytes) makes layer z (its brick layer `bricks`) and returns its faces (its
-// bytes to `bytes`, null when counting, or its LayerMesh); then, with Corners::Numbered, the
-// layers' corners are numbered in layer order, and format(below, mesh, z, bytes) makes the
-// bytes of a numbered layer (`below` the layer under it). Returns the counts of the walk.
+// Streams the voxel layers as the parts of a file (stream_parts) in slabs of `slab_layers` (0:
+// slab_layers_for), writing each layer's bytes to `out` in layer order (nothing without `out`: a
+// walk that only counts), and reports the layers done as phase `phase`. For each slab, on any
+// core: make(bricks, z, scratch, mesh, bytes) makes layer z (its brick layer `bricks`) and
+// returns its faces (its bytes to `bytes`, null when counting, or its LayerMesh); then, with
+// Corners::Numbered, the layers' corners are numbered in layer order, and format(below, mesh, z,
+// bytes) makes the bytes of a numbered layer (`below` the layer under it). Returns the counts of
+// the walk.
 template <class Make, class Format>
 MeshCounts stream_layers(const ExposedFaces& faces, const SparseVoxels& voxels,
                          const std::string& path, std::ostream* out, int64_t slab_layers,
@@ -406,12 +405,11 @@ MeshCounts stream_layers(const ExposedFaces& faces, const SparseVoxels& voxels,
     tbb::enumerable_thread_specific<LayerScratch> scratch;
     LayerMesh carried;  // the layer below the slab being made (its last layer, once numbered)
     MeshCounts counts;
-    stream_slabs<MeshSlab>(
-        nz, slab_layers > 0 ? slab_layers : slab_layers_for(voxels),
+    stream_parts<MeshSlab>(
+        out, nz, slab_layers > 0 ? slab_layers : slab_layers_for(voxels),
         [&](MeshSlab& slab, int64_t first, int64_t end) {
             const size_t layers = size_t(end - first);
             slab.meshes.resize(layers);
-            slab.bytes.resize(layers);
             slab.faces.assign(layers, 0);
             std::vector<BrickLayer> bricks;  // of the brick layers the slab lies in
             for (int64_t bz = first / brick; bz <= (end - 1) / brick; ++bz)
@@ -419,7 +417,6 @@ MeshCounts stream_layers(const ExposedFaces& faces, const SparseVoxels& voxels,
             // Phase 1: each layer's faces, on any core.
             tbb::parallel_for(size_t(0), layers, [&](size_t i) {
                 const int64_t z = first + int64_t(i);
-                slab.bytes[i].clear();
                 slab.faces[i] = make(bricks[size_t(z / brick - first / brick)], z, scratch.local(),
                                      slab.meshes[i], out ? &slab.bytes[i] : nullptr);
             });
@@ -443,11 +440,6 @@ MeshCounts stream_layers(const ExposedFaces& faces, const SparseVoxels& voxels,
                     format(below(i), slab.meshes[i], first + int64_t(i), slab.bytes[i]);
                 });
             std::swap(carried, slab.meshes.back());
-        },
-        [&](const MeshSlab& slab, int64_t, int64_t) {
-            if (out)
-                for (const BlockWriter& bytes : slab.bytes)
-                    out->write(bytes.data(), std::streamsize(bytes.size()));
         },
         [&](int64_t first) { progress.report(phase, uint64_t(first), uint64_t(nz)); });
     return counts;
