@@ -464,64 +464,75 @@ OV_FN int ov_thin_overlaps(const OvThinTriangle* s, float qx, float qy, float qz
 // functions above, and an AND does not depend on the order of its terms: every voxel is the
 // scalar result (the kernels are tested against the reference bit for bit). The lanes are int4
 // masks (-1 where the test holds); a strict bit of the setup becomes a lane mask.
-OV_FN int4 ov_strict4(int strict, int bit) {
-    return (int4)(-((strict >> bit) & 1));
-}
-
 // The anchor-relative coordinates q0 .. q0 + 3 of a block's 4 voxels along one axis.
 OV_FN float4 ov_row4(int q0) {
     return convert_float4((int4)(q0) + (int4)(0, 1, 2, 3));
 }
 
+// The lane tests, written once for N lanes (4: a row of a block; 16: a 4x4 face or layer of it).
 // Projection k's tests (k = 0: the (y, z) plane, 1: (z, x), 2: (x, y); a1 and a2 as in the
-// setups) at coordinates c1 along a1 and c2 along a2.
-OV_FN int4 ov_sat_projection4(const OvSatTriangle* s, int k, float4 c1, float4 c2) {
-    int4 m = (int4)(-1);
-    for (int j = 0; j < 3; ++j) {
-        int i = 3 * k + j;
-        float4 d = s->axis[i][0] * c1 + s->axis[i][1] * c2;
-        m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);
+// setups) at coordinates c1 along a1 and c2 along a2; the plane test at (qx, qy, qz).
+#define OV_LANE_TESTS(N)                                                                         \
+    OV_FN int##N ov_strict##N(int strict, int bit) {                                             \
+        return (int##N)(-((strict >> bit) & 1));                                                 \
+    }                                                                                            \
+    OV_FN int##N ov_sat_projection##N(const OvSatTriangle* s, int k, float##N c1, float##N c2) { \
+        int##N m = (int##N)(-1);                                                                 \
+        for (int j = 0; j < 3; ++j) {                                                            \
+            int i = 3 * k + j;                                                                   \
+            float##N d = s->axis[i][0] * c1 + s->axis[i][1] * c2;                                \
+            m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);                                    \
+        }                                                                                        \
+        return m;                                                                                \
+    }                                                                                            \
+    OV_FN int##N ov_edge_projection##N(const float edge_normal[3][3][2],                         \
+                                       const float edge_offset[3][3], int strict, int k,         \
+                                       float##N c1, float##N c2) {                               \
+        int##N m = (int##N)(-1);                                                                 \
+        for (int j = 0; j < 3; ++j) {                                                            \
+            float##N e =                                                                         \
+                edge_normal[k][j][0] * c1 + edge_normal[k][j][1] * c2 + edge_offset[k][j];      \
+            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict##N(strict, 3 * k + j)));                \
+        }                                                                                        \
+        return m;                                                                                \
+    }                                                                                            \
+    OV_FN int##N ov_pef_projection##N(const OvPefTriangle* s, int k, float##N c1, float##N c2) { \
+        return ov_edge_projection##N(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);      \
+    }                                                                                            \
+    OV_FN int##N ov_thin_projection##N(const OvThinTriangle* s, int k, float##N c1,              \
+                                       float##N c2) {                                            \
+        return ov_edge_projection##N(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);      \
+    }                                                                                            \
+    OV_FN int##N ov_sat_plane##N(const OvSatTriangle* s, float##N qx, float##N qy, float qz) {   \
+        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;                 \
+        return ~(dn < s->normal_lo) & ~(dn > s->normal_hi);                                      \
+    }                                                                                            \
+    OV_FN int##N ov_pef_plane##N(const OvPefTriangle* s, float##N qx, float##N qy, float qz) {   \
+        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;                 \
+        float##N e1 = dn + s->d1;                                                                \
+        float##N e2 = dn + s->d2;                                                                \
+        int##N m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict##N(s->strict, 9)));                 \
+        return m & ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict##N(s->strict, 10)));                \
+    }                                                                                            \
+    OV_FN int##N ov_thin_plane##N(const OvThinTriangle* s, float##N qx, float##N qy, float qz) { \
+        float##N dn =                                                                            \
+            s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset;         \
+        int##N m = ~(dn > s->plane_half) & ~(dn < -s->plane_half);                               \
+        return m & ~(((dn == -s->plane_half) & ov_strict##N(s->strict, 9)) |                     \
+                     ((dn == s->plane_half) & ov_strict##N(s->strict, 10)));                     \
     }
-    return m;
-}
+OV_LANE_TESTS(4)
+OV_LANE_TESTS(16)
 
-OV_FN int4 ov_edge_projection4(const float edge_normal[3][3][2], const float edge_offset[3][3],
-                               int strict, int k, float4 c1, float4 c2) {
-    int4 m = (int4)(-1);
-    for (int j = 0; j < 3; ++j) {
-        float4 e = edge_normal[k][j][0] * c1 + edge_normal[k][j][1] * c2 + edge_offset[k][j];
-        m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict4(strict, 3 * k + j)));
-    }
-    return m;
-}
-
-OV_FN int4 ov_pef_projection4(const OvPefTriangle* s, int k, float4 c1, float4 c2) {
-    return ov_edge_projection4(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);
-}
-
-OV_FN int4 ov_thin_projection4(const OvThinTriangle* s, int k, float4 c1, float4 c2) {
-    return ov_edge_projection4(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);
-}
-
-// The plane test of a row of 4 voxels along x at anchor-relative (qx, qy, qz).
-OV_FN int4 ov_sat_plane4(const OvSatTriangle* s, float4 qx, float qy, float qz) {
-    float4 dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
-    return ~(dn < s->normal_lo) & ~(dn > s->normal_hi);
-}
-
-OV_FN int4 ov_pef_plane4(const OvPefTriangle* s, float4 qx, float qy, float qz) {
-    float4 dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;
-    float4 e1 = dn + s->d1;
-    float4 e2 = dn + s->d2;
-    int4 m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict4(s->strict, 9)));
-    return m & ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict4(s->strict, 10)));
-}
-
-OV_FN int4 ov_thin_plane4(const OvThinTriangle* s, float4 qx, float qy, float qz) {
-    float4 dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset;
-    int4 m = ~(dn > s->plane_half) & ~(dn < -s->plane_half);
-    return m & ~(((dn == -s->plane_half) & ov_strict4(s->strict, 9)) |
-                 ((dn == s->plane_half) & ov_strict4(s->strict, 10)));
+// The 16 lanes of a mask as the low 16 bits of an int (lane i at bit i): each lane's bit, then
+// the halves ORed together.
+OV_FN uint ov_lane_bits16(int16 m) {
+    int16 b = m & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384,
+                          32768);
+    int8 b8 = b.lo | b.hi;
+    int4 b4 = b8.lo | b8.hi;
+    int2 b2 = b4.lo | b4.hi;
+    return (uint)(b2.s0 | b2.s1);
 }
 
 // The 4 lanes of a mask as the low 4 bits of an int (lane i at bit i).

@@ -715,14 +715,19 @@ TEST(Meshing, EdgeCrossingIsTheIeeeQuotientOfTheDifferences) {
 }
 
 // Programs are built with -cl-fp32-correctly-rounded-divide-sqrt exactly when the device says it
-// supports it, and never with options that relax IEEE arithmetic.
+// supports it, never with options that relax IEEE arithmetic, and with OV_WIDE_BLOCKS on CPUs.
 TEST(Meshing, BuildOptionsFollowTheDevicesReportedFloatCapability) {
-    const std::string plain = detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN);
+    const std::string plain =
+        detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN, CL_DEVICE_TYPE_GPU);
     EXPECT_EQ(plain, "-cl-std=CL1.2");
     const std::string with =
         detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN | CL_FP_DENORM |
-                              CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT);
+                                  CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT,
+                              CL_DEVICE_TYPE_GPU);
     EXPECT_EQ(with, "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt");
+    // CPU devices take the surface kernels' 16-lane blocks (the same bits).
+    EXPECT_EQ(detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN, CL_DEVICE_TYPE_CPU),
+              "-cl-std=CL1.2 -DOV_WIDE_BLOCKS");
 
     // The device in use: its program was built with the options its capability calls for.
     Device::Impl& cl = detail::device_impl(device());

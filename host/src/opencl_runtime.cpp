@@ -97,10 +97,11 @@ size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device) {
     return std::max<size_t>(1, size);
 }
 
-std::string build_options(cl_device_fp_config single_fp_config) {
+std::string build_options(cl_device_fp_config single_fp_config, cl_device_type type) {
     std::string options = "-cl-std=CL1.2";
     if (single_fp_config & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT)
         options += " -cl-fp32-correctly-rounded-divide-sqrt";
+    if (type & CL_DEVICE_TYPE_CPU) options += " -DOV_WIDE_BLOCKS";
     return options;
 }
 
@@ -346,7 +347,8 @@ Device Device::open(const std::string& selector) {
     try {
         impl->context = cl::Context(f.device);
         impl->queue = cl::CommandQueue(impl->context, f.device);
-        impl->build_options = detail::build_options(f.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>());
+        impl->build_options = detail::build_options(
+            f.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>(), f.device.getInfo<CL_DEVICE_TYPE>());
     } catch (const cl::Error& e) {
         throw_device_error(e, "creating a context on " + f.info.name);
     }

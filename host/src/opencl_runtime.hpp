@@ -32,7 +32,10 @@ size_t work_group_size(const cl::Kernel& kernel, const cl::Device& device);
 // CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT (asking for it elsewhere is an invalid build option). The
 // bit-for-bit kernels do not depend on it (they divide only through meshing_math.h's exact
 // om_divide); it makes the winding number's divisions and square roots IEEE where available.
-std::string build_options(cl_device_fp_config single_fp_config);
+// A device of `type` CPU also gets -DOV_WIDE_BLOCKS: the surface kernels test a block's voxels 16
+// lanes at a time, which a CPU's vector unit does about as fast as 4 (the same bits; on a GPU a
+// work item's 16 lanes are 16 scalar operations, and its per-row skipping pays).
+std::string build_options(cl_device_fp_config single_fp_config, cl_device_type type);
 
 // Launches `kernel` over at least n items in groups of `group`; kernels skip the padding items.
 void launch(const cl::CommandQueue& queue, const cl::Kernel& kernel, uint64_t n, size_t group);
