@@ -347,8 +347,8 @@ Device Device::open(const std::string& selector) {
     try {
         impl->context = cl::Context(f.device);
         impl->queue = cl::CommandQueue(impl->context, f.device);
-        impl->build_options = detail::build_options(
-            f.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>(), f.device.getInfo<CL_DEVICE_TYPE>());
+        impl->build_options = detail::build_options(f.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>(),
+                                                    f.device.getInfo<CL_DEVICE_TYPE>());
     } catch (const cl::Error& e) {
         throw_device_error(e, "creating a context on " + f.info.name);
     }
