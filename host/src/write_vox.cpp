@@ -12,14 +12,19 @@
 // chunk names.
 //
 // Streaming: the models are written tile by tile straight from the bricks. A first pass counts
-// each tile's voxels (popcounts of its blocks), which fixes every chunk size before anything is
-// written; the second writes each tile's voxels in a fixed order (4^3 blocks in z, y, x order
-// within the tile, bits in block order), so the file does not depend on the brick size or hash
-// order and the largest buffer is one tile's block list.
+// each tile's voxels (popcounts of its blocks, the tiles in parallel), which fixes every chunk
+// size before anything is written; the second writes each tile's voxels in a fixed order (4^3
+// blocks in z, y, x order within the tile, bits in block order), walking the tile's blocks in
+// that order through a table of its bricks, a layer of blocks (4 voxel layers) at a time: the
+// layers are the parts of one stream (stream_parts), made on every core while the slab of layers
+// before is written. So the file does not depend on the brick size, hash order or cores, and the
+// largest buffers are two slabs of block layers (at most 1 MiB each).
 //
 // Axes are kept as they are (MagicaVoxel treats z as up). The format has no units, so the grid's
 // origin and voxel size are not recorded; positions are voxel indices. Every voxel uses colour
 // index 1 of the default palette, so no RGBA chunk is written.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <limits>
 #include <sstream>
@@ -125,11 +130,15 @@ struct Tile {
     uint64_t voxels = 0;
 };
 
-// A set 4^3 block inside a tile: its position (x fastest over the tile's 64^3 blocks) and bits.
-struct TileBlock {
-    uint32_t position;
-    uint64_t bits;
-    bool operator<(const TileBlock& o) const { return position < o.position; }
+// The stored bricks a tile's blocks lie in, as a table over their brick coordinates (null where
+// none is stored), so that walking the tile's blocks in order asks the bricks' map once per brick.
+struct TileBricks {
+    std::array<int64_t, 3> first{}, count{};  // brick coordinates
+    std::vector<const uint64_t*> blocks;
+    const uint64_t* at(int64_t bx, int64_t by, int64_t bz) const {
+        return blocks[size_t((bx - first[0]) +
+                             count[0] * ((by - first[1]) + count[1] * (bz - first[2])))];
+    }
 };
 
 class TileWalker {
@@ -171,47 +180,107 @@ class TileWalker {
             }
             tiles.back().bricks.push_back(tile_of_brick[e].second);
         }
-        for (Tile& tile : tiles)
-            for_each_block(
-                tile, [&](uint32_t, uint64_t bits) { tile.voxels += uint64_t(popcount64(bits)); });
+        tbb::parallel_for(size_t(0), tiles.size(),
+                          [&](size_t t) { tiles[t].voxels = voxels_in(tiles[t]); });
         tiles.erase(
             std::remove_if(tiles.begin(), tiles.end(), [](const Tile& t) { return t.voxels == 0; }),
             tiles.end());
         return tiles;
     }
 
-    // The tile's set blocks in position order.
-    std::vector<TileBlock> blocks(const Tile& tile) const {
-        std::vector<TileBlock> found;
-        for_each_block(tile, [&](uint32_t position, uint64_t bits) {
-            found.push_back({position, bits});
-        });
-        std::sort(found.begin(), found.end());
-        return found;
+    // The table of the bricks tile's blocks lie in.
+    TileBricks bricks_of(const Tile& tile) const {
+        const auto& dims = voxels_.grid().dims;
+        const int64_t per_brick = brick_size_ / SparseVoxels::kBlock;
+        TileBricks table;
+        for (int a = 0; a < 3; ++a) {
+            const int64_t first_block = tile.coords[a] * kBlocksPerTileAxis;
+            const int64_t end_block =
+                std::min(first_block + kBlocksPerTileAxis,
+                         (dims[a] + SparseVoxels::kBlock - 1) / SparseVoxels::kBlock);
+            table.first[a] = first_block / per_brick;
+            table.count[a] = (end_block - 1) / per_brick - table.first[a] + 1;
+        }
+        const auto nb = voxels_.brick_dims();
+        table.blocks.reserve(size_t(table.count[0] * table.count[1] * table.count[2]));
+        for (int64_t bz = table.first[2]; bz < table.first[2] + table.count[2]; ++bz)
+            for (int64_t by = table.first[1]; by < table.first[1] + table.count[1]; ++by)
+                for (int64_t bx = table.first[0]; bx < table.first[0] + table.count[0]; ++bx)
+                    table.blocks.push_back(
+                        voxels_.brick_blocks(uint64_t(bx + nb[0] * (by + nb[1] * bz))));
+        return table;
+    }
+
+    // The XYZI words of the voxels of the tile's block layer lz (the tile's blocks at that z) to
+    // `w`, in the file's order: blocks x fastest, then y, each block's voxels in bit order. A
+    // voxel's word is its block's word plus its place in the block (no byte carries: a tile
+    // coordinate is at most 255), so a full block, most of a solid, is 64 sums written at once.
+    void write_layer(const Tile& tile, const TileBricks& bricks, int64_t lz, BlockWriter& w) const {
+        static const std::array<uint32_t, 64> in_block = [] {
+            std::array<uint32_t, 64> words{};
+            for (int bit = 0; bit < 64; ++bit) {
+                const auto v = voxel_in_block(bit);
+                words[size_t(bit)] = uint32_t(v[0]) | uint32_t(v[1]) << 8 | uint32_t(v[2]) << 16;
+            }
+            return words;
+        }();
+        const auto& dims = voxels_.grid().dims;
+        const int64_t per_brick = brick_size_ / SparseVoxels::kBlock;
+        std::array<int64_t, 3> first{}, end{};  // the tile's blocks, in grid block coordinates
+        for (int a = 0; a < 3; ++a) {
+            first[a] = tile.coords[a] * kBlocksPerTileAxis;
+            end[a] = std::min(first[a] + kBlocksPerTileAxis,
+                              (dims[a] + SparseVoxels::kBlock - 1) / SparseVoxels::kBlock);
+        }
+        const int64_t gz = first[2] + lz;
+        if (gz >= end[2]) return;
+        char full[64 * 4];
+        for (int64_t gy = first[1]; gy < end[1]; ++gy)
+            for (int64_t gx = first[0]; gx < end[0];) {
+                // The run of the row's blocks in one brick.
+                const int64_t run_end = std::min(end[0], (gx / per_brick + 1) * per_brick);
+                const uint64_t* blocks = bricks.at(gx / per_brick, gy / per_brick, gz / per_brick);
+                if (!blocks) {
+                    gx = run_end;
+                    continue;
+                }
+                const uint64_t* row =
+                    blocks + per_brick * (gy % per_brick + per_brick * (gz % per_brick));
+                for (; gx < run_end; ++gx) {
+                    const uint64_t bits = row[gx % per_brick];
+                    if (!bits) continue;
+                    const uint32_t base = uint32_t(4 * (gx - first[0])) |
+                                          uint32_t(4 * (gy - first[1])) << 8 |
+                                          uint32_t(4 * lz) << 16 | uint32_t(kColorIndex) << 24;
+                    if (bits == ~uint64_t(0)) {
+                        for (size_t bit = 0; bit < 64; ++bit)
+                            store_le(full + 4 * bit, base + in_block[bit]);
+                        w.bytes(full, sizeof full);
+                        continue;
+                    }
+                    for (uint64_t mask = bits; mask; mask &= mask - 1)
+                        w.little_endian(base + in_block[size_t(__builtin_ctzll(mask))]);
+                }
+            }
     }
 
   private:
-    // Calls f(position, bits) for each set block of the tile, in the bricks' order.
-    template <class F>
-    void for_each_block(const Tile& tile, F&& f) const {
+    // The set voxels of the tile's blocks (of its bricks, those inside it).
+    uint64_t voxels_in(const Tile& tile) const {
+        uint64_t count = 0;
         for (const uint64_t brick : tile.bricks) {
             const uint64_t* words = voxels_.brick_blocks(brick);
             for (size_t w = 0; w < layout_.blocks_per_brick(); ++w) {
                 if (!words[w]) continue;
                 const auto o = layout_.block_origin(brick, w);
-                std::array<int64_t, 3> local{};
                 bool inside = true;
-                for (int a = 0; a < 3; ++a) {
-                    local[a] = (o[a] - tile.coords[a] * kTile) / SparseVoxels::kBlock;
-                    inside =
-                        inside && o[a] >= tile.coords[a] * kTile && local[a] < kBlocksPerTileAxis;
-                }
-                if (!inside) continue;
-                f(uint32_t(local[0] +
-                           kBlocksPerTileAxis * (local[1] + kBlocksPerTileAxis * local[2])),
-                  words[w]);
+                for (int a = 0; a < 3; ++a)
+                    inside = inside && o[a] >= tile.coords[a] * kTile &&
+                             o[a] < (tile.coords[a] + 1) * kTile;
+                if (inside) count += uint64_t(popcount64(words[w]));
             }
         }
+        return count;
     }
 
     const SparseVoxels& voxels_;
@@ -223,36 +292,6 @@ std::array<int64_t, 3> tile_size(const Grid& grid, const Tile& tile) {
     std::array<int64_t, 3> size{};
     for (int a = 0; a < 3; ++a) size[a] = std::min(kTile, grid.dims[a] - tile.coords[a] * kTile);
     return size;
-}
-
-// XYZI content: the count, then x, y, z, colour per voxel (a little-endian 32-bit word each).
-// A voxel's word is its block's word plus its place in the block (no byte carries: a tile
-// coordinate is at most 255), so a full block, most of a solid, is 64 sums written at once.
-void write_tile_voxels(std::ostream& out, const std::vector<TileBlock>& blocks) {
-    static const std::array<uint32_t, 64> in_block = [] {
-        std::array<uint32_t, 64> words{};
-        for (int bit = 0; bit < 64; ++bit) {
-            const auto v = voxel_in_block(bit);
-            words[size_t(bit)] = uint32_t(v[0]) | uint32_t(v[1]) << 8 | uint32_t(v[2]) << 16;
-        }
-        return words;
-    }();
-    BlockWriter w(out);
-    char full[64 * 4];
-    for (const TileBlock& block : blocks) {
-        const uint32_t x = block.position % kBlocksPerTileAxis * 4;
-        const uint32_t y = block.position / kBlocksPerTileAxis % kBlocksPerTileAxis * 4;
-        const uint32_t z = block.position / (kBlocksPerTileAxis * kBlocksPerTileAxis) * 4;
-        const uint32_t base = x | y << 8 | z << 16 | uint32_t(kColorIndex) << 24;
-        if (block.bits == ~uint64_t(0)) {
-            for (size_t bit = 0; bit < 64; ++bit) store_le(full + 4 * bit, base + in_block[bit]);
-            w.bytes(full, sizeof full);
-            continue;
-        }
-        for (uint64_t mask = block.bits; mask; mask &= mask - 1)
-            w.little_endian(base + in_block[size_t(__builtin_ctzll(mask))]);
-    }
-    w.flush();
 }
 
 }  // namespace
@@ -294,24 +333,49 @@ void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         throw OutputError("cannot write " + path + ": " + std::to_string(voxels.count()) +
                           " voxels exceed the 2 GiB a .vox file can hold; write .vdb instead");
 
-    // Phase 3: magic, version, MAIN, PACK, the models tile by tile, then the scene graph.
+    // Phase 3: magic, version, MAIN, PACK, the models tile by tile, then the scene graph. The
+    // models are the parts of one stream (stream_parts): a tile's block layers, the first with
+    // the tile's SIZE and XYZI headers, each made on any core while the slab before is written.
     const size_t models = progress.add(1);
+    std::vector<int64_t> first_part(tiles.size() + 1, 0);  // of each tile, in the stream
+    for (size_t m = 0; m < tiles.size(); ++m)
+        first_part[m + 1] = first_part[m] + kBlocksPerTileAxis;
     write_file_atomically(path, [&](std::ostream& out) {
         out.write("VOX ", 4);
         write_i32(out, kVersion);
         write_chunk_header(out, "MAIN", 0, main_children);
         write_chunk_header(out, "PACK", 4, 0);
         write_i32(out, int32_t(tiles.size()));
-        for (size_t m = 0; m < tiles.size(); ++m) {
-            const Tile& tile = tiles[m];
-            const auto size = tile_size(grid, tile);
-            write_chunk_header(out, "SIZE", 12, 0);
-            for (int a = 0; a < 3; ++a) write_i32(out, int32_t(size[a]));
-            write_chunk_header(out, "XYZI", 4 + 4 * tile.voxels, 0);
-            write_i32(out, int32_t(tile.voxels));
-            write_tile_voxels(out, walker.blocks(tile));
-            progress.report(models, m + 1, tiles.size());
-        }
+        std::vector<TileBricks> bricks(tiles.size());
+        stream_parts<PartsSlab>(
+            &out, first_part.back(), parts_per_slab(),
+            [&](PartsSlab& slab, int64_t first, int64_t end) {
+                // The tables of the tiles the slab begins, before its parts are made; those of
+                // tiles already made are let go.
+                for (size_t m = 0; m < tiles.size(); ++m)
+                    if (first_part[m] >= first && first_part[m] < end)
+                        bricks[m] = walker.bricks_of(tiles[m]);
+                    else if (first_part[m + 1] <= first)
+                        bricks[m] = TileBricks{};
+                tbb::parallel_for(first, end, [&](int64_t part) {
+                    const size_t m = size_t(part / kBlocksPerTileAxis);
+                    const int64_t lz = part % kBlocksPerTileAxis;
+                    BlockWriter& w = slab.bytes[size_t(part - first)];
+                    if (lz == 0) {
+                        std::ostringstream header;
+                        const auto size = tile_size(grid, tiles[m]);
+                        write_chunk_header(header, "SIZE", 12, 0);
+                        for (int a = 0; a < 3; ++a) write_i32(header, int32_t(size[a]));
+                        write_chunk_header(header, "XYZI", 4 + 4 * tiles[m].voxels, 0);
+                        write_i32(header, int32_t(tiles[m].voxels));
+                        w.text(header.str());
+                    }
+                    walker.write_layer(tiles[m], bricks[m], lz, w);
+                });
+            },
+            [&](int64_t first) {
+                progress.report(models, uint64_t(first), uint64_t(first_part.back()));
+            });
         out << graph_bytes;
         progress.finish();
     });
