@@ -25,8 +25,9 @@ namespace {
 
 // Each format is a header, then parts of kPartItems vertices or triangles formatted on any core
 // (stream_parts): formatting doubles as shortest round-trip text costs most of writing an OBJ.
-// A slab of parts_per_slab() parts (64 k items or more) is reported at a time.
+// A slab of parts (about 64 k items on 2 cores) is reported at a time.
 constexpr uint64_t kPartItems = 4096;
+constexpr uint64_t kItemBytes = 32;  // about a vertex's or a triangle's bytes, in any format
 
 uint64_t parts_of(uint64_t items) {
     return (items + kPartItems - 1) / kPartItems;
@@ -46,7 +47,7 @@ void stream_mesh_parts(std::ostream& out, const Mesh& mesh, uint64_t vertex_part
                        Triangles&& triangles) {
     const int64_t parts = int64_t(vertex_parts + parts_of(mesh.triangles.size()));
     detail::stream_parts<detail::PartsSlab>(
-        &out, parts, detail::parts_per_slab(),
+        &out, parts, detail::parts_per_slab(kPartItems * kItemBytes),
         [&](detail::PartsSlab& slab, int64_t first, int64_t end) {
             tbb::parallel_for(first, end, [&](int64_t part) {
                 detail::BlockWriter& bytes = slab.bytes[size_t(part - first)];

@@ -43,6 +43,9 @@ namespace {
 
 constexpr int64_t kTile = 256;
 constexpr int64_t kBlocksPerTileAxis = kTile / SparseVoxels::kBlock;
+// The most bytes of voxels a tile's layer of blocks can hold (4 bytes a voxel): the parts of the
+// model stream.
+constexpr uint64_t kTileLayerBytes = 4 * kTile * kTile * SparseVoxels::kBlock;
 constexpr uint8_t kColorIndex = 1;
 // 150 is the version MagicaVoxel 0.99 wrote when it introduced the scene graph chunks; readers
 // that know the scene graph accept it.
@@ -265,20 +268,30 @@ class TileWalker {
     }
 
   private:
-    // The set voxels of the tile's blocks (of its bricks, those inside it).
+    // The set voxels of the tile's blocks (of its bricks, those inside it): a brick inside the
+    // tile (every brick, where the brick size divides the tile's) counted whole, the others block
+    // by block.
     uint64_t voxels_in(const Tile& tile) const {
+        const int64_t per_brick = brick_size_ / SparseVoxels::kBlock;
         uint64_t count = 0;
         for (const uint64_t brick : tile.bricks) {
             const uint64_t* words = voxels_.brick_blocks(brick);
-            for (size_t w = 0; w < layout_.blocks_per_brick(); ++w) {
-                if (!words[w]) continue;
-                const auto o = layout_.block_origin(brick, w);
-                bool inside = true;
-                for (int a = 0; a < 3; ++a)
-                    inside = inside && o[a] >= tile.coords[a] * kTile &&
-                             o[a] < (tile.coords[a] + 1) * kTile;
-                if (inside) count += uint64_t(popcount64(words[w]));
+            const auto o = layout_.brick_origin(brick);
+            std::array<int64_t, 3> lo{}, hi{};  // the brick's blocks inside the tile
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::max<int64_t>(0, tile.coords[a] * kTile - o[a]) / SparseVoxels::kBlock;
+                hi[a] = std::min<int64_t>(
+                    per_brick, ((tile.coords[a] + 1) * kTile - o[a]) / SparseVoxels::kBlock);
             }
+            if (lo == std::array<int64_t, 3>{} &&
+                hi == std::array<int64_t, 3>{per_brick, per_brick, per_brick}) {
+                count += count_bits(words, layout_.blocks_per_brick());
+                continue;
+            }
+            for (int64_t z = lo[2]; z < hi[2]; ++z)
+                for (int64_t y = lo[1]; y < hi[1]; ++y)
+                    count += count_bits(words + per_brick * (y + per_brick * z) + lo[0],
+                                        size_t(hi[0] - lo[0]));
         }
         return count;
     }
@@ -348,7 +361,7 @@ void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         write_i32(out, int32_t(tiles.size()));
         std::vector<TileBricks> bricks(tiles.size());
         stream_parts<PartsSlab>(
-            &out, first_part.back(), parts_per_slab(),
+            &out, first_part.back(), parts_per_slab(kTileLayerBytes),
             [&](PartsSlab& slab, int64_t first, int64_t end) {
                 // The tables of the tiles the slab begins, before its parts are made; those of
                 // tiles already made are let go.
