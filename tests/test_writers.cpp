@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <locale>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -25,6 +26,7 @@
 #include <vector>
 
 #include "atomic_file.hpp"
+#include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
 #include "writers.hpp"
 
@@ -799,6 +801,53 @@ TEST_F(WriterTest, HugeSparseGridWorksForSparseFormatsAndFailsCleanlyForDenseOne
 // ---------------------------------------------------------------------------------------------
 // Choosing the format, and failures
 // ---------------------------------------------------------------------------------------------
+// A program's global C++ locale does not reach the files: under one with a decimal comma and
+// thousands separators every format's bytes are those written under the classic locale (the
+// binvox header's translate and scale, the mesh headers' counts were written through it).
+TEST_F(WriterTest, FilesDoNotDependOnTheGlobalLocale) {
+    struct CommaNumbers : std::numpunct<char> {
+        char do_decimal_point() const override { return ','; }
+        char do_thousands_sep() const override { return '.'; }
+        std::string do_grouping() const override { return "\3"; }
+    };
+    const Grid grid = make_grid({10, 10, 10}, {0.5, -2.25, 3.125}, 0.25);
+    VoxelSet set;
+    for (int64_t k = 0; k < 10; ++k)
+        for (int64_t j = 0; j < 10; ++j)
+            for (int64_t i = 0; i < 10; ++i) set.insert({i, j, k});  // 1,000 voxels
+    const SparseVoxels voxels = make_voxels(grid, set, 8);
+    oclvox::Mesh mesh;  // 1,200 vertices, 400 triangles
+    for (uint32_t t = 0; t < 400; ++t) {
+        for (int v = 0; v < 3; ++v) mesh.positions.push_back({0.5 * t, 0.25 * v, -1.5});
+        mesh.triangles.push_back({3 * t, 3 * t + 1, 3 * t + 2});
+    }
+    auto write_all = [&] {
+        std::map<std::string, std::string> files;
+        for (const std::string ext : {".binvox", ".npy", ".vox", ".obj", ".ply", ".stl"}) {
+            oclvox::write_voxels(path("v" + ext), voxels);
+            files["voxels" + ext] = read_bytes(path("v" + ext));
+        }
+        files["voxels.npy.json"] = read_bytes(path("v.npy.json"));
+        for (const std::string ext : {".obj", ".ply", ".stl"}) {
+            oclvox::write_mesh(path("m" + ext), mesh);
+            files["mesh" + ext] = read_bytes(path("m" + ext));
+        }
+        return files;
+    };
+    const std::map<std::string, std::string> classic = write_all();
+    const std::locale before =
+        std::locale::global(std::locale(std::locale::classic(), new CommaNumbers));
+    std::map<std::string, std::string> comma;
+    try {
+        comma = write_all();
+    } catch (...) {
+        std::locale::global(before);
+        throw;
+    }
+    std::locale::global(before);
+    for (const auto& [name, bytes] : classic) EXPECT_TRUE(comma.at(name) == bytes) << name;
+}
+
 TEST_F(WriterTest, ExtensionIsCaseInsensitive) {
     const VoxelSet set = odd_pattern();
     oclvox::write_voxels(path("OUT.BinVox"), make_voxels(odd_grid(), set));

@@ -19,6 +19,8 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <locale>
 #include <mutex>
 #include <set>
 
@@ -98,8 +100,12 @@ void write_file_atomically(const std::string& path,
         throw OutputError("cannot write " + path + ": cannot create a file in folder '" +
                           folder_of(path) + "': " + last_system_error());
 
-    // Phase 2: let the format write its bytes. Failures other than OutputError are reported as
-    // OutputError too, so callers of write_voxels only need to handle one type.
+    // Phase 2: let the format write its bytes, numbers in the classic locale whatever the
+    // program's global one (an application's std::locale::global with a decimal comma or
+    // thousands separators made "translate 0,5" and "element vertex 1,794,572"). Failures other
+    // than OutputError are reported as OutputError too, so callers of write_voxels only need to
+    // handle one type.
+    stream.imbue(std::locale::classic());
     try {
         write(stream);
     } catch (const OutputError&) {
