@@ -472,54 +472,52 @@ OV_FN float4 ov_row4(int q0) {
 // The lane tests, written once for N lanes (4: a row of a block; 16: a 4x4 face or layer of it).
 // Projection k's tests (k = 0: the (y, z) plane, 1: (z, x), 2: (x, y); a1 and a2 as in the
 // setups) at coordinates c1 along a1 and c2 along a2; the plane test at (qx, qy, qz).
-#define OV_LANE_TESTS(N)                                                                         \
-    OV_FN int##N ov_strict##N(int strict, int bit) {                                             \
-        return (int##N)(-((strict >> bit) & 1));                                                 \
-    }                                                                                            \
-    OV_FN int##N ov_sat_projection##N(const OvSatTriangle* s, int k, float##N c1, float##N c2) { \
-        int##N m = (int##N)(-1);                                                                 \
-        for (int j = 0; j < 3; ++j) {                                                            \
-            int i = 3 * k + j;                                                                   \
-            float##N d = s->axis[i][0] * c1 + s->axis[i][1] * c2;                                \
-            m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);                                    \
-        }                                                                                        \
-        return m;                                                                                \
-    }                                                                                            \
-    OV_FN int##N ov_edge_projection##N(const float edge_normal[3][3][2],                         \
-                                       const float edge_offset[3][3], int strict, int k,         \
-                                       float##N c1, float##N c2) {                               \
-        int##N m = (int##N)(-1);                                                                 \
-        for (int j = 0; j < 3; ++j) {                                                            \
-            float##N e =                                                                         \
-                edge_normal[k][j][0] * c1 + edge_normal[k][j][1] * c2 + edge_offset[k][j];      \
-            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict##N(strict, 3 * k + j)));                \
-        }                                                                                        \
-        return m;                                                                                \
-    }                                                                                            \
-    OV_FN int##N ov_pef_projection##N(const OvPefTriangle* s, int k, float##N c1, float##N c2) { \
-        return ov_edge_projection##N(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);      \
-    }                                                                                            \
-    OV_FN int##N ov_thin_projection##N(const OvThinTriangle* s, int k, float##N c1,              \
-                                       float##N c2) {                                            \
-        return ov_edge_projection##N(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);      \
-    }                                                                                            \
-    OV_FN int##N ov_sat_plane##N(const OvSatTriangle* s, float##N qx, float##N qy, float qz) {   \
-        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;                 \
-        return ~(dn < s->normal_lo) & ~(dn > s->normal_hi);                                      \
-    }                                                                                            \
-    OV_FN int##N ov_pef_plane##N(const OvPefTriangle* s, float##N qx, float##N qy, float qz) {   \
-        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;                 \
-        float##N e1 = dn + s->d1;                                                                \
-        float##N e2 = dn + s->d2;                                                                \
-        int##N m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict##N(s->strict, 9)));                 \
-        return m & ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict##N(s->strict, 10)));                \
-    }                                                                                            \
-    OV_FN int##N ov_thin_plane##N(const OvThinTriangle* s, float##N qx, float##N qy, float qz) { \
-        float##N dn =                                                                            \
-            s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset;         \
-        int##N m = ~(dn > s->plane_half) & ~(dn < -s->plane_half);                               \
-        return m & ~(((dn == -s->plane_half) & ov_strict##N(s->strict, 9)) |                     \
-                     ((dn == s->plane_half) & ov_strict##N(s->strict, 10)));                     \
+#define OV_LANE_TESTS(N)                                                                           \
+    OV_FN int##N ov_strict##N(int strict, int bit) {                                               \
+        return (int##N)(-((strict >> bit) & 1));                                                   \
+    }                                                                                              \
+    OV_FN int##N ov_sat_projection##N(const OvSatTriangle* s, int k, float##N c1, float##N c2) {   \
+        int##N m = (int##N)(-1);                                                                   \
+        for (int j = 0; j < 3; ++j) {                                                              \
+            int i = 3 * k + j;                                                                     \
+            float##N d = s->axis[i][0] * c1 + s->axis[i][1] * c2;                                  \
+            m &= ~(d < s->axis_lo[i]) & ~(d > s->axis_hi[i]);                                      \
+        }                                                                                          \
+        return m;                                                                                  \
+    }                                                                                              \
+    OV_FN int##N ov_edge_projection##N(const float edge_normal[3][3][2],                           \
+                                       const float edge_offset[3][3], int strict, int k,           \
+                                       float##N c1, float##N c2) {                                 \
+        int##N m = (int##N)(-1);                                                                   \
+        for (int j = 0; j < 3; ++j) {                                                              \
+            float##N e =                                                                           \
+                edge_normal[k][j][0] * c1 + edge_normal[k][j][1] * c2 + edge_offset[k][j];         \
+            m &= ~((e < 0.0f) | ((e == 0.0f) & ov_strict##N(strict, 3 * k + j)));                  \
+        }                                                                                          \
+        return m;                                                                                  \
+    }                                                                                              \
+    OV_FN int##N ov_pef_projection##N(const OvPefTriangle* s, int k, float##N c1, float##N c2) {   \
+        return ov_edge_projection##N(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);        \
+    }                                                                                              \
+    OV_FN int##N ov_thin_projection##N(const OvThinTriangle* s, int k, float##N c1, float##N c2) { \
+        return ov_edge_projection##N(s->edge_normal, s->edge_offset, s->strict, k, c1, c2);        \
+    }                                                                                              \
+    OV_FN int##N ov_sat_plane##N(const OvSatTriangle* s, float##N qx, float##N qy, float qz) {     \
+        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;                   \
+        return ~(dn < s->normal_lo) & ~(dn > s->normal_hi);                                        \
+    }                                                                                              \
+    OV_FN int##N ov_pef_plane##N(const OvPefTriangle* s, float##N qx, float##N qy, float qz) {     \
+        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz;                   \
+        float##N e1 = dn + s->d1;                                                                  \
+        float##N e2 = dn + s->d2;                                                                  \
+        int##N m = ~((e2 > 0.0f) | ((e2 == 0.0f) & ov_strict##N(s->strict, 9)));                   \
+        return m & ~((e1 < 0.0f) | ((e1 == 0.0f) & ov_strict##N(s->strict, 10)));                  \
+    }                                                                                              \
+    OV_FN int##N ov_thin_plane##N(const OvThinTriangle* s, float##N qx, float##N qy, float qz) {   \
+        float##N dn = s->normal[0] * qx + s->normal[1] * qy + s->normal[2] * qz + s->plane_offset; \
+        int##N m = ~(dn > s->plane_half) & ~(dn < -s->plane_half);                                 \
+        return m & ~(((dn == -s->plane_half) & ov_strict##N(s->strict, 9)) |                       \
+                     ((dn == s->plane_half) & ov_strict##N(s->strict, 10)));                       \
     }
 OV_LANE_TESTS(4)
 OV_LANE_TESTS(16)
@@ -527,8 +525,8 @@ OV_LANE_TESTS(16)
 // The 16 lanes of a mask as the low 16 bits of an int (lane i at bit i): each lane's bit, then
 // the halves ORed together.
 OV_FN uint ov_lane_bits16(int16 m) {
-    int16 b = m & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384,
-                          32768);
+    int16 b =
+        m & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384, 32768);
     int8 b8 = b.lo | b.hi;
     int4 b4 = b8.lo | b8.hi;
     int2 b2 = b4.lo | b4.hi;

@@ -91,63 +91,63 @@ static uint ov_spread_nibbles(uint b) {
 // ov_P_block16 takes each face's 16 lanes at once and the plane test a layer of 16 lanes at a
 // time, the voxel range applied to the lane masks: a CPU's vector unit does 16 lanes about as
 // fast as 4, and the block's work no longer branches row by row.
-#define OV_BLOCK_MASKS(P, SETUP)                                                                  \
-    static ulong ov_##P##_block4(const SETUP* s, const int block[3], const int lo[3],            \
-                                 const int hi[3]) {                                              \
-        /* The three faces' tests of the rows in range, as 16-bit masks of 4 rows of 4 lanes:    \
-           yz bit y + 4z, zx bit x + 4z, xy bit x + 4y (block-local). */                          \
-        float4 qx = ov_row4(block[0] * 4 - s->anchor[0]);                                         \
-        float4 qy = ov_row4(block[1] * 4 - s->anchor[1]);                                         \
-        uint yz = 0, zx = 0, xy = 0;                                                              \
-        for (int z = lo[2]; z <= hi[2]; ++z) {                                                    \
-            float qz = (float)(z - s->anchor[2]);                                                 \
-            yz |= ov_lane_bits(ov_##P##_projection4(s, 0, qy, (float4)(qz))) << 4 * (z & 3);      \
-            zx |= ov_lane_bits(ov_##P##_projection4(s, 1, (float4)(qz), qx)) << 4 * (z & 3);      \
-        }                                                                                         \
-        for (int y = lo[1]; y <= hi[1]; ++y)                                                      \
-            xy |= ov_lane_bits(                                                                   \
-                      ov_##P##_projection4(s, 2, qx, (float4)((float)(y - s->anchor[1]))))        \
-                  << 4 * (y & 3);                                                                 \
-        int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                       \
-        uint xs = ov_lane_bits((x >= lo[0]) & (x <= hi[0]));                                      \
-        ulong mask = 0;                                                                           \
-        for (int z = lo[2]; z <= hi[2]; ++z)                                                      \
-            for (int y = lo[1]; y <= hi[1]; ++y) {                                                \
-                if (!((yz >> ((y & 3) + 4 * (z & 3))) & 1)) continue;                             \
-                uint lanes = (zx >> 4 * (z & 3)) & (xy >> 4 * (y & 3)) & xs & 0xFu;               \
-                if (!lanes) continue;                                                             \
-                lanes &= ov_lane_bits(ov_##P##_plane4(s, qx, (float)(y - s->anchor[1]),           \
-                                                      (float)(z - s->anchor[2])));                \
-                mask |= (ulong)lanes << ov_block_bit(0, y & 3, z & 3);                            \
-            }                                                                                     \
-        return mask;                                                                              \
-    }                                                                                             \
-    static ulong ov_##P##_block16(const SETUP* s, const int block[3], const int lo[3],           \
-                                  const int hi[3]) {                                             \
-        /* Lane i of a face or layer is (i % 4, i / 4) in its two axes. */                        \
-        const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);         \
-        const int16 low = lane & 3, high = lane >> 2;                                             \
-        const float16 x_low = convert_float16((int16)(block[0] * 4 - s->anchor[0]) + low);        \
-        const float16 y_low = convert_float16((int16)(block[1] * 4 - s->anchor[1]) + low);        \
-        const float16 y_high = convert_float16((int16)(block[1] * 4 - s->anchor[1]) + high);      \
-        const float16 z_high = convert_float16((int16)(block[2] * 4 - s->anchor[2]) + high);      \
-        uint yz = ov_lane_bits16(ov_##P##_projection16(s, 0, y_low, z_high)); /* y + 4z */        \
-        uint zx = ov_lane_bits16(ov_##P##_projection16(s, 1, z_high, x_low)); /* x + 4z */        \
-        uint xy = ov_lane_bits16(ov_##P##_projection16(s, 2, x_low, y_high)); /* x + 4y */        \
-        int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                       \
-        int4 y = (int4)(block[1] * 4) + (int4)(0, 1, 2, 3);                                       \
-        uint in_range = xy & ov_lane_bits((x >= lo[0]) & (x <= hi[0])) * 0x1111u &                \
-                        ov_spread_nibbles(ov_lane_bits((y >= lo[1]) & (y <= hi[1])));             \
-        ulong mask = 0;                                                                           \
-        for (int z = lo[2]; z <= hi[2]; ++z) {                                                    \
-            uint layer = in_range & ov_spread_nibbles(yz >> 4 * (z & 3) & 0xFu) &                 \
-                         (zx >> 4 * (z & 3) & 0xFu) * 0x1111u;                                    \
-            if (!layer) continue;                                                                 \
-            layer &= ov_lane_bits16(                                                              \
-                ov_##P##_plane16(s, x_low, y_high, (float)(z - s->anchor[2])));                   \
-            mask |= (ulong)layer << 16 * (z & 3);                                                 \
-        }                                                                                         \
-        return mask;                                                                              \
+#define OV_BLOCK_MASKS(P, SETUP)                                                                   \
+    static ulong ov_##P##_block4(const SETUP* s, const int block[3], const int lo[3],              \
+                                 const int hi[3]) {                                                \
+        /* The three faces' tests of the rows in range, as 16-bit masks of 4 rows of 4 lanes:      \
+           yz bit y + 4z, zx bit x + 4z, xy bit x + 4y (block-local). */                           \
+        float4 qx = ov_row4(block[0] * 4 - s->anchor[0]);                                          \
+        float4 qy = ov_row4(block[1] * 4 - s->anchor[1]);                                          \
+        uint yz = 0, zx = 0, xy = 0;                                                               \
+        for (int z = lo[2]; z <= hi[2]; ++z) {                                                     \
+            float qz = (float)(z - s->anchor[2]);                                                  \
+            yz |= ov_lane_bits(ov_##P##_projection4(s, 0, qy, (float4)(qz))) << 4 * (z & 3);       \
+            zx |= ov_lane_bits(ov_##P##_projection4(s, 1, (float4)(qz), qx)) << 4 * (z & 3);       \
+        }                                                                                          \
+        for (int y = lo[1]; y <= hi[1]; ++y)                                                       \
+            xy |=                                                                                  \
+                ov_lane_bits(ov_##P##_projection4(s, 2, qx, (float4)((float)(y - s->anchor[1]))))  \
+                << 4 * (y & 3);                                                                    \
+        int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                        \
+        uint xs = ov_lane_bits((x >= lo[0]) & (x <= hi[0]));                                       \
+        ulong mask = 0;                                                                            \
+        for (int z = lo[2]; z <= hi[2]; ++z)                                                       \
+            for (int y = lo[1]; y <= hi[1]; ++y) {                                                 \
+                if (!((yz >> ((y & 3) + 4 * (z & 3))) & 1)) continue;                              \
+                uint lanes = (zx >> 4 * (z & 3)) & (xy >> 4 * (y & 3)) & xs & 0xFu;                \
+                if (!lanes) continue;                                                              \
+                lanes &= ov_lane_bits(                                                             \
+                    ov_##P##_plane4(s, qx, (float)(y - s->anchor[1]), (float)(z - s->anchor[2]))); \
+                mask |= (ulong)lanes << ov_block_bit(0, y & 3, z & 3);                             \
+            }                                                                                      \
+        return mask;                                                                               \
+    }                                                                                              \
+    static ulong ov_##P##_block16(const SETUP* s, const int block[3], const int lo[3],             \
+                                  const int hi[3]) {                                               \
+        /* Lane i of a face or layer is (i % 4, i / 4) in its two axes. */                         \
+        const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);          \
+        const int16 low = lane & 3, high = lane >> 2;                                              \
+        const float16 x_low = convert_float16((int16)(block[0] * 4 - s->anchor[0]) + low);         \
+        const float16 y_low = convert_float16((int16)(block[1] * 4 - s->anchor[1]) + low);         \
+        const float16 y_high = convert_float16((int16)(block[1] * 4 - s->anchor[1]) + high);       \
+        const float16 z_high = convert_float16((int16)(block[2] * 4 - s->anchor[2]) + high);       \
+        uint yz = ov_lane_bits16(ov_##P##_projection16(s, 0, y_low, z_high)); /* y + 4z */         \
+        uint zx = ov_lane_bits16(ov_##P##_projection16(s, 1, z_high, x_low)); /* x + 4z */         \
+        uint xy = ov_lane_bits16(ov_##P##_projection16(s, 2, x_low, y_high)); /* x + 4y */         \
+        int4 x = (int4)(block[0] * 4) + (int4)(0, 1, 2, 3);                                        \
+        int4 y = (int4)(block[1] * 4) + (int4)(0, 1, 2, 3);                                        \
+        uint in_range = xy & ov_lane_bits((x >= lo[0]) & (x <= hi[0])) * 0x1111u &                 \
+                        ov_spread_nibbles(ov_lane_bits((y >= lo[1]) & (y <= hi[1])));              \
+        ulong mask = 0;                                                                            \
+        for (int z = lo[2]; z <= hi[2]; ++z) {                                                     \
+            uint layer = in_range & ov_spread_nibbles(yz >> 4 * (z & 3) & 0xFu) &                  \
+                         (zx >> 4 * (z & 3) & 0xFu) * 0x1111u;                                     \
+            if (!layer) continue;                                                                  \
+            layer &=                                                                               \
+                ov_lane_bits16(ov_##P##_plane16(s, x_low, y_high, (float)(z - s->anchor[2])));     \
+            mask |= (ulong)layer << 16 * (z & 3);                                                  \
+        }                                                                                          \
+        return mask;                                                                               \
     }
 
 #ifdef OV_WIDE_BLOCKS

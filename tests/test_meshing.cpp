@@ -720,10 +720,9 @@ TEST(Meshing, BuildOptionsFollowTheDevicesReportedFloatCapability) {
     const std::string plain =
         detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN, CL_DEVICE_TYPE_GPU);
     EXPECT_EQ(plain, "-cl-std=CL1.2");
-    const std::string with =
-        detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN | CL_FP_DENORM |
-                                  CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT,
-                              CL_DEVICE_TYPE_GPU);
+    const std::string with = detail::build_options(
+        CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN | CL_FP_DENORM | CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT,
+        CL_DEVICE_TYPE_GPU);
     EXPECT_EQ(with, "-cl-std=CL1.2 -cl-fp32-correctly-rounded-divide-sqrt");
     // CPU devices take the surface kernels' 16-lane blocks (the same bits).
     EXPECT_EQ(detail::build_options(CL_FP_ROUND_TO_NEAREST | CL_FP_INF_NAN, CL_DEVICE_TYPE_CPU),
