@@ -350,9 +350,8 @@ void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhas
     // models are the parts of one stream (stream_parts): a tile's block layers, the first with
     // the tile's SIZE and XYZI headers, each made on any core while the slab before is written.
     const size_t models = progress.add(1);
-    std::vector<int64_t> first_part(tiles.size() + 1, 0);  // of each tile, in the stream
-    for (size_t m = 0; m < tiles.size(); ++m)
-        first_part[m + 1] = first_part[m] + kBlocksPerTileAxis;
+    // Part p of the stream is block layer p % kBlocksPerTileAxis of tile p / kBlocksPerTileAxis.
+    const int64_t parts = int64_t(tiles.size()) * kBlocksPerTileAxis;
     write_file_atomically(path, [&](std::ostream& out) {
         out.write("VOX ", 4);
         write_i32(out, kVersion);
@@ -360,16 +359,17 @@ void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         write_chunk_header(out, "PACK", 4, 0);
         write_i32(out, int32_t(tiles.size()));
         std::vector<TileBricks> bricks(tiles.size());
+        size_t released = 0;  // tiles whose tables are let go
         stream_parts<PartsSlab>(
-            &out, first_part.back(), parts_per_slab(kTileLayerBytes),
+            &out, parts, parts_per_slab(kTileLayerBytes),
             [&](PartsSlab& slab, int64_t first, int64_t end) {
-                // The tables of the tiles the slab begins, before its parts are made; those of
-                // tiles already made are let go.
-                for (size_t m = 0; m < tiles.size(); ++m)
-                    if (first_part[m] >= first && first_part[m] < end)
+                // The table of a tile the slab begins, before its parts are made; those of the
+                // tiles before the slab's first are let go.
+                const size_t first_tile = size_t(first / kBlocksPerTileAxis);
+                for (; released < first_tile; ++released) bricks[released] = TileBricks{};
+                for (size_t m = first_tile; m <= size_t((end - 1) / kBlocksPerTileAxis); ++m)
+                    if (int64_t(m) * kBlocksPerTileAxis >= first)
                         bricks[m] = walker.bricks_of(tiles[m]);
-                    else if (first_part[m + 1] <= first)
-                        bricks[m] = TileBricks{};
                 tbb::parallel_for(first, end, [&](int64_t part) {
                     const size_t m = size_t(part / kBlocksPerTileAxis);
                     const int64_t lz = part % kBlocksPerTileAxis;
@@ -386,9 +386,7 @@ void write_vox(const std::string& path, const SparseVoxels& voxels, ProgressPhas
                     walker.write_layer(tiles[m], bricks[m], lz, w);
                 });
             },
-            [&](int64_t first) {
-                progress.report(models, uint64_t(first), uint64_t(first_part.back()));
-            });
+            [&](int64_t first) { progress.report(models, uint64_t(first), uint64_t(parts)); });
         out << graph_bytes;
         progress.finish();
     });
