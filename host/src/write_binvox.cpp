@@ -108,24 +108,16 @@ void encode_planes(const SparseVoxels& voxels, int64_t x, int64_t count, int64_t
             for (int64_t wy = 0; wy < per_axis; ++wy) {
                 const uint64_t word = blocks[wx + per_axis * (wy + per_axis * wz)];
                 if (!word) continue;
-                const int64_t y = by * b + 4 * wy;  // a multiple of 4: the 4 bits share a word
-                if (word == ~uint64_t(0)) {         // a solid's inside: every row's 4 voxels set
-                    for (int64_t j = 0; j < rows_z; ++j)
-                        for (int64_t i = 0; i < count; ++i) {
-                            const int64_t row = 4 * j + i;
-                            rows[size_t(row * words_per_row + y / 64)] |= uint64_t(0xF) << (y % 64);
-                            first_word[row] = std::min(first_word[row], y / 64);
-                            last_word[row] = std::max(last_word[row], y / 64);
-                        }
-                    continue;
-                }
+                const int64_t y = by * b + 4 * wy;       // a multiple of 4: the 4 bits share a word
+                const bool full = word == ~uint64_t(0);  // a solid's inside: all 4 of every row
                 for (int64_t j = 0; j < rows_z; ++j)
                     for (int64_t i = 0; i < count; ++i) {
-                        const uint64_t bits = word >> ((x + i) % 4 + 16 * j) & 0x1111;
+                        const uint64_t bits =
+                            full ? 0xF
+                                 : (word >> ((x + i) % 4 + 16 * j) & 0x1111) * 0x1248 >> 12 & 0xF;
                         if (!bits) continue;
                         const int64_t row = 4 * j + i;
-                        rows[size_t(row * words_per_row + y / 64)] |= (bits * 0x1248 >> 12 & 0xF)
-                                                                      << (y % 64);
+                        rows[size_t(row * words_per_row + y / 64)] |= bits << (y % 64);
                         first_word[row] = std::min(first_word[row], y / 64);
                         last_word[row] = std::max(last_word[row], y / 64);
                     }
