@@ -7,7 +7,7 @@
 // are lattice points shared by all the quads that touch them, so the mesh is indexed, not a quad
 // soup, its vertices numbered in order of first use.
 //
-// Streaming, on every core: the voxel layers go through stream_slabs a slab of layers at a time,
+// Streaming, on every core: the voxel layers go through stream_parts a slab of layers at a time,
 // and within a slab each layer is made on its own. A layer's faces come in (y, x, direction)
 // order straight from the voxels' rows: a brick's rows of a layer are its bits along x
 // (brick-local y), so a row's exposed faces in one direction are the row less its neighbour row
@@ -136,9 +136,12 @@ class ExposedFaces {
           blocks_(voxels.blocks_per_brick_axis()),
           words_((brick_ + 63) / 64),
           nbx_(uint64_t(voxels.brick_dims()[0])),
-          nby_(uint64_t(voxels.brick_dims()[1])) {}
+          nby_(uint64_t(voxels.brick_dims()[1])),
+          voxels_set_(voxels.count()) {}
 
     int64_t brick_size() const { return brick_; }
+    // The set voxels, counted once (a pass over every brick's words).
+    uint64_t voxels_set() const { return voxels_set_; }
 
     // The stored bricks of brick layer `brick_z`, with their neighbours.
     BrickLayer brick_layer(int64_t brick_z) const {
@@ -265,6 +268,7 @@ class ExposedFaces {
     const std::vector<uint64_t> bricks_;
     const int64_t brick_, blocks_, words_;
     const uint64_t nbx_, nby_;
+    const uint64_t voxels_set_;
 };
 
 // One voxel layer's share of the mesh, made on its own: its corners in order of first use
@@ -371,9 +375,9 @@ uint64_t number_of(const LayerMesh& below, const LayerMesh& mesh, uint32_t i) {
 // of 48 bytes (an overestimate for all but the thinnest shells), and never fewer than two per
 // core.
 constexpr double kMeshSlabBytes = double(uint64_t(256) << 20);
-int64_t slab_layers_for(const SparseVoxels& voxels) {
+int64_t slab_layers_for(const ExposedFaces& faces, const Grid& grid) {
     const int64_t cores = tbb::this_task_arena::max_concurrency();
-    const double layer_bytes = 6.0 * 48.0 * double(voxels.count()) / double(voxels.grid().dims[2]);
+    const double layer_bytes = 6.0 * 48.0 * double(faces.voxels_set()) / double(grid.dims[2]);
     const int64_t fit = int64_t(std::min(64.0, kMeshSlabBytes / std::max(layer_bytes, 1.0)));
     return std::max(std::min(std::max<int64_t>(4 * cores, 16), fit),
                     std::min<int64_t>(2 * cores, 64));
@@ -409,7 +413,7 @@ MeshCounts stream_layers(const ExposedFaces& faces, const SparseVoxels& voxels,
     LayerMesh carried;  // the layer below the slab being made (its last layer, once numbered)
     MeshCounts counts;
     stream_parts<MeshSlab>(
-        out, nz, slab_layers > 0 ? slab_layers : slab_layers_for(voxels),
+        out, nz, slab_layers > 0 ? slab_layers : slab_layers_for(faces, voxels.grid()),
         [&](MeshSlab& slab, int64_t first, int64_t end) {
             const size_t layers = size_t(end - first);
             slab.meshes.resize(layers);
@@ -526,7 +530,7 @@ void write_cube_mesh_obj(const std::string& path, const SparseVoxels& voxels,
         }
     };
     write_file_atomically(path, [&](std::ostream& out) {
-        out << "# oclvox: exposed faces of " << voxels.count() << " voxels\n";
+        out << "# oclvox: exposed faces of " << faces.voxels_set() << " voxels\n";
         stream_layers(faces, voxels, path, &out, slab_layers, Corners::Numbered, progress, pass,
                       mesh_maker(faces, path), layer_text);
         progress.finish();
@@ -554,8 +558,8 @@ std::string cube_mesh_ply_header(uint64_t voxels, uint64_t vertices, uint64_t qu
 void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
                          ProgressPhases& progress, int64_t slab_layers) {
     const Grid& grid = voxels.grid();
-    const uint64_t voxel_count = voxels.count();
     const ExposedFaces faces(voxels);
+    const uint64_t voxel_count = faces.voxels_set();
     // Two walks over the layers (vertices, faces) after a header with room for any counts, which
     // are written into it at the end. A grid whose vertices could pass PLY's signed 32-bit
     // indices (over 2^31 / 8 voxels) is walked once more first, so that one over the limit is
@@ -604,8 +608,8 @@ void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
 void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
                          ProgressPhases& progress, int64_t slab_layers) {
     const Grid& grid = voxels.grid();
-    const uint64_t voxel_count = voxels.count();
     const ExposedFaces faces(voxels);
+    const uint64_t voxel_count = faces.voxels_set();
     const bool may_pass_limit = 12 * voxel_count > std::numeric_limits<uint32_t>::max();
     const size_t counting = may_pass_limit ? progress.add(1) : 0, face_pass = progress.add(1);
     // make: the layer's faces as triangles to `bytes` (none when counting).
