@@ -124,6 +124,41 @@ TEST(DeviceMatchesReferenceForModes, ThinAndHalfOpen) {
     }
 }
 
+// A GPU builds the surface kernels without OV_WIDE_BLOCKS: each block's lanes 4 at a time
+// (ov_P_block4) where a CPU takes 16 (ov_P_block16), and no prefetch. So that path equals the
+// reference in every run of the suite, not only where a GPU is lent, this device builds them as a
+// GPU would (its own cached binaries are apart: the cache key holds the options) and runs SAT,
+// PEF and thin, closed and half-open, on random triangles, a box on voxel planes and spot.
+TEST(DeviceMatchesReferenceForModes, KernelsBuiltAsForAGpu) {
+    Device gpu_built =
+        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    Device::Impl& cl = detail::device_impl(gpu_built);
+    cl.build_options =
+        detail::build_options(cl.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>(), CL_DEVICE_TYPE_GPU);
+    ASSERT_EQ(cl.build_options.find("OV_WIDE_BLOCKS"), std::string::npos);
+    Mesh m = random_triangles(300, 0, 44, 6, 31);
+    const Mesh box = box_mesh({4, 4, 4}, {20, 12, 30});
+    for (const auto& t : box.triangles)
+        add_triangle(m, box.positions[t[0]], box.positions[t[1]], box.positions[t[2]]);
+    const Mesh spot = load_mesh(mesh_path("spot.obj"));
+    GridFit fit;
+    fit.resolution = 64;
+    for (const auto& [mesh, grid] : {std::pair<const Mesh&, Grid>{m, unit_grid(48, 40, 44)},
+                                     std::pair<const Mesh&, Grid>{spot, fit_grid(spot, fit)}})
+        for (const VoxelizeMode mode : {VoxelizeMode::Surface, VoxelizeMode::Thin})
+            for (const OverlapTest test : kTests)
+                for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
+                    if (mode == VoxelizeMode::Thin && test == OverlapTest::SAT) continue;
+                    VoxelizeOptions o = options(test, 16);
+                    o.mode = mode;
+                    o.boundary = boundary;
+                    SCOPED_TRACE(std::string(to_string(mode)) + " " + to_string(test) + " " +
+                                 to_string(boundary));
+                    expect_same(gpu_built.voxelize(mesh, grid, o),
+                                voxelize_reference(mesh, grid, o));
+                }
+}
+
 // The kernels find each voxel row's run from a bound and walk to its exact ends; the bound is
 // widest where a test's x coefficient is tiny. Large triangles nearly parallel to the rows (normals
 // almost perpendicular to x, tilted by 1e-7 to 1e-2), on and just off voxel planes, with every
