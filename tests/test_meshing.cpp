@@ -373,6 +373,20 @@ TEST(Meshing, DeviceEqualsHostReferenceBitForBit) {
         }
 }
 
+// The device meshers as a GPU runs them (device_used_as_a_gpu: the field uploaded, the counts
+// and triangles downloaded from the device's memory) give the host reference's meshes.
+TEST(Meshing, DeviceRunAsOnAGpuEqualsHostReference) {
+    for (const ScalarField& field : {sphere_field(), noise_field(13, 3)})
+        for (auto method :
+             {detail::MeshingMethod::SurfaceNets, detail::MeshingMethod::MarchingCubes}) {
+            const Mesh reference = detail::mesh_field_reference(field, 0.0f, method, 32);
+            const bool nets = method == detail::MeshingMethod::SurfaceNets;
+            expect_identical(nets ? surface_nets(test::device_used_as_a_gpu(), field, 0.0f)
+                                  : marching_cubes(test::device_used_as_a_gpu(), field, 0.0f),
+                             reference);
+        }
+}
+
 // Progress over the scan, count and emit passes keeps the fields' contract (one fixed total, never
 // back, ending at it), changes no vertex, and a false answer cancels on the device as on the host.
 TEST(Meshing, ProgressReportsEveryPassAndCancels) {

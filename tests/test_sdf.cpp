@@ -1028,6 +1028,25 @@ TEST(SparseSdf, ToDenseIsTheDenseFieldBitForBitOnDeviceAndReference) {
         }
 }
 
+// Sparse and dense band fields as a GPU computes them (device_used_as_a_gpu: uploads, leaves
+// downloaded from the device's memory), in one batch of leaves and in many, are this device's
+// fields sample for sample.
+TEST(SparseSdf, FieldsComputedAsOnAGpuEqualThisDevicesFields) {
+    Device& gpu = device_used_as_a_gpu();
+    for (const SparseCase& c : sparse_cases()) {
+        SCOPED_TRACE(c.name);
+        SdfOptions o = band(2.0);
+        const ScalarField expected = signed_distance(device(), c.mesh, c.grid, o);
+        expect_identical(signed_distance(gpu, c.mesh, c.grid, o), expected);
+        expect_identical(signed_distance_sparse(gpu, c.mesh, c.grid, o).to_dense(), expected);
+        o.device_budget_bytes = 7 * SparseField::kLeafSamples * 4;  // seven leaves a batch
+        VoxelizeStats stats;
+        expect_identical(signed_distance_sparse(gpu, c.mesh, c.grid, o, &stats).to_dense(),
+                         expected);
+        EXPECT_GT(stats.batches, 1u);
+    }
+}
+
 TEST(SparseSdf, BatchBudgetAndBrickSizeDoNotChangeAnySample) {
     const SparseCase c = sparse_cases()[1];
     const SdfOptions o = band(2.0);

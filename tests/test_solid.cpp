@@ -501,6 +501,28 @@ TEST(Solid, ParityDeviceEqualsReferenceBitForBit) {
     }
 }
 
+// The parity and winding solids as a GPU runs them (device_used_as_a_gpu: uploads, flip buffers
+// the device fills, compact downloads), in one batch and in many, are this device's solids.
+TEST(Solid, ParityAndWindingRunAsOnAGpuEqualThisDevicesRuns) {
+    Device& gpu = device_used_as_a_gpu();
+    const Mesh bunny = load("bunny00.off");
+    const Grid g = fitted(bunny, 64);
+    const SparseVoxels parity = on_device(bunny, g, solid_options(InsideTest::Parity, 16));
+    VoxelizeOptions small = solid_options(InsideTest::Parity, 16);
+    VoxelizeStats stats;
+    EXPECT_TRUE(gpu.voxelize(bunny, g, small, &stats).same_voxels(parity));
+    small.device_budget_bytes = 16 << 10;  // a few brick columns a batch
+    EXPECT_TRUE(gpu.voxelize(bunny, g, small, &stats).same_voxels(parity));
+    EXPECT_GT(stats.batches, 1u);
+
+    const Mesh scan = load("stanford-bunny.obj");  // open: the winding number
+    const Grid gs = fitted(scan, 40);
+    const VoxelizeOptions winding = solid_options(InsideTest::Winding, 16);
+    const SparseVoxels expected = on_device(scan, gs, winding);
+    EXPECT_GT(expected.count(), 0u);
+    EXPECT_TRUE(gpu.voxelize(scan, gs, winding).same_voxels(expected));
+}
+
 TEST(Solid, ResultDoesNotDependOnBrickSize) {
     const Mesh m = load("bunny00.off");
     const Grid g = fitted(m, 64);

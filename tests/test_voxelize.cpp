@@ -124,18 +124,13 @@ TEST(DeviceMatchesReferenceForModes, ThinAndHalfOpen) {
     }
 }
 
-// A GPU builds the surface kernels without OV_WIDE_BLOCKS: each block's lanes 4 at a time
-// (ov_P_block4) where a CPU takes 16 (ov_P_block16), and no prefetch. So that path equals the
-// reference in every run of the suite, not only where a GPU is lent, this device builds them as a
-// GPU would (its own cached binaries are apart: the cache key holds the options) and runs SAT,
-// PEF and thin, closed and half-open, on random triangles, a box on voxel planes and spot.
-TEST(DeviceMatchesReferenceForModes, KernelsBuiltAsForAGpu) {
-    Device gpu_built =
-        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
-    Device::Impl& cl = detail::device_impl(gpu_built);
-    cl.build_options =
-        detail::build_options(cl.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>(), CL_DEVICE_TYPE_GPU);
-    ASSERT_EQ(cl.build_options.find("OV_WIDE_BLOCKS"), std::string::npos);
+// The surface kernels and their batches as a GPU runs them (device_used_as_a_gpu: 4-lane
+// blocks, uploads, bit buffers the device fills, compact downloads) equal the reference: SAT, PEF
+// and thin, closed and half-open, on random triangles with a box on voxel planes and on spot, in
+// one batch and in a batch per brick.
+TEST(DeviceMatchesReferenceForModes, WhenRunAsOnAGpu) {
+    Device& gpu = device_used_as_a_gpu();
+    ASSERT_EQ(detail::device_impl(gpu).build_options.find("OV_WIDE_BLOCKS"), std::string::npos);
     Mesh m = random_triangles(300, 0, 44, 6, 31);
     const Mesh box = box_mesh({4, 4, 4}, {20, 12, 30});
     for (const auto& t : box.triangles)
@@ -154,8 +149,13 @@ TEST(DeviceMatchesReferenceForModes, KernelsBuiltAsForAGpu) {
                     o.boundary = boundary;
                     SCOPED_TRACE(std::string(to_string(mode)) + " " + to_string(test) + " " +
                                  to_string(boundary));
-                    expect_same(gpu_built.voxelize(mesh, grid, o),
-                                voxelize_reference(mesh, grid, o));
+                    const SparseVoxels reference = voxelize_reference(mesh, grid, o);
+                    VoxelizeStats stats;
+                    expect_same(gpu.voxelize(mesh, grid, o, &stats), reference);
+                    EXPECT_EQ(stats.batches, 1u);
+                    o.device_budget_bytes = 16 * 16 * 16 / 8;  // a brick a batch
+                    expect_same(gpu.voxelize(mesh, grid, o, &stats), reference);
+                    EXPECT_EQ(stats.batches, stats.bricks_active);
                 }
 }
 
