@@ -27,11 +27,8 @@ namespace {
 
 using Vec3 = std::array<double, 3>;
 
-Device& device() {
-    static Device d =
-        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
-    return d;
-}
+using test::device;
+using test::device_used_as_a_gpu;
 
 // ---- fields
 // --------------------------------------------------------------------------------------
@@ -381,8 +378,8 @@ TEST(Meshing, DeviceRunAsOnAGpuEqualsHostReference) {
              {detail::MeshingMethod::SurfaceNets, detail::MeshingMethod::MarchingCubes}) {
             const Mesh reference = detail::mesh_field_reference(field, 0.0f, method, 32);
             const bool nets = method == detail::MeshingMethod::SurfaceNets;
-            expect_identical(nets ? surface_nets(test::device_used_as_a_gpu(), field, 0.0f)
-                                  : marching_cubes(test::device_used_as_a_gpu(), field, 0.0f),
+            expect_identical(nets ? surface_nets(device_used_as_a_gpu(), field, 0.0f)
+                                  : marching_cubes(device_used_as_a_gpu(), field, 0.0f),
                              reference);
         }
 }
