@@ -21,6 +21,7 @@
 #include <cstring>
 #include <fstream>
 #include <locale>
+#include <memory>
 #include <mutex>
 #include <set>
 
@@ -88,13 +89,21 @@ struct TemporaryFile {
     }
 };
 
+// The output stream's buffer (see write_file_atomically).
+constexpr size_t kStreamBufferBytes = size_t(1) << 20;
+
 }  // namespace
 
 void write_file_atomically(const std::string& path,
                            const std::function<void(std::ostream&)>& write) {
-    // Phase 1: create the temporary file. A missing or read-only folder fails here.
+    // Phase 1: create the temporary file. A missing or read-only folder fails here. Its buffer
+    // is 1 MiB, set before the file opens (libstdc++ ignores it after): a format written in many
+    // small pieces (OpenVDB's stream writes a leaf in four of 12-64 bytes) otherwise made a system
+    // call every 8 KiB, a fifth of writing bunny00's 187 MB surface .vdb at 4096^3.
     errno = 0;
+    const std::unique_ptr<char[]> buffer(new char[kStreamBufferBytes]);  // pages touched as filled
     std::ofstream stream;
+    stream.rdbuf()->pubsetbuf(buffer.get(), std::streamsize(kStreamBufferBytes));
     TemporaryFile temporary(path, stream);
     if (!stream.is_open())
         throw OutputError("cannot write " + path + ": cannot create a file in folder '" +
