@@ -1320,6 +1320,29 @@ TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits)
     }
 }
 
+// Whole-leaf bricks are built 256 at a time, each group's leaves inserted into the tree while
+// the next group is built: a grid of over a thousand active bricks of 8 (several groups, sparse
+// noise in every brick and a solid box pruned to tiles) reads back with exactly its voxels.
+TEST_F(WriterTest, VdbOfManyBrickGroupsHasExactlyTheSetVoxels) {
+    const Grid grid = make_grid({130, 70, 90});
+    VoxelSet set;
+    uint32_t state = 99;
+    for (int64_t k = 0; k < 90; ++k)
+        for (int64_t j = 0; j < 70; ++j)
+            for (int64_t i = 0; i < 130; ++i) {
+                state = state * 1664525u + 1013904223u;
+                const bool box = i >= 16 && i < 48 && j >= 8 && j < 40 && k >= 24 && k < 64;
+                if (box || (state >> 24) < 4) set.insert({i, j, k});
+            }
+    const SparseVoxels voxels = make_voxels(grid, set, 8);
+    ASSERT_GT(voxels.brick_indices().size(), 3 * 256u);
+    oclvox::write_voxels(path("groups.vdb"), voxels);
+    const VdbOccupancy vdb = read_vdb_occupancy(path("groups.vdb"));
+    EXPECT_EQ(vdb.active_count, set.size());
+    EXPECT_EQ(vdb.active, set);
+    EXPECT_TRUE(vdb.all_true);
+}
+
 TEST_F(WriterTest, VdbReadsBackThroughOpenVdbsPythonModule) {
     if (std::system("/usr/bin/python3 -c 'import pyopenvdb' 2>/dev/null") != 0)
         GTEST_SKIP() << "python3-openvdb is not installed (scripts/install_deps.sh installs it)";

@@ -16,6 +16,7 @@
 // copy of the grid is ever made.
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include <memory>
 
@@ -101,6 +102,10 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         }
     };
     const size_t group = whole_leaves ? 256 : bricks.size();
+    // Whole leaves: a task hands one group's leaves to the tree (a serial insertion) while the
+    // cores build the next group's.
+    std::vector<std::vector<std::unique_ptr<Leaf>>> adding;
+    tbb::task_group inserting;
     for (size_t first = 0; first < bricks.size(); first += group) {
         progress.report(tree, first, bricks.size());
         const size_t end = std::min(bricks.size(), first + group);
@@ -111,9 +116,14 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
         leaves.clear();
         leaves.resize(end - first);
         tbb::parallel_for(first, end, [&](size_t b) { build_brick(b, &leaves[b - first]); });
-        for (auto& own : leaves)
-            for (auto& leaf : own) access.addLeaf(leaf.release());
+        inserting.wait();
+        std::swap(adding, leaves);
+        inserting.run([&] {
+            for (auto& own : adding)
+                for (auto& leaf : own) access.addLeaf(leaf.release());
+        });
     }
+    inserting.wait();
 
     // Phase 2: full leaves become tiles, then the file.
     vdb->tree().prune();
