@@ -940,20 +940,29 @@ TEST_F(WriterTest, FailedRenameRemovesTheTemporaryFile) {
 // SparseVoxels::get (not from the bricks the writers read)
 // ---------------------------------------------------------------------------------------------
 
+// A solid box [lo, hi) and noise below layer noise_end (a voxel in about noise_in_256 of 256),
+// from a fixed sequence.
+SparseVoxels box_and_noise(const Grid& grid, int brick_size, const std::array<int64_t, 3>& lo,
+                           const std::array<int64_t, 3>& hi, int64_t noise_end,
+                           uint32_t noise_in_256, uint32_t seed) {
+    SparseVoxels voxels(grid, brick_size);
+    uint32_t state = seed;
+    for (int64_t k = 0; k < grid.dims[2]; ++k)
+        for (int64_t j = 0; j < grid.dims[1]; ++j)
+            for (int64_t i = 0; i < grid.dims[0]; ++i) {
+                state = state * 1664525u + 1013904223u;
+                const bool box =
+                    i >= lo[0] && i < hi[0] && j >= lo[1] && j < hi[1] && k >= lo[2] && k < hi[2];
+                if (box || (k < noise_end && (state >> 24) < noise_in_256)) voxels.set(i, j, k);
+            }
+    return voxels;
+}
+
 // A pattern with long runs (a solid box, > 255 voxels per run), empty stretches and noise, on a
 // non-cubic grid that is not a multiple of any brick size used.
 SparseVoxels mixed_voxels(int brick_size) {
-    const Grid grid = make_grid({37, 21, 45}, {0.5, -2.0, 3.0}, 0.25);
-    SparseVoxels voxels(grid, brick_size);
-    uint32_t state = 12345;
-    for (int64_t k = 0; k < 45; ++k)
-        for (int64_t j = 0; j < 21; ++j)
-            for (int64_t i = 0; i < 37; ++i) {
-                state = state * 1664525u + 1013904223u;
-                const bool box = i >= 3 && i < 30 && j >= 2 && j < 21 && k >= 10 && k < 40;
-                if (box || (k < 8 && (state >> 24) < 80)) voxels.set(i, j, k);
-            }
-    return voxels;
+    return box_and_noise(make_grid({37, 21, 45}, {0.5, -2.0, 3.0}, 0.25), brick_size, {3, 2, 10},
+                         {30, 21, 40}, 8, 80, 12345);
 }
 
 // The .npy data section: uint8, Fortran order (x fastest).
@@ -1294,6 +1303,18 @@ TEST_F(WriterTest, StlCubeMeshEnclosesExactlyTheVoxelVolumeFacingOutwards) {
 // ---------------------------------------------------------------------------------------------
 // OpenVDB occupancy, read back through OpenVDB's own API
 // ---------------------------------------------------------------------------------------------
+// Writes `voxels` to `file` and reads it back through OpenVDB, expecting exactly their voxels
+// active and true.
+VdbOccupancy written_vdb_holding_exactly(const std::string& file, const SparseVoxels& voxels) {
+    oclvox::write_voxels(file, voxels);
+    VdbOccupancy vdb = read_vdb_occupancy(file);
+    const VoxelSet expected = set_of(voxels);
+    EXPECT_EQ(vdb.active_count, expected.size());
+    EXPECT_EQ(vdb.active, expected);
+    EXPECT_TRUE(vdb.all_true);
+    return vdb;
+}
+
 TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits) {
     // Bricks of 4 and 12 share leaves (one pass through an accessor); 8, 16 and 64 hold whole
     // leaves (built in parallel, brick by brick).
@@ -1301,12 +1322,7 @@ TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits)
         SCOPED_TRACE("brick " + std::to_string(brick));
         // The mixed pattern has whole 8^3 leaves (pruned to tiles) and partial ones.
         const SparseVoxels voxels = mixed_voxels(brick);
-        oclvox::write_voxels(path("o.vdb"), voxels);
-        const VdbOccupancy vdb = read_vdb_occupancy(path("o.vdb"));
-        const VoxelSet expected = set_of(voxels);
-        EXPECT_EQ(vdb.active_count, expected.size());
-        EXPECT_EQ(vdb.active, expected);
-        EXPECT_TRUE(vdb.all_true);
+        const VdbOccupancy vdb = written_vdb_holding_exactly(path("o.vdb"), voxels);
 
         const Grid& g = voxels.grid();
         for (const Voxel& v : {Voxel{0, 0, 0}, Voxel{36, 20, 44}, Voxel{5, 17, 30}}) {
@@ -1324,23 +1340,10 @@ TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits)
 // the next group is built: a grid of over a thousand active bricks of 8 (several groups, sparse
 // noise in every brick and a solid box pruned to tiles) reads back with exactly its voxels.
 TEST_F(WriterTest, VdbOfManyBrickGroupsHasExactlyTheSetVoxels) {
-    const Grid grid = make_grid({130, 70, 90});
-    VoxelSet set;
-    uint32_t state = 99;
-    for (int64_t k = 0; k < 90; ++k)
-        for (int64_t j = 0; j < 70; ++j)
-            for (int64_t i = 0; i < 130; ++i) {
-                state = state * 1664525u + 1013904223u;
-                const bool box = i >= 16 && i < 48 && j >= 8 && j < 40 && k >= 24 && k < 64;
-                if (box || (state >> 24) < 4) set.insert({i, j, k});
-            }
-    const SparseVoxels voxels = make_voxels(grid, set, 8);
+    const SparseVoxels voxels =
+        box_and_noise(make_grid({130, 70, 90}), 8, {16, 8, 24}, {48, 40, 64}, 90, 4, 99);
     ASSERT_GT(voxels.brick_indices().size(), 3 * 256u);
-    oclvox::write_voxels(path("groups.vdb"), voxels);
-    const VdbOccupancy vdb = read_vdb_occupancy(path("groups.vdb"));
-    EXPECT_EQ(vdb.active_count, set.size());
-    EXPECT_EQ(vdb.active, set);
-    EXPECT_TRUE(vdb.all_true);
+    written_vdb_holding_exactly(path("groups.vdb"), voxels);
 }
 
 TEST_F(WriterTest, VdbReadsBackThroughOpenVdbsPythonModule) {
