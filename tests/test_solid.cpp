@@ -502,7 +502,8 @@ TEST(Solid, ParityDeviceEqualsReferenceBitForBit) {
 }
 
 // The parity and winding solids as a GPU runs them (device_used_as_a_gpu: uploads, flip buffers
-// the device fills, compact downloads), in one batch and in many, are this device's solids.
+// the device fills, compact or whole downloads), in one batch and in many, are this device's
+// solids.
 TEST(Solid, ParityAndWindingRunAsOnAGpuEqualThisDevicesRuns) {
     Device& gpu = device_used_as_a_gpu();
     const Mesh bunny = load("bunny00.off");
@@ -514,6 +515,8 @@ TEST(Solid, ParityAndWindingRunAsOnAGpuEqualThisDevicesRuns) {
     small.device_budget_bytes = 16 << 10;  // a few brick columns a batch
     EXPECT_TRUE(gpu.voxelize(bunny, g, small, &stats).same_voxels(parity));
     EXPECT_GT(stats.batches, 1u);
+    small.download = Download::Whole;  // mapped from the device's memory
+    EXPECT_TRUE(gpu.voxelize(bunny, g, small).same_voxels(parity));
 
     const Mesh scan = load("stanford-bunny.obj");  // open: the winding number
     const Grid gs = fitted(scan, 40);

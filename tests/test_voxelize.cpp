@@ -125,9 +125,9 @@ TEST(DeviceMatchesReferenceForModes, ThinAndHalfOpen) {
 }
 
 // The surface kernels and their batches as a GPU runs them (device_used_as_a_gpu: 4-lane
-// blocks, uploads, bit buffers the device fills, compact downloads) equal the reference: SAT, PEF
-// and thin, closed and half-open, on random triangles with a box on voxel planes and on spot, in
-// one batch and in a batch per brick.
+// blocks, uploads, bit buffers the device fills, compact or whole downloads) equal the
+// reference: SAT, PEF and thin, closed and half-open, on random triangles with a box on voxel
+// planes and on spot, in one batch and in a batch per brick.
 TEST(DeviceMatchesReferenceForModes, WhenRunAsOnAGpu) {
     Device& gpu = device_used_as_a_gpu();
     ASSERT_EQ(detail::device_impl(gpu).build_options.find("OV_WIDE_BLOCKS"), std::string::npos);
@@ -156,6 +156,8 @@ TEST(DeviceMatchesReferenceForModes, WhenRunAsOnAGpu) {
                     o.device_budget_bytes = 16 * 16 * 16 / 8;  // a brick a batch
                     expect_same(gpu.voxelize(mesh, grid, o, &stats), reference);
                     EXPECT_EQ(stats.batches, stats.bricks_active);
+                    o.download = Download::Whole;  // mapped from the device's memory
+                    expect_same(gpu.voxelize(mesh, grid, o), reference);
                 }
 }
 
