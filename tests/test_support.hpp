@@ -25,23 +25,27 @@ namespace oclvox::test {
 
 using detail::Vec3d;
 
-// The OpenCL device the tests run on: $OCLVOX_DEVICE, else the library's default choice. Opened
-// once per test process.
+// The selector of the OpenCL device the tests run on: $OCLVOX_DEVICE, else the library's default
+// choice.
+inline std::string device_selector() {
+    const char* selector = std::getenv("OCLVOX_DEVICE");
+    return selector ? selector : "";
+}
+// That device, opened once per test process.
 inline Device& device() {
-    static Device d =
-        Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+    static Device d = Device::open(device_selector());
     return d;
 }
 
 // The same device used as a GPU is: its programs built with a GPU's options (no OV_WIDE_BLOCKS,
 // so the surface kernels take ov_P_block4 and no prefetch) and its memory treated as its own
-// (uploaded inputs, bit buffers it fills, compact downloads, no host-memory batch cap). On a CPU
-// device that runs, in every run of the suite, the paths a GPU takes, which otherwise run only
-// where a GPU is lent. (The kernel cache keeps these builds apart: its key holds the options.)
+// (uploaded inputs, bit buffers it fills, compact downloads by default, no host-memory batch
+// cap). On a CPU device that runs, in every run of the suite, the paths a GPU takes, which
+// otherwise run only where a GPU is lent. (The kernel cache keeps these builds apart: its key
+// holds the options.)
 inline Device& device_used_as_a_gpu() {
     static Device d = [] {
-        Device opened =
-            Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+        Device opened = Device::open(device_selector());
         Device::Impl& cl = detail::device_impl(opened);
         cl.info.host_unified_memory = false;
         cl.build_options = detail::build_options(cl.device.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>(),

@@ -401,8 +401,7 @@ TEST(Devices, LoadKernelsLeavesNothingForVoxelizeToBuild) {
     for (const VoxelizeMode mode :
          {VoxelizeMode::Surface, VoxelizeMode::Thin, VoxelizeMode::Solid, VoxelizeMode::Filled})
         for (const Download download : {Download::Whole, Download::NonEmptyBlocks}) {
-            Device d =
-                Device::open(std::getenv("OCLVOX_DEVICE") ? std::getenv("OCLVOX_DEVICE") : "");
+            Device d = Device::open(device_selector());
             std::vector<std::string> built;
             d.on_kernel_compile([&](const Device::KernelCompile& c) {
                 if (c.finished) built.push_back(c.program);

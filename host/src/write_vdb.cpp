@@ -10,10 +10,10 @@
 // The tree is built straight from the bricks: each 4^3 block word lands in one 8^3 leaf
 // (blocks are 4-aligned), and its bits are ORed into the leaf's active and value words four rows
 // of 16 at a time. Bricks whose edge is a multiple of 8 hold whole leaves, so their leaves are
-// built in parallel, brick by brick, and then handed to the tree; other brick sizes share leaves
-// between bricks and are built in one pass through a cached accessor. Whole leaves that end up
-// full are then pruned to active tiles, so a solid interior costs a tile, not 512 bits. No dense
-// copy of the grid is ever made.
+// built in parallel, brick by brick, a group of bricks at a time, and handed to the tree by a task
+// while the next group's are built; other brick sizes share leaves between bricks and are built in
+// one pass through a cached accessor. Whole leaves that end up full are then pruned to active
+// tiles, so a solid interior costs a tile, not 512 bits. No dense copy of the grid is ever made.
 
 #include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
