@@ -10,9 +10,9 @@
 // given its (triangle, brick) pair's index, so a huge triangle spreads over many items instead of
 // serialising on one.
 //
-// For SAT and PEF a triangle whose range is one voxel sets that voxel untested
-// (ov_range_is_one_voxel): the host sends those voxels to set_direct_bits instead, a work item
-// each that decodes no pair and reads no triangle.
+// For SAT and PEF a triangle whose range is a row of voxels sets them untested
+// (ov_range_is_row): the host sends those rows to set_direct_bits instead, a work item each that
+// decodes no pair and reads no triangle.
 #include "voxel_math.h"
 
 // CPU devices whose compiler is clang (PoCL, Intel's) prefetch triangles (decode_item) with
@@ -212,12 +212,31 @@ OV_VOXELIZE_KERNEL(voxelize_sat, sat, OvSatTriangle)
 OV_VOXELIZE_KERNEL(voxelize_pef, pef, OvPefTriangle)
 OV_VOXELIZE_KERNEL(voxelize_thin, thin, OvThinTriangle)
 
-// Sets bits [first, end) of the list: each is a bit's index among the batch's brick bits (the
-// voxel of a one-voxel (triangle, brick) pair, for SAT and PEF: see ov_range_is_one_voxel).
-__kernel void set_direct_bits(__global const ulong* bit_index, uint first, uint end,
+// Sets the voxels of entries [first, end) of the list: each a row of a direct pair (the voxels
+// of a (triangle, brick) pair whose range is a row, for SAT and PEF: see ov_range_is_row), as
+// ov_direct_row encodes it. Along the row a voxel's bit moves on by 1, 4 or 16 (x, y, z) within
+// its 4x4x4 block, and to the next block's (1, nb or nb^2 blocks on: x fastest in the brick) at
+// the block's face.
+__kernel void set_direct_bits(__global const ulong* rows, uint first, uint end, int brick_size,
                               __global uint* bits) {
     uint i = first + (uint)get_global_id(0);
     if (i >= end) return;
-    ulong bit = bit_index[i];
-    atomic_or(&bits[bit >> 5], 1u << (uint)(bit & 31));
+    ulong row = rows[i];
+    ulong bit = row & (((ulong)1 << OV_ROW_FIRST_BITS) - 1);
+    int axis = (int)(row >> OV_ROW_FIRST_BITS) & 3;
+    int length = (int)(row >> (OV_ROW_FIRST_BITS + 2)) + 1;
+    int nb = brick_size / 4;
+    ulong step = axis == 0 ? 1 : axis == 1 ? 4 : 16;
+    ulong block_step = 64 * (ulong)(axis == 0 ? 1 : axis == 1 ? nb : nb * nb);
+    int in_block = (int)(bit >> (2 * axis)) & 3;  // the voxel's coordinate in its block
+    for (int v = 0; v < length; ++v) {
+        atomic_or(&bits[bit >> 5], 1u << (uint)(bit & 31));
+        if (in_block == 3) {
+            bit += block_step - 3 * step;
+            in_block = 0;
+        } else {
+            bit += step;
+            ++in_block;
+        }
+    }
 }

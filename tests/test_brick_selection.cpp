@@ -600,32 +600,35 @@ TEST(PairBatches, HoldThePairsWithWorkAndEachItemsPair) {
     EXPECT_EQ(values(b.item_pair), (std::vector<cl_uint>{0, 1, 1, 2, 3, 3}));
 }
 
-// Direct pairs (a bit of their unit's 1000, here triangle t's bit 10 * t in unit u) become bits
-// of the batch (slot * 1000 + bit), in unit order, and neither pairs nor work items; worked by
-// hand for units {7 (2 items), 8 (direct)}, {9 (direct)}, {10 (none), 11 (direct)}.
+// Direct pairs (an entry whose low bits are a bit of their unit's 1000, here triangle t's bit
+// 10 * t, and whose high bits are the kernel's, here t << 50) become entries of the batch whose
+// bit is the batch's (slot * 1000 + bit) and whose high bits are kept, in unit order, and neither
+// pairs nor work items; worked by hand for units {7 (2 items), 8 (direct)}, {9 (direct)},
+// {10 (none), 11 (direct)}.
 TEST(PairBatches, DirectPairsAreTheirUnitsBitsInTheBatch) {
     const HandBinning h;
     auto batch = [&](size_t first) {
-        return detail::make_pair_batch(h.units, h.first_pair, h.pair_triangle, first, 3, "brick",
-                                       1000, [](size_t) {
-                                           return [](uint32_t t) {
-                                               return t == 7    ? cl_uint(2)
-                                                      : t == 10 ? cl_uint(0)
-                                                                : detail::kDirectBit | (10 * t);
-                                           };
-                                       });
+        return detail::make_pair_batch(
+            h.units, h.first_pair, h.pair_triangle, first, 3, "brick", 1000, [](size_t) {
+                return [](uint32_t t) {
+                    return t == 7    ? uint64_t(2)
+                           : t == 10 ? uint64_t(0)
+                                     : detail::kDirectPair | uint64_t(t) << 50 | (10 * t);
+                };
+            });
     };
     const detail::PairBatch all = batch(0);
     EXPECT_EQ(all.items, 2u);
     EXPECT_EQ(values(all.pair_triangle), (std::vector<cl_uint>{7}));
     EXPECT_EQ(values(all.item_pair), (std::vector<cl_uint>{0, 0}));
-    EXPECT_EQ(std::vector<cl_ulong>(all.direct_bits.begin(), all.direct_bits.end()),
-              (std::vector<cl_ulong>{80, 1090, 2110}));
+    const auto high = [](uint64_t t) { return t << 50; };
+    EXPECT_EQ(std::vector<cl_ulong>(all.direct_entries.begin(), all.direct_entries.end()),
+              (std::vector<cl_ulong>{high(8) | 80, high(9) | 1090, high(11) | 2110}));
     const detail::PairBatch later = batch(1);  // slots count from the first unit
     EXPECT_EQ(later.items, 0u);
     EXPECT_TRUE(later.pair_triangle.empty());
-    EXPECT_EQ(std::vector<cl_ulong>(later.direct_bits.begin(), later.direct_bits.end()),
-              (std::vector<cl_ulong>{90, 1110}));
+    EXPECT_EQ(std::vector<cl_ulong>(later.direct_entries.begin(), later.direct_entries.end()),
+              (std::vector<cl_ulong>{high(9) | 90, high(11) | 1110}));
 }
 
 TEST(PairBatches, StopAtTheSlotsOrTheWorkItemsAndStartWhereAsked) {

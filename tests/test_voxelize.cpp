@@ -199,7 +199,7 @@ TEST(DeviceMatchesReferenceForModes, LongRowsNearlyParallelToX) {
 }
 
 // A triangle within one voxel's box meets that voxel and no other: its range is one voxel, and the
-// conservative tests set it without testing (ov_range_is_one_voxel). Hand-worked on 3000 such
+// conservative tests set it without testing (ov_range_is_row). Hand-worked on 3000 such
 // triangles at dyadic coordinates (exact in float): strictly inside their voxel for closed boxes,
 // and for half-open ones also with vertices on the voxel's lower faces, which belong to it alone.
 // Device and reference must set exactly those voxels, for every brick size; among larger
@@ -235,6 +235,58 @@ TEST(DeviceMatchesReferenceForModes, TrianglesWithinOneVoxelSetThatVoxelAlone) {
             VoxelizeOptions o = options(test, 16);
             o.boundary = boundary;
             expect_same(device().voxelize(mixed, g, o), voxelize_reference(mixed, g, o));
+        }
+    }
+}
+
+// A triangle within one voxel's box across two axes meets every voxel of its range along the
+// third (it is connected, and its coordinates there fill the interval of its vertices'), and the
+// conservative tests set that row without testing (ov_range_is_row). Hand-worked on rows along
+// each axis at dyadic coordinates (exact in float), some reaching out of the grid: across the
+// row, strictly inside the voxel for closed boxes (also on its lower face for half-open ones);
+// along it, ends anywhere, on voxel faces too, so the row is the voxels k with
+// ceil(lo) - 1 <= k <= floor(hi) for closed boxes (a face touched belongs to both voxels) and
+// floor(lo) <= k <= floor(hi) for half-open ones. Device (also as a GPU runs it) and reference
+// must set exactly those voxels, for brick sizes that cut the rows in many places.
+TEST(DeviceMatchesReferenceForModes, TrianglesWithinOneVoxelRowSetTheWholeRow) {
+    const Grid g = unit_grid(40, 33, 47);
+    for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
+        std::mt19937 rng(boundary == Boundary::Closed ? 5 : 6);
+        std::uniform_int_distribution<int> fraction(boundary == Boundary::Closed ? 1 : 0, 63);
+        std::uniform_int_distribution<int> along(0, 12 * 64);  // up to 12 voxels long
+        Mesh m;
+        SparseVoxels expected(g, 16);
+        for (int t = 0; t < 3000; ++t) {
+            const int axis = t % 3;
+            int64_t v[3] = {int64_t(rng() % 40), int64_t(rng() % 33), int64_t(rng() % 47)};
+            const int start = int(rng() % uint32_t(g.dims[axis] + 6)) - 4;  // some leave the grid
+            Vec3d corner[3];
+            double lo = 1e9, hi = -1e9;
+            for (Vec3d& p : corner) {
+                for (int k = 0; k < 3; ++k) p[k] = double(v[k]) + fraction(rng) / 64.0;
+                p[axis] = start + along(rng) / 64.0;
+                lo = std::min(lo, p[axis]);
+                hi = std::max(hi, p[axis]);
+            }
+            add_triangle(m, corner[0], corner[1], corner[2]);
+            const int64_t first =
+                boundary == Boundary::Closed ? int64_t(std::ceil(lo)) - 1 : int64_t(std::floor(lo));
+            for (int64_t k = std::max<int64_t>(first, 0);
+                 k <= std::min<int64_t>(int64_t(std::floor(hi)), g.dims[axis] - 1); ++k) {
+                v[axis] = k;
+                expected.set(v[0], v[1], v[2]);
+            }
+        }
+        for (OverlapTest test : kTests) {
+            SCOPED_TRACE(std::string(to_string(test)) +
+                         (boundary == Boundary::Closed ? " closed" : " half-open"));
+            for (int brick : {8, 16, 48}) {
+                VoxelizeOptions o = options(test, brick);
+                o.boundary = boundary;
+                expect_same(device().voxelize(m, g, o), expected);
+                expect_same(device_used_as_a_gpu().voxelize(m, g, o), expected);
+                expect_same(voxelize_reference(m, g, o), expected);
+            }
         }
     }
 }

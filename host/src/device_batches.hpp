@@ -121,29 +121,33 @@ class BitSlotBuffer {
 // Work items of one batch are numbered with 32-bit offsets.
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 
-// What a unit counter returns for a pair whose whole work is one bit of its unit's result, set
-// without a kernel's tests: kDirectBit | that bit's index among the unit's bits (below 2^31).
-constexpr cl_uint kDirectBit = cl_uint(1) << 31;
+// What a unit counter returns for a pair whose whole work is set without a kernel's tests:
+// kDirectPair | a direct entry for its unit, whose low kDirectBitBits bits are a bit's index among
+// the unit's bits and whose bits above them (below kDirectPair) the kernel that sets it defines
+// (for the surface kernels a row of voxels from that bit: ov_direct_row).
+constexpr uint64_t kDirectPair = uint64_t(1) << 63;
+constexpr int kDirectBitBits = 48;  // a batch has fewer bits than 2^48 (32 TiB)
 
 // One batch of a binning's units (bricks, brick columns) for a kernel with a work item per piece
 // of a (triangle, unit) pair: units [first_unit, first_unit + unit_count), the pairs that have
 // work (their triangle, their unit's slot in the batch, their first work item) and each work
-// item's pair; and the bits that direct pairs set, as indices among the batch's bits (slot *
+// item's pair; and the direct pairs' entries, their bits now indices among the batch's bits (slot *
 // unit_bits + the bit's index in its unit).
 struct PairBatch {
     size_t first_unit = 0, unit_count = 0;
     FilledLaterVector<cl_uint> pair_triangle, pair_slot, pair_first_item, item_pair;
-    FilledLaterVector<cl_ulong> direct_bits;
+    FilledLaterVector<cl_ulong> direct_entries;
     uint64_t items = 0;
 };
 
 // Gathers units [first, ...) of a binning (unit u's triangles are
 // pair_triangle[first_pair[u] .. first_pair[u + 1]), its name units[u]) into one batch of at
 // most max_slots units and max_items work items. unit_counter(u) gives a function of a triangle
-// that returns its work items in unit u (0: none), or kDirectBit | a bit of the unit's result
-// (unit_bits bits a unit) that is the pair's whole work. Units are independent, so their pairs
-// are counted and then written in parallel; only the cut and the prefix sums are serial, a step a
-// unit. Throws GridError, naming `unit_name`, if one unit alone has too many work items.
+// that returns its work items in unit u (0: none, fewer than 2^32), or kDirectPair | a direct
+// entry in the unit (unit_bits bits a unit) that is the pair's whole work. Units are independent,
+// so their pairs are counted and then written in parallel; only the cut and the prefix sums are
+// serial, a step a unit. Throws GridError, naming `unit_name`, if one unit alone has too many work
+// items.
 template <class UnitCounter>
 PairBatch make_pair_batch(const std::vector<uint64_t>& units,
                           const std::vector<uint64_t>& first_pair,
@@ -158,15 +162,15 @@ PairBatch make_pair_batch(const std::vector<uint64_t>& units,
     struct UnitCounts {
         uint64_t items, pairs, directs;
     };
-    FilledLaterVector<cl_uint> pair_work(first_pair[last] - pair_base);
+    FilledLaterVector<uint64_t> pair_work(first_pair[last] - pair_base);
     std::vector<UnitCounts> unit(last - first);
     tbb::parallel_for(first, last, [&](size_t u) {
         const auto work_of = unit_counter(u);
         UnitCounts counts{0, 0, 0};
         for (uint64_t p = first_pair[u]; p < first_pair[u + 1]; ++p) {
-            const cl_uint n = work_of(pair_triangle[p]);
+            const uint64_t n = work_of(pair_triangle[p]);
             pair_work[p - pair_base] = n;
-            if (n & kDirectBit) {
+            if (n & kDirectPair) {
                 ++counts.directs;
             } else {
                 counts.items += n;
@@ -203,14 +207,14 @@ PairBatch make_pair_batch(const std::vector<uint64_t>& units,
     batch.pair_slot.resize(total.pairs);
     batch.pair_first_item.resize(total.pairs);
     batch.item_pair.resize(total.items);
-    batch.direct_bits.resize(total.directs);
+    batch.direct_entries.resize(total.directs);
     tbb::parallel_for(size_t(0), batch.unit_count, [&](size_t slot) {
         const size_t u = first + slot;
         UnitCounts next = unit[slot];
         for (uint64_t p = first_pair[u]; p < first_pair[u + 1]; ++p) {
-            const cl_uint n = pair_work[p - pair_base];
-            if (n & kDirectBit) {
-                batch.direct_bits[next.directs++] = slot * unit_bits + (n & ~kDirectBit);
+            const uint64_t n = pair_work[p - pair_base];
+            if (n & kDirectPair) {
+                batch.direct_entries[next.directs++] = slot * unit_bits + (n & ~kDirectPair);
                 continue;
             }
             if (n == 0) continue;

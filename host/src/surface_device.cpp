@@ -39,31 +39,36 @@ std::array<int, 3> brick_coordinates(const detail::Binning& binning, const Grid&
 }
 
 // Bricks [first, ...) as one batch: a work item per run of up to OV_BLOCKS_PER_ITEM blocks of a
-// triangle's blocks in a brick; for a conservative test (SAT, PEF), a triangle whose range is one
-// voxel is a direct bit instead (ov_range_is_one_voxel).
+// triangle's blocks in a brick; for a conservative test (SAT, PEF), a triangle whose range is a
+// row of voxels is a direct pair instead, its voxels in the brick one entry (ov_range_is_row).
 detail::PairBatch make_batch(const detail::Binning& binning,
                              const detail::PreparedTriangles& prepared, const Grid& grid,
                              int brick_size, bool conservative, size_t first, size_t max_slots) {
+    static_assert(OV_ROW_FIRST_BITS == detail::kDirectBitBits);
     const uint64_t brick_bits = uint64_t(brick_size) * uint64_t(brick_size) * uint64_t(brick_size);
     return detail::make_pair_batch(
         binning.bricks, binning.brick_first_pair, binning.pair_triangle, first, max_slots, "brick",
         brick_bits, [&](size_t b) {
             const std::array<int, 3> brick = brick_coordinates(binning, grid, brick_size, b);
-            return [&, brick](uint32_t triangle) {
+            return [&, brick](uint32_t triangle) -> uint64_t {
                 const detail::OvRange& range = prepared.ranges[triangle];
                 detail::OvPairWork work;
                 const int blocks = detail::ov_pair_work(
                     range, brick[0], brick[1], brick[2], brick_size, int(grid.dims[0]),
                     int(grid.dims[1]), int(grid.dims[2]), &work);
-                if (conservative && blocks > 0 && detail::ov_range_is_one_voxel(range)) {
-                    const int* v = work.voxel_lo;
-                    return detail::kDirectBit |
-                           cl_uint(64 * detail::ov_brick_block(v[0] / 4, v[1] / 4, v[2] / 4,
-                                                               brick[0], brick[1], brick[2],
-                                                               brick_size) +
-                                   detail::ov_block_bit(v[0] & 3, v[1] & 3, v[2] & 3));
+                if (conservative && blocks > 0 && detail::ov_range_is_row(range)) {
+                    const int* lo = work.voxel_lo;
+                    const int* hi = work.voxel_hi;
+                    const int axis = hi[1] != lo[1] ? 1 : hi[2] != lo[2] ? 2 : 0;
+                    const uint64_t first_bit =
+                        64 * uint64_t(detail::ov_brick_block(lo[0] / 4, lo[1] / 4, lo[2] / 4,
+                                                             brick[0], brick[1], brick[2],
+                                                             brick_size)) +
+                        uint64_t(detail::ov_block_bit(lo[0] & 3, lo[1] & 3, lo[2] & 3));
+                    return detail::kDirectPair |
+                           detail::ov_direct_row(first_bit, axis, hi[axis] - lo[axis] + 1);
                 }
-                return cl_uint(detail::ov_pair_items(blocks));
+                return uint64_t(detail::ov_pair_items(blocks));
             };
         });
 }
@@ -170,7 +175,7 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                 const cl::Buffer pair_first = detail::read_in_place(cl, batch.pair_first_item);
                 const cl::Buffer item_pair = detail::read_in_place(cl, batch.item_pair);
                 const cl::Buffer slot_brick = detail::read_in_place(cl, slot_coordinates);
-                const cl::Buffer direct_bits = detail::read_in_place(cl, batch.direct_bits);
+                const cl::Buffer direct_rows = detail::read_in_place(cl, batch.direct_entries);
                 cl.queue.finish();
                 stats.seconds_upload += seconds_since(t);
 
@@ -186,9 +191,9 @@ SparseVoxels Device::voxelize(const Mesh& mesh, const Grid& grid, const Voxelize
                                        detail::launch(cl.queue, voxelize, count, voxelize_group);
                                    },
                                    {});
-                const uint64_t directs = batch.direct_bits.size();
-                detail::set_args(set_direct, 0, direct_bits, cl_uint(0), cl_uint(directs),
-                                 bit_buffer);
+                const uint64_t directs = batch.direct_entries.size();
+                detail::set_args(set_direct, 0, direct_rows, cl_uint(0), cl_uint(directs),
+                                 cl_int(brick_size), bit_buffer);
                 detail::run_sliced(cl.queue, directs, set_direct_group,
                                    [&](uint64_t first, uint64_t count) {
                                        set_direct.setArg(1, cl_uint(first));

@@ -39,8 +39,8 @@ void refuse_absurd_work(const detail::PreparedTriangles& prepared, const Grid& g
     }
 }
 
-// `conservative`: the test is SAT or PEF, which set the voxel of a triangle whose range is one
-// voxel without testing it, as the kernels do (ov_range_is_one_voxel).
+// `conservative`: the test is SAT or PEF, which set the voxels of a triangle whose range is a row
+// of voxels without testing them, as the kernels do (ov_range_is_row).
 template <typename Setup, typename Overlaps>
 void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels& out, Setup setup,
                         Overlaps overlaps, bool conservative) {
@@ -52,8 +52,10 @@ void voxelize_triangles(const detail::PreparedTriangles& prepared, SparseVoxels&
             lo[k] = std::max<int>(r.lo[k], 0);
             hi[k] = int(std::min<int64_t>(r.hi[k], grid.dims[k] - 1));
         }
-        if (conservative && detail::ov_range_is_one_voxel(r)) {
-            if (lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2]) out.set(lo[0], lo[1], lo[2]);
+        if (conservative && detail::ov_range_is_row(r)) {
+            for (int z = lo[2]; z <= hi[2]; ++z)
+                for (int y = lo[1]; y <= hi[1]; ++y)
+                    for (int x = lo[0]; x <= hi[0]; ++x) out.set(x, y, z);
             continue;
         }
         const auto s = setup(prepared.triangles[t]);
