@@ -40,7 +40,9 @@ __kernel void parity_flip(__global const OvParityTriangle* triangles,
 // words bottom to top: each word of flips becomes parity (a prefix XOR continuing its column's
 // carry), and its 32 layers, 8 block rows, are copied into the blocks. Taking the prefix on the
 // way spares a pass that wrote every parity word back and one that read it again. Voxels at or
-// above nz are left clear: the grid ends there even when the parity does not.
+// above nz are left clear: the grid ends there even when the parity does not. Only blocks that
+// hold a voxel are written (the blocks arrive zero): in the host's memory the pages of a brick
+// outside the solid are then never touched, and the host knows that brick empty unread.
 __kernel void parity_blocks(__global const uint* bits, uint slots, int brick_size, int brick_rows,
                             int nz, uint words, __global uint* blocks) {
     uint item = (uint)get_global_id(0);
@@ -102,8 +104,10 @@ __kernel void parity_blocks(__global const uint* bits, uint slots, int brick_siz
             int gz = 8 * word + r;
             size_t brick = (size_t)slot * brick_rows + (size_t)(gz / nb);
             size_t block = (size_t)(gx + nb * (gy + nb * (gz % nb)));
-            blocks[2 * (brick * nb * nb * nb + block)] = low;
-            blocks[2 * (brick * nb * nb * nb + block) + 1] = high;
+            if (low | high) {
+                blocks[2 * (brick * nb * nb * nb + block)] = low;
+                blocks[2 * (brick * nb * nb * nb + block) + 1] = high;
+            }
         }
     }
 }

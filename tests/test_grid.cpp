@@ -194,5 +194,53 @@ TEST(SparseVoxels, TakenBricksStayInTheirRun) {
                  GridError);
 }
 
+// Pages of fresh host memory count as untouched until written, and again once given back; so
+// adopting bricks skips the never-touched ones unread, while bricks in touched pages are read: one
+// written with zeros (memset) is empty and its pages are given back, and small bricks sharing a
+// touched page are each kept or dropped by their own bits.
+TEST(SparseVoxels, TakenBricksInPagesNeverTouchedAreEmptyUnread) {
+    const size_t page = detail::host_page_size();
+    std::shared_ptr<uint64_t> pages = detail::zeroed_host_pages(8 * page);
+    ASSERT_TRUE(pages);
+    char* const bytes = reinterpret_cast<char*>(pages.get());
+    bytes[3 * page + 17] = 1;
+    std::vector<uint8_t> touched = detail::touched_host_pages(bytes, 8 * page);
+    ASSERT_EQ(touched.size(), 8u);
+    EXPECT_TRUE(touched[3]);  // written: always touched
+    // Linux says which pages were never touched (/proc/self/pagemap); that is what saves the reads.
+    EXPECT_EQ(std::count(touched.begin(), touched.end(), 0), 7);
+    detail::release_host_pages(bytes + 3 * page, page);
+    EXPECT_EQ(detail::touched_host_pages(bytes, 8 * page), std::vector<uint8_t>(8, 0));
+
+    SparseVoxels v(unit_grid(128, 128, 128), 64);  // 8 bricks of 32 KiB, whole pages
+    const size_t n = v.blocks_per_brick();
+    std::shared_ptr<uint64_t> run = detail::zeroed_host_pages(3 * n * sizeof(uint64_t));
+    ASSERT_TRUE(run);
+    std::memset(run.get() + n, 0, n * sizeof(uint64_t));  // run brick 1: touched, all zero
+    run.get()[2 * n + 7] = 4;                             // run brick 2: voxel (30, 0, 0) of 3
+    detail::SparseVoxelsAccess::adopt_bricks(v, run, 3, [](size_t i) { return uint64_t(i + 1); });
+    EXPECT_EQ(v.brick_indices(), std::vector<uint64_t>{3});
+    EXPECT_EQ(v.count(), 1u);
+    EXPECT_TRUE(v.get(64 + 30, 64, 0));
+    const std::vector<uint8_t> after =
+        detail::touched_host_pages(run.get(), 3 * n * sizeof(uint64_t));
+    EXPECT_EQ(
+        std::count(after.begin(), after.begin() + ptrdiff_t(2 * n * sizeof(uint64_t) / page), 1),
+        0);  // brick 0 never touched, brick 1's pages given back
+
+    // 8^3 bricks of 64 bytes: 64 to a page.
+    SparseVoxels small(unit_grid(64, 64, 64), 8);
+    std::shared_ptr<uint64_t> shared = detail::zeroed_host_pages(128 * 8 * sizeof(uint64_t));
+    ASSERT_TRUE(shared);
+    shared.get()[8 * 5] = 1;        // brick 5: voxel (40, 0, 0)
+    shared.get()[8 * 100 + 3] = 1;  // brick 100 (another page), block (1, 1, 0): voxel (36, 36, 8)
+    detail::SparseVoxelsAccess::adopt_bricks(small, shared, 128,
+                                             [](size_t i) { return uint64_t(i); });
+    EXPECT_EQ(small.brick_indices(), (std::vector<uint64_t>{5, 100}));
+    EXPECT_EQ(small.count(), 2u);
+    EXPECT_TRUE(small.get(40, 0, 0));
+    EXPECT_TRUE(small.get(36, 36, 8));
+}
+
 }  // namespace
 }  // namespace oclvox::test

@@ -86,14 +86,15 @@ class SlotBuffer {
 // place, zeroed on every core, where the device's fill runs on one thread (through PoCL the fill
 // took 12 ms of motorBike's 17 MiB at 1024^3, most of it faulting in fresh pages; zeroed on two
 // cores, 5 ms). Fresh pages are zero already: bits the kernels write sparsely are left to fault
-// in where written (most pages of a surface's bricks never are), as are bits written once whole
-// (the parity solid's blocks: zeroing them first took 17 ms at 1024^3, their faults in the kernel
-// 8 ms), while bits the kernels flip at random and then read whole (the parity solid's flips) are
-// zeroed on every core first, as faults inside those kernels cost far more (parity solid of
-// bunny00 at 1024^3: voxelize phase 145 ms with the flips' pages zeroed first, 173-191 ms
-// without, 2026-11-27). A result can take the pages instead of a copy (take_pages,
-// download_bricks), and the next batch gets fresh ones. Elsewhere the bits are a device buffer,
-// kept while the batch size stays, that the device fills.
+// in where written (most pages of a surface's bricks never are), as are bits written once (the
+// parity solid's blocks, written only where they hold voxels: zeroing them first took 17 ms at
+// 1024^3, their faults in the kernel 8 ms; and a brick whose pages were never touched is known
+// empty without a read, SparseVoxelsAccess::adopt_bricks), while bits the kernels flip at random
+// and then read whole (the parity solid's flips) are zeroed on every core first, as faults inside
+// those kernels cost far more (parity solid of bunny00 at 1024^3: voxelize phase 145 ms with the
+// flips' pages zeroed first, 173-191 ms without, 2026-11-27). A result can take the pages instead
+// of a copy (take_pages, download_bricks), and the next batch gets fresh ones. Elsewhere the bits
+// are a device buffer, kept while the batch size stays, that the device fills.
 class BitSlotBuffer {
   public:
     enum class FreshPages { FaultWhereWritten, ZeroOnEveryCore };

@@ -2,9 +2,11 @@
 // dense field, a sparse result's bricks, a mesher's buffers) makes before it allocates.
 #pragma once
 
+#include <fcntl.h>
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
@@ -87,6 +89,35 @@ inline void release_host_pages(void* p, size_t bytes) {
     const uintptr_t begin = (reinterpret_cast<uintptr_t>(p) + page - 1) / page * page;
     const uintptr_t end = (reinterpret_cast<uintptr_t>(p) + bytes) / page * page;
     if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_DONTNEED);
+}
+
+// Which pages of the `bytes` of zeroed_host_pages memory from `p` (page-aligned) may hold anything
+// but zeros: entry i for the i-th page, 0 only for a page never touched (neither in memory nor
+// swapped out, as /proc/self/pagemap says: a fresh private page still reads as zero), which a
+// caller can then know to be zero without reading it (a read would map it). Every page counts as
+// touched where the system cannot say. (mincore would not do: a page swapped out is not resident
+// either.)
+inline std::vector<uint8_t> touched_host_pages(const void* p, size_t bytes) {
+    const size_t page = host_page_size();
+    const size_t pages = (bytes + page - 1) / page;
+    std::vector<uint8_t> touched(pages, 1);
+    const int fd = open("/proc/self/pagemap", O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return touched;
+    // One 64-bit entry a page: bit 63 present, bit 62 swapped out.
+    std::vector<uint64_t> entries(pages);
+    const size_t want = pages * sizeof(uint64_t);
+    const off_t at = off_t(reinterpret_cast<uintptr_t>(p) / page * sizeof(uint64_t));
+    size_t got = 0;
+    while (got < want) {
+        const ssize_t n =
+            pread(fd, reinterpret_cast<char*>(entries.data()) + got, want - got, at + off_t(got));
+        if (n <= 0) break;
+        got += size_t(n);
+    }
+    close(fd);
+    if (got == want)
+        for (size_t i = 0; i < pages; ++i) touched[i] = (entries[i] >> 62) != 0;
+    return touched;
 }
 
 // An allocator whose resize leaves new elements of trivial types uninitialised instead of zeroing

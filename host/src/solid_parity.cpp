@@ -195,7 +195,8 @@ void parity_device(Device::Impl& cl, const ParityTriangles& triangles, SparseVox
     cl.queue.finish();
     stats.seconds_upload += seconds_since(t);
     BitSlotBuffer bits(column_words * sizeof(cl_uint), BitSlotBuffer::FreshPages::ZeroOnEveryCore);
-    // The blocks are written whole, and a result in the host's memory takes their pages.
+    // The blocks that hold voxels are written once, and a result in the host's memory takes their
+    // pages (those of bricks without a voxel stay untouched: adopt_bricks skips them unread).
     BitSlotBuffer blocks(block_words * sizeof(cl_uint),
                          BitSlotBuffer::FreshPages::FaultWhereWritten);
 

@@ -186,13 +186,27 @@ void detail::SparseVoxelsAccess::adopt_bricks(SparseVoxels& voxels,
                                               const std::function<uint64_t(size_t)>& brick_index) {
     const std::vector<uint64_t> indices = checked_brick_indices(voxels, count, brick_index);
     const size_t n = voxels.blocks_per_brick();
-    // Phase 1: which bricks hold a voxel, in parallel (a non-empty brick stops at its first set
-    // word); the pages of the others are given back.
+    // Phase 1: which bricks hold a voxel, in parallel. A brick none of whose pages was ever
+    // touched is empty unread: devices write only the blocks that hold voxels, so most empty
+    // bricks of a solid's columns are such (reading them, and giving back the pages the reads
+    // mapped, one system call and one TLB flush of the other cores a brick, took 8% of a parity
+    // solid's run at 1024^3). The others are read, up to their first set word, and the pages of
+    // the empty ones given back.
+    const size_t brick_bytes = n * sizeof(uint64_t), page = host_page_size();
+    const auto first_page = reinterpret_cast<uintptr_t>(run.get()) / page * page;
+    const std::vector<uint8_t> touched = touched_host_pages(
+        reinterpret_cast<const void*>(first_page),
+        reinterpret_cast<uintptr_t>(run.get()) + count * brick_bytes - first_page);
     std::vector<uint8_t> holds_voxels(count);
     tbb::parallel_for(size_t(0), count, [&](size_t i) {
         uint64_t* const words = run.get() + i * n;
+        const uintptr_t begin = reinterpret_cast<uintptr_t>(words) - first_page;
+        if (std::none_of(touched.begin() + ptrdiff_t(begin / page),
+                         touched.begin() + ptrdiff_t((begin + brick_bytes - 1) / page + 1),
+                         [](uint8_t t) { return t != 0; }))
+            return;
         holds_voxels[i] = std::any_of(words, words + n, [](uint64_t w) { return w != 0; });
-        if (!holds_voxels[i]) release_host_pages(words, n * sizeof(uint64_t));
+        if (!holds_voxels[i]) release_host_pages(words, brick_bytes);
     });
     // Phase 2: the others are stored where they lie, or ORed into the brick already stored.
     for (size_t i = 0; i < count; ++i) {
@@ -202,7 +216,7 @@ void detail::SparseVoxelsAccess::adopt_bricks(SparseVoxels& voxels,
             voxels.bricks_.try_emplace(indices[i], std::shared_ptr<uint64_t>(run, words));
         if (fresh) continue;
         for (size_t w = 0; w < n; ++w) it->second.get()[w] |= words[w];
-        release_host_pages(words, n * sizeof(uint64_t));
+        release_host_pages(words, brick_bytes);
     }
 }
 
