@@ -58,39 +58,57 @@ __kernel void parity_blocks(__global const uint* bits, uint slots, int brick_siz
     // Row y's 4 columns as the lanes of carry[y]: each one's parity below the current word (0 or
     // 1). A row's 4 words are neighbours, read as one vector.
     uint4 carry[4] = {(uint4)(0u), (uint4)(0u), (uint4)(0u), (uint4)(0u)};
-    // The column's bricks may reach above its last word: those block rows are written clear.
+    // The column's bricks may reach above its last word: those block rows stay clear.
     for (int word = 0; 8 * word < rows; ++word) {
         // Layer 32 * word + 4 * r + z of column (x, y) is bit 4 * r + z of that column's word.
         int k0 = 32 * word;
         uint valid = k0 + 32 <= nz ? 0xffffffffu : k0 >= nz ? 0u : (1u << (nz - k0)) - 1u;
-        uint column_bits[16];
+        uint4 flips[4];
+        uint crossed = 0;
         for (int y = 0; y < 4; ++y) {
-            uint4 parity = valid
-                               ? vload4(0, columns + (size_t)word * layer + (size_t)y * brick_size)
-                               : (uint4)(0u);
-            parity = ovs_prefix_xor4(parity, carry[y]);
-            carry[y] = parity >> 31;
-            parity &= (uint4)(valid);
-            column_bits[4 * y] = parity.s0;
-            column_bits[4 * y + 1] = parity.s1;
-            column_bits[4 * y + 2] = parity.s2;
-            column_bits[4 * y + 3] = parity.s3;
+            flips[y] = valid ? vload4(0, columns + (size_t)word * layer + (size_t)y * brick_size)
+                             : (uint4)(0u);
+            crossed |= flips[y].s0 | flips[y].s1 | flips[y].s2 | flips[y].s3;
         }
-        // Transpose the 16 x 32 bit matrix (column c, layer k) in place, as two 16 x 16 halves
-        // side by side in each word: afterwards bits 0-15 of column_bits[k] are layer k's 16
-        // columns and bits 16-31 are layer 16 + k's. Each step swaps the off-diagonal j x j
-        // blocks of every 2j x 2j block (Hacker's Delight, "transposing a bit matrix"), the masks
-        // repeated in both halves.
-        const uint masks[4] = {0x00ff00ffu, 0x0f0f0f0fu, 0x33333333u, 0x55555555u};
+        uint column_bits[16];
+        if (!crossed) {
+            // No crossing in these 32 layers (most words of a solid: outside it or inside it): each
+            // column's parity is its carry throughout, so layer k of the transpose below is the
+            // 16 columns' carries wherever k is in the grid, and nothing needs transposing.
+            uint carries = 0;  // bit x + 4y: column (x, y)'s
+            for (int y = 0; y < 4; ++y)
+                carries |= (carry[y].s0 | carry[y].s1 << 1 | carry[y].s2 << 2 | carry[y].s3 << 3)
+                           << 4 * y;
+            if (!carries) continue;  // no voxel: the blocks stay clear
+            for (int k = 0; k < 16; ++k)
+                column_bits[k] = (valid >> k & 1u ? carries : 0u) |
+                                 (valid >> (16 + k) & 1u ? carries << 16 : 0u);
+        } else {
+            for (int y = 0; y < 4; ++y) {
+                uint4 parity = ovs_prefix_xor4(flips[y], carry[y]);
+                carry[y] = parity >> 31;
+                parity &= (uint4)(valid);
+                column_bits[4 * y] = parity.s0;
+                column_bits[4 * y + 1] = parity.s1;
+                column_bits[4 * y + 2] = parity.s2;
+                column_bits[4 * y + 3] = parity.s3;
+            }
+            // Transpose the 16 x 32 bit matrix (column c, layer k) in place, as two 16 x 16
+            // halves side by side in each word: afterwards bits 0-15 of column_bits[k] are layer
+            // k's 16 columns and bits 16-31 are layer 16 + k's. Each step swaps the off-diagonal
+            // j x j blocks of every 2j x 2j block (Hacker's Delight, "transposing a bit matrix"),
+            // the masks repeated in both halves.
+            const uint masks[4] = {0x00ff00ffu, 0x0f0f0f0fu, 0x33333333u, 0x55555555u};
 #pragma unroll
-        for (int s = 0; s < 4; ++s) {
-            int j = 8 >> s;
+            for (int s = 0; s < 4; ++s) {
+                int j = 8 >> s;
 #pragma unroll
-            for (int i = 0; i < 8; ++i) {
-                int a = (i & ~(j - 1)) << 1 | (i & (j - 1));  // the i-th row with bit j clear
-                uint t = (column_bits[a] >> j ^ column_bits[a + j]) & masks[s];
-                column_bits[a + j] ^= t;
-                column_bits[a] ^= t << j;
+                for (int i = 0; i < 8; ++i) {
+                    int a = (i & ~(j - 1)) << 1 | (i & (j - 1));  // the i-th row with bit j clear
+                    uint t = (column_bits[a] >> j ^ column_bits[a + j]) & masks[s];
+                    column_bits[a + j] ^= t;
+                    column_bits[a] ^= t << j;
+                }
             }
         }
         for (int r = 0; r < 8 && 8 * word + r < rows; ++r) {
