@@ -91,31 +91,44 @@ inline void release_host_pages(void* p, size_t bytes) {
     if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_DONTNEED);
 }
 
-// Which pages of the `bytes` of zeroed_host_pages memory from `p` (page-aligned) may hold anything
-// but zeros: entry i for the i-th page, 0 only for a page never touched (neither in memory nor
-// swapped out, as /proc/self/pagemap says: a fresh private page still reads as zero), which a
-// caller can then know to be zero without reading it (a read would map it). Every page counts as
-// touched where the system cannot say. (mincore would not do: a page swapped out is not resident
-// either.)
-inline std::vector<uint8_t> touched_host_pages(const void* p, size_t bytes) {
-    const size_t page = host_page_size();
-    const size_t pages = (bytes + page - 1) / page;
-    std::vector<uint8_t> touched(pages, 1);
+// The /proc/self/pagemap entries of `pages` pages from `p` (page-aligned), one 64-bit word a page
+// (bit 63: in memory, bit 62: swapped out); false if the system does not give them.
+inline bool read_page_map(const void* p, size_t pages, uint64_t* entries) {
     const int fd = open("/proc/self/pagemap", O_RDONLY | O_CLOEXEC);
-    if (fd < 0) return touched;
-    // One 64-bit entry a page: bit 63 present, bit 62 swapped out.
-    std::vector<uint64_t> entries(pages);
+    if (fd < 0) return false;
     const size_t want = pages * sizeof(uint64_t);
-    const off_t at = off_t(reinterpret_cast<uintptr_t>(p) / page * sizeof(uint64_t));
+    const off_t at = off_t(reinterpret_cast<uintptr_t>(p) / host_page_size() * sizeof(uint64_t));
     size_t got = 0;
     while (got < want) {
         const ssize_t n =
-            pread(fd, reinterpret_cast<char*>(entries.data()) + got, want - got, at + off_t(got));
+            pread(fd, reinterpret_cast<char*>(entries) + got, want - got, at + off_t(got));
         if (n <= 0) break;
         got += size_t(n);
     }
     close(fd);
-    if (got == want)
+    return got == want;
+}
+
+// Which pages of the `bytes` of zeroed_host_pages memory from `p` (page-aligned) may hold anything
+// but zeros: entry i for the i-th page, 0 only for a page never touched (neither in memory nor
+// swapped out, as /proc/self/pagemap says: a fresh private page still reads as zero), which a
+// caller can then know to be zero without reading it (a read would map it). Every page counts as
+// touched where the system cannot say, or where, asked once about two fresh pages of which one
+// was written, it did not answer exactly that (an emulated /proc must not make data vanish).
+// (mincore would not do: a page swapped out is not resident either.)
+inline std::vector<uint8_t> touched_host_pages(const void* p, size_t bytes) {
+    static const bool page_map_tells = [] {
+        const std::shared_ptr<uint64_t> probe = zeroed_host_pages(2 * host_page_size());
+        if (!probe) return false;
+        *static_cast<volatile uint64_t*>(probe.get()) = 1;
+        uint64_t entries[2];
+        return read_page_map(probe.get(), 2, entries) && (entries[0] >> 62) != 0 &&
+               (entries[1] >> 62) == 0;
+    }();
+    const size_t pages = (bytes + host_page_size() - 1) / host_page_size();
+    std::vector<uint8_t> touched(pages, 1);
+    std::vector<uint64_t> entries(pages);
+    if (page_map_tells && read_page_map(p, pages, entries.data()))
         for (size_t i = 0; i < pages; ++i) touched[i] = (entries[i] >> 62) != 0;
     return touched;
 }
