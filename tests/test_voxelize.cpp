@@ -198,12 +198,28 @@ TEST(DeviceMatchesReferenceForModes, LongRowsNearlyParallelToX) {
     }
 }
 
+// SAT and PEF with `boundary`, on the suite's device (also as a GPU runs it) and as the reference,
+// with bricks of 8, 16 and 48, set exactly the voxels of `expected` on mesh m.
+void expect_conservative_tests_set(const Mesh& m, const Grid& g, Boundary boundary,
+                                   const SparseVoxels& expected) {
+    for (OverlapTest test : kTests)
+        for (int brick : {8, 16, 48}) {
+            SCOPED_TRACE(std::string(to_string(test)) + " " + to_string(boundary) + ", bricks of " +
+                         std::to_string(brick));
+            VoxelizeOptions o = options(test, brick);
+            o.boundary = boundary;
+            expect_same(device().voxelize(m, g, o), expected);
+            expect_same(device_used_as_a_gpu().voxelize(m, g, o), expected);
+            expect_same(voxelize_reference(m, g, o), expected);
+        }
+}
+
 // A triangle within one voxel's box meets that voxel and no other: its range is one voxel, and the
 // conservative tests set it without testing (ov_range_is_row). Hand-worked on 3000 such
 // triangles at dyadic coordinates (exact in float): strictly inside their voxel for closed boxes,
 // and for half-open ones also with vertices on the voxel's lower faces, which belong to it alone.
-// Device and reference must set exactly those voxels, for every brick size; among larger
-// triangles, device == reference.
+// Device (also as a GPU runs it) and reference must set exactly those voxels, for every brick
+// size; among larger triangles, device == reference.
 TEST(DeviceMatchesReferenceForModes, TrianglesWithinOneVoxelSetThatVoxelAlone) {
     const Grid g = unit_grid(40, 33, 47);
     for (const Boundary boundary : {Boundary::Closed, Boundary::HalfOpen}) {
@@ -219,19 +235,12 @@ TEST(DeviceMatchesReferenceForModes, TrianglesWithinOneVoxelSetThatVoxelAlone) {
             add_triangle(m, corner[0], corner[1], corner[2]);
             expected.set(v[0], v[1], v[2]);
         }
+        expect_conservative_tests_set(m, g, boundary, expected);
+        // Mixed with triangles of every size, the one-voxel ones still take their own path.
+        Mesh mixed = random_triangles(300, -3, 45, 8, 5);
+        for (const auto& t : m.triangles)
+            add_triangle(mixed, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
         for (OverlapTest test : kTests) {
-            SCOPED_TRACE(std::string(to_string(test)) +
-                         (boundary == Boundary::Closed ? " closed" : " half-open"));
-            for (int brick : {8, 16, 48}) {
-                VoxelizeOptions o = options(test, brick);
-                o.boundary = boundary;
-                expect_same(device().voxelize(m, g, o), expected);
-                expect_same(voxelize_reference(m, g, o), expected);
-            }
-            // Mixed with triangles of every size, the one-voxel ones still take their own path.
-            Mesh mixed = random_triangles(300, -3, 45, 8, 5);
-            for (const auto& t : m.triangles)
-                add_triangle(mixed, m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]);
             VoxelizeOptions o = options(test, 16);
             o.boundary = boundary;
             expect_same(device().voxelize(mixed, g, o), voxelize_reference(mixed, g, o));
@@ -277,17 +286,7 @@ TEST(DeviceMatchesReferenceForModes, TrianglesWithinOneVoxelRowSetTheWholeRow) {
                 expected.set(v[0], v[1], v[2]);
             }
         }
-        for (OverlapTest test : kTests) {
-            SCOPED_TRACE(std::string(to_string(test)) +
-                         (boundary == Boundary::Closed ? " closed" : " half-open"));
-            for (int brick : {8, 16, 48}) {
-                VoxelizeOptions o = options(test, brick);
-                o.boundary = boundary;
-                expect_same(device().voxelize(m, g, o), expected);
-                expect_same(device_used_as_a_gpu().voxelize(m, g, o), expected);
-                expect_same(voxelize_reference(m, g, o), expected);
-            }
-        }
+        expect_conservative_tests_set(m, g, boundary, expected);
     }
 }
 
