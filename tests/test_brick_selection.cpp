@@ -9,6 +9,7 @@
 
 #include "binning.hpp"
 #include "bit_count.hpp"
+#include "block_download.hpp"
 #include "device_batches.hpp"
 #include "overlap_double.hpp"
 #include "test_support.hpp"
@@ -656,6 +657,32 @@ TEST(PairBatches, AUnitOverTheWorkItemsAloneIsAnErrorNamingIt) {
         EXPECT_NE(std::string(e.what()).find("brick 30 needs 3 work items"), std::string::npos)
             << e.what();
     }
+}
+
+// A compact download's blocks land at their indices, worked by hand for 3 units of 4 blocks;
+// indices a driver broke (descending, repeated, beyond the batch) are refused, and nothing is
+// written outside the batch's blocks either way.
+TEST(CompactDownloads, BlocksLandAtTheirIndicesAndBrokenIndicesAreRefused) {
+    auto place = [](const std::vector<cl_uint>& indices, std::vector<uint64_t>& blocks) {
+        std::vector<cl_uint> words;
+        for (const cl_uint index : indices) words.insert(words.end(), {index + 100, index + 200});
+        blocks.assign(13, 0);  // 3 x 4 blocks and a sentinel
+        blocks[12] = 7;
+        const bool placed = detail::place_compact_blocks(indices, words, 3, 4, blocks.data());
+        EXPECT_EQ(blocks[12], 7u);
+        return placed;
+    };
+    auto block = [](uint64_t index) { return (index + 100) | (index + 200) << 32; };
+    std::vector<uint64_t> blocks;
+    ASSERT_TRUE(place({1, 5, 6, 11}, blocks));
+    EXPECT_EQ(blocks, (std::vector<uint64_t>{0, block(1), 0, 0, 0, block(5), block(6), 0, 0, 0, 0,
+                                             block(11), 7}));
+    EXPECT_TRUE(place({}, blocks));
+    EXPECT_FALSE(place({5, 1}, blocks));
+    EXPECT_FALSE(place({6, 5, 9}, blocks));
+    EXPECT_FALSE(place({3, 3}, blocks));
+    EXPECT_FALSE(place({1, 12}, blocks));
+    EXPECT_FALSE(place({4000000000u}, blocks));
 }
 
 }  // namespace

@@ -3,7 +3,10 @@
 // 1024^3 and 64^3 bricks, a surface brick holds a few hundred non-empty blocks of 4096.
 #include "block_download.hpp"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <vector>
 
 #include "device_batches.hpp"
@@ -13,6 +16,34 @@
 namespace oclvox::detail {
 
 constexpr size_t kGroupBlocks = 64;  // OV_GROUP_BLOCKS of blocks.cl
+
+bool place_compact_blocks(const std::vector<cl_uint>& indices, const std::vector<cl_uint>& words,
+                          size_t units, size_t blocks_per_unit, uint64_t* blocks) {
+    // A unit's blocks are those whose indices fall in its range, found by binary search; every
+    // index is checked against its unit's range and its predecessor before its block is written.
+    auto unit_start = [&](uint64_t unit) {
+        return size_t(
+            std::lower_bound(indices.begin(), indices.end(), unit * blocks_per_unit,
+                             [](cl_uint index, uint64_t block) { return index < block; }) -
+            indices.begin());
+    };
+    std::atomic<bool> valid{unit_start(units) == indices.size()};  // none beyond the batch
+    tbb::parallel_for(size_t(0), units, [&](size_t u) {
+        const size_t begin = unit_start(u), end = unit_start(u + 1);
+        if (end < begin) valid = false;  // the indices do not ascend
+        const uint64_t first_block = uint64_t(u) * blocks_per_unit;
+        for (size_t i = begin; i < end; ++i) {
+            const uint64_t block = indices[i];
+            if (block < first_block || block >= first_block + blocks_per_unit ||
+                (i > begin && block <= indices[i - 1])) {
+                valid = false;
+                return;
+            }
+            blocks[block] = uint64_t(words[2 * i]) | uint64_t(words[2 * i + 1]) << 32;
+        }
+    });
+    return valid;
+}
 
 void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer& bit_slots,
                      size_t units, size_t blocks_per_unit, Download mode, VoxelizeStats& stats,
@@ -89,26 +120,18 @@ void download_bricks(Device::Impl& cl, const cl::Buffer& bits, BitSlotBuffer& bi
     cl.queue.enqueueReadBuffer(words, CL_TRUE, 0, 2 * total * sizeof(cl_uint), words_back.data());
     stats.bytes_downloaded += 3 * total * sizeof(cl_uint);
 
-    // Phase 4: per unit with blocks, its whole block array. The indices come from the device: a
-    // driver that breaks them is an error, never a write out of bounds.
-    for (size_t i = 0; i < total; ++i)
-        if (index_back[i] >= block_count || (i > 0 && index_back[i] <= index_back[i - 1]))
-            throw DeviceError("the device's compacted blocks are out of order or range (block " +
-                              std::to_string(index_back[i]) + " at " + std::to_string(i) + " of " +
-                              std::to_string(total) + ")");
-    std::vector<size_t> unit_first;  // where each unit with blocks starts in the compact list
-    for (size_t i = 0; i < total; ++i)
-        if (i == 0 || index_back[i] / blocks_per_unit != index_back[i - 1] / blocks_per_unit)
-            unit_first.push_back(i);
-    unit_first.push_back(total);
-    result.merge_bricks(
-        unit_first.size() - 1,
-        [&](size_t u) { return brick_of(index_back[unit_first[u]] / blocks_per_unit); },
-        [&](size_t u, uint64_t* blocks) {
-            for (size_t i = unit_first[u]; i < unit_first[u + 1]; ++i)
-                blocks[index_back[i] % blocks_per_unit] =
-                    uint64_t(words_back[2 * i]) | uint64_t(words_back[2 * i + 1]) << 32;
-        });
+    // Phase 4: each unit's blocks written into fresh pages, which the result then takes as its
+    // bricks where they lie (adopt_bricks: a unit without blocks leaves its pages untouched and is
+    // no brick). Merged brick by brick instead, every brick was a zeroed allocation of its own,
+    // and zeroing was most of the host's part of the download.
+    const std::shared_ptr<uint64_t> run = zeroed_host_pages(block_count * sizeof(uint64_t));
+    if (!run)  // a smaller batch may succeed (run_batches)
+        throw cl::Error(CL_OUT_OF_HOST_MEMORY, "mmap of a downloaded batch's bricks");
+    if (!place_compact_blocks(index_back, words_back, units, blocks_per_unit, run.get()))
+        throw DeviceError("the device's compacted blocks are out of order or range (" +
+                          std::to_string(total) + " blocks of a batch of " +
+                          std::to_string(block_count) + ")");
+    SparseVoxelsAccess::adopt_bricks(result, run, units, brick_of);
     stats.seconds_download += seconds_since(start);
 }
 

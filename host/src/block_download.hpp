@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <vector>
 
 #include "device_batches.hpp"
 #include "opencl_runtime.hpp"
@@ -16,6 +17,14 @@ inline bool downloads_non_empty_blocks(const Device::Impl& cl, Download mode) {
     return mode == Download::NonEmptyBlocks ||
            (mode == Download::Auto && !cl.info.host_unified_memory);
 }
+
+// The blocks of a compact download, `indices` (ascending, among a batch's units x blocks_per_unit
+// blocks) and each one's two words (`words`, low first), written to their places in `blocks`
+// (units x blocks_per_unit words; the others are left as they are), units in parallel. False
+// unless the indices ascend strictly and lie in the batch (a driver has broken them); nothing is
+// ever written out of bounds.
+bool place_compact_blocks(const std::vector<cl_uint>& indices, const std::vector<cl_uint>& words,
+                          size_t units, size_t blocks_per_unit, uint64_t* blocks);
 
 // A batch's `units` bricks in `bits` (each blocks_per_unit 4^3 blocks of two 32-bit words, low
 // word first, one brick after another) come back whole or as their non-empty blocks, as `mode`
