@@ -123,11 +123,12 @@ class BitSlotBuffer {
 constexpr uint64_t kMaxItemsPerBatch = uint64_t(1) << 31;
 
 // What a unit counter returns for a pair whose whole work is set without a kernel's tests:
-// kDirectPair | a direct entry for its unit, whose low kDirectBitBits bits are a bit's index among
-// the unit's bits and whose bits above them (below kDirectPair) the kernel that sets it defines
-// (for the surface kernels a row of voxels from that bit: ov_direct_row).
+// kDirectPair | a direct entry for its unit, whose low bits are a bit's index among the unit's bits
+// and whose high bits (below kDirectPair) the kernel that sets it defines (for the surface
+// kernels, ov_direct_row: a row of voxels from that bit, the index in the low OV_ROW_FIRST_BITS =
+// 48 bits). The batch adds the unit's slot * unit_bits to the entry, which stays within those low
+// bits: a batch has far fewer than 2^48 bits (32 TiB).
 constexpr uint64_t kDirectPair = uint64_t(1) << 63;
-constexpr int kDirectBitBits = 48;  // a batch has fewer bits than 2^48 (32 TiB)
 
 // One batch of a binning's units (bricks, brick columns) for a kernel with a work item per piece
 // of a (triangle, unit) pair: units [first_unit, first_unit + unit_count), the pairs that have

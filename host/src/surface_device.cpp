@@ -44,7 +44,6 @@ std::array<int, 3> brick_coordinates(const detail::Binning& binning, const Grid&
 detail::PairBatch make_batch(const detail::Binning& binning,
                              const detail::PreparedTriangles& prepared, const Grid& grid,
                              int brick_size, bool conservative, size_t first, size_t max_slots) {
-    static_assert(OV_ROW_FIRST_BITS == detail::kDirectBitBits);
     const uint64_t brick_bits = uint64_t(brick_size) * uint64_t(brick_size) * uint64_t(brick_size);
     return detail::make_pair_batch(
         binning.bricks, binning.brick_first_pair, binning.pair_triangle, first, max_slots, "brick",
