@@ -609,6 +609,46 @@ TEST_F(MeshFiles, ObjFaceIndicesReadAsWholeNumbersWhateverTheirDigits) {
             << word;
 }
 
+// Vertex and face lines read the same whatever separates their words (spaces, tabs, vertical
+// tabs, form feeds), however their lines end ("\n", "\r\n", a lone "\r", the end of the file),
+// wherever a comment starts (right after a number too), and whichever way an index is written (up
+// to nine digits and more, a sign, empty texture or normal parts, more parts than three, relative):
+// the common spellings take a quicker reading than the rest, and the two must agree. Expected
+// positions worked out by hand from the text.
+TEST_F(MeshFiles, ObjLinesReadTheSameWhateverTheirSpacingAndLineEnds) {
+    const std::string text =
+        "v 1 2 3\n"                       // vertex 1
+        "v\t+4.5\t-0\t6e1 1.0 # a w\r\n"  // vertex 2: (4.5, -0, 60)
+        "v 7\v8\f9#comment\r"             // vertex 3, a lone CR
+        "vn 0 0 1\n"                      // skipped
+        "v1 9 9 9\n"                      // keyword v1: skipped
+        "  v   0.125   0.25   0.5  \n"    // vertex 4
+        "f 1 2 3\n"                       // (1, 2, 3)
+        "f 1/ 2// 3/1/1/1#x\n"            // (1, 2, 3)
+        "f\t+1 000000002 -1\n"            // (1, 2, 4)
+        "f 000000000004 3 000000002\r\n"  // (4, 3, 2)
+        "fo 1 2 3\n"                      // keyword fo: skipped
+        "f 4/1 1//1\v2";                  // (4, 1, 2), no line end
+    const Mesh mesh = oclvox::load_mesh(write("spellings.obj", text));
+    const Vec3 vertex[5] = {{}, {1, 2, 3}, {4.5, -0.0, 60}, {7, 8, 9}, {0.125, 0.25, 0.5}};
+    const std::vector<std::array<int, 3>> faces = {
+        {1, 2, 3}, {1, 2, 3}, {1, 2, 4}, {4, 3, 2}, {4, 1, 2}};
+    ASSERT_EQ(mesh.triangles.size(), faces.size());
+    for (size_t t = 0; t < faces.size(); ++t)
+        for (int c = 0; c < 3; ++c)
+            EXPECT_EQ(mesh.positions[mesh.triangles[t][c]], vertex[faces[t][c]]) << t << " " << c;
+    // Broken words fail on their line whatever precedes them on it.
+    const std::string three = "v 0 0 0\nv 1 0 0\r\nv 0 1 0\r";
+    for (const char* line : {"f 1 2 3x", "f 1 2 3/x", "f 1 2 0", "f 1/0 2 3", "f 1 2 3#\nv 1 2 3e",
+                             "f 1 2 1234567890x", "f 1 2 +", "f 1 2\v3/x", "v 1 2", "v 1 2 #3",
+                             "v 1 2 0x1", "v 1 2 1e999"}) {
+        const std::string message = input_error_of(write("broken.obj", three + line + "\n"));
+        EXPECT_TRUE(contains(
+            message, std::string(line).find('\n') != std::string::npos ? "line 5: " : "line 4: "))
+            << line << ": " << message;
+    }
+}
+
 TEST_F(MeshFiles, OffAndPlyFaceIndexOutOfRangeFails) {
     EXPECT_TRUE(
         contains(input_error_of(write("index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n")),

@@ -1,6 +1,10 @@
 // The pieces every mesh reader shares (see mesh_reading.hpp).
 #include "mesh_reading.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -32,7 +36,7 @@ void require_file(const std::string& path) {
 
 }  // namespace
 
-std::string read_whole_file(const std::string& path) {
+FileBytes read_whole_file(const std::string& path) {
     // The file is opened once: a named pipe gives its bytes to one reader only.
     require_file(path);
     std::ifstream file(path, std::ios::binary);
@@ -42,7 +46,7 @@ std::string read_whole_file(const std::string& path) {
     // large OBJ. The size is only a start, so a pipe or a growing file is still read whole.
     std::error_code error;
     const uint64_t expected = std::filesystem::file_size(path, error);
-    std::string bytes(error ? size_t(1) << 16 : size_t(expected) + 1, '\0');
+    detail::FilledLaterVector<char> bytes(error ? size_t(1) << 16 : size_t(expected) + 1);
     size_t size = 0;
     while (file.read(bytes.data() + size, std::streamsize(bytes.size() - size))) {
         size = bytes.size();
@@ -51,7 +55,7 @@ std::string read_whole_file(const std::string& path) {
     if (file.bad() || !file.eof()) fail(path, "reading the file failed");
     bytes.resize(size + size_t(file.gcount()));
     if (bytes.empty()) fail(path, "the file is empty");
-    return bytes;
+    return FileBytes(std::move(bytes));
 }
 
 void require_room(const std::string& path, uint64_t count, uint64_t min_bytes_each,
@@ -268,7 +272,28 @@ Mesh triangulated(const std::string& path, Polygons polygons) {
     Mesh mesh;
     mesh.positions = std::move(polygons.positions);
     size_t triangles = 0;
-    for (const uint32_t count : polygons.corner_counts) triangles += count >= 3 ? count - 2 : 0;
+    bool only_triangles = true;
+    for (const uint32_t count : polygons.corner_counts) {
+        triangles += count >= 3 ? count - 2 : 0;
+        only_triangles = only_triangles && count == 3;
+    }
+    // A file of triangles only (most large ones) is taken over on all cores once every index is
+    // known to be in range; otherwise the loop below finds the first bad one and names it.
+    if (only_triangles && tbb::parallel_reduce(
+                              tbb::blocked_range<size_t>(0, polygons.corners.size()), true,
+                              [&](const tbb::blocked_range<size_t>& corners, bool valid) {
+                                  for (size_t k = corners.begin(); k < corners.end(); ++k)
+                                      valid = valid && uint64_t(polygons.corners[k]) < vertex_count;
+                                  return valid;
+                              },
+                              [](bool a, bool b) { return a && b; })) {
+        mesh.triangles.resize(triangles);
+        tbb::parallel_for(size_t(0), triangles, [&](size_t t) {
+            for (int c = 0; c < 3; ++c)
+                mesh.triangles[t][c] = uint32_t(polygons.corners[3 * t + size_t(c)]);
+        });
+        return mesh;
+    }
     mesh.triangles.reserve(triangles);
     PolygonTriangulator triangulator;
     std::vector<uint32_t> corners;

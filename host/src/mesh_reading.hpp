@@ -74,9 +74,20 @@ Mesh triangulated(const std::string& path, Polygons polygons);
 
 [[noreturn]] void fail(const std::string& path, const std::string& problem);
 
+// A file's bytes, in a buffer that was not zeroed before the read filled it (for a file of many
+// megabytes the zeroing and its page faults cost as much again as the read).
+class FileBytes {
+  public:
+    explicit FileBytes(detail::FilledLaterVector<char> bytes) : bytes_(std::move(bytes)) {}
+    std::string_view view() const { return {bytes_.data(), bytes_.size()}; }
+
+  private:
+    detail::FilledLaterVector<char> bytes_;
+};
+
 // The whole file, after clear failures for a missing, unreadable or empty one. Opened once, so a
 // named pipe is read whole.
-std::string read_whole_file(const std::string& path);
+FileBytes read_whole_file(const std::string& path);
 
 // Fails unless `count` items of at least `min_bytes_each` bytes fit in `bytes_left` bytes. Called
 // with every count a header declares, before anything is allocated for it, so a few bytes that

@@ -16,6 +16,8 @@
 // is the first one in the file, with its line number.
 #include <tbb/parallel_for.h>
 
+#include <charconv>
+
 #include "mesh_reading.hpp"
 
 namespace oclvox::mesh_reading {
@@ -59,6 +61,75 @@ int64_t corner_index(const TextCursor& line, std::string_view corner, size_t ver
     return vertex;
 }
 
+// The common lines, "v x y z ..." and "f a b c ..." with indices of up to 9 digits, none of them
+// relative or signed, read in one pass over their characters: each number is parsed where it
+// starts and its end checked to be a word's, where the strict reading below first finds the line's
+// end, then its words, then parses each word. Returns the offset of the line's end (its '\n' or
+// '\r', or the end of the text), having added the line's vertex or face to out; or npos, with out
+// as it was, for every other line (keywords skipped, comments, relative indices, anything
+// malformed), which the strict reading then reads or names the problem of. Both accept the same
+// lines with the same values: a number ends where a word does (no blank, '#' or line end can be
+// part of one), and a vertex coordinate is from_chars' reading either way.
+size_t quick_line(std::string_view text, size_t at, Polygons& out, size_t* face_number) {
+    constexpr size_t kNot = std::string_view::npos;
+    const char* p = text.data() + at;
+    const char* const end = text.data() + text.size();
+    // A blank, the comment sign or a line end ends a word (TextCursor's word ends).
+    auto at_word_end = [&](const char* q) {
+        return q == end || *q == ' ' || (*q >= '\t' && *q <= '\r') || *q == '#';
+    };
+    auto skip_blanks = [&] {  // (TextCursor's blanks, but for the CR that ends a line here)
+        while (p != end && (*p == ' ' || *p == '\t' || *p == '\v' || *p == '\f')) ++p;
+    };
+    auto line_end = [&] {
+        while (p != end && *p != '\n' && *p != '\r') ++p;
+        return size_t(p - text.data());
+    };
+    skip_blanks();
+    if (p == end || (*p != 'v' && *p != 'f') || !at_word_end(p + 1)) return kNot;
+    if (*p++ == 'v') {
+        Position position;
+        for (double& coordinate : position) {
+            skip_blanks();
+            const char* const first = p != end && *p == '+' ? p + 1 : p;  // as skip_plus
+            const auto parsed = std::from_chars(first, end, coordinate);
+            if (parsed.ec != std::errc() || !at_word_end(parsed.ptr)) return kNot;
+            p = parsed.ptr;
+        }
+        out.positions.push_back(position);
+        return line_end();
+    }
+    const size_t corners_before = out.corners.size();
+    uint32_t corners = 0;
+    for (skip_blanks(); p != end && !at_word_end(p); skip_blanks()) {
+        // v, v/vt, v//vn or v/vt/vn (or more parts, as corner_index reads them): digits each,
+        // all but the vertex's possibly empty, none zero. Nine digits fit in 32 bits.
+        uint32_t vertex = 0;
+        for (int part = 0;; ++part) {
+            const char* const digits = p;
+            uint32_t value = 0;
+            while (p != end && unsigned(*p - '0') <= 9 && p - digits < 9)
+                value = 10 * value + unsigned(*p++ - '0');
+            if ((p != digits && value == 0) || (p == digits && part == 0)) {
+                out.corners.resize(corners_before);
+                return kNot;
+            }
+            if (part == 0) vertex = value;
+            if (p == end || *p != '/') break;
+            ++p;
+        }
+        if (!at_word_end(p)) {
+            out.corners.resize(corners_before);
+            return kNot;
+        }
+        out.corners.push_back(int64_t(vertex) - 1);
+        ++corners;
+    }
+    out.corner_counts.push_back(corners);
+    ++*face_number;
+    return line_end();
+}
+
 // Parses the whole lines of `text` into out. Line by line; "\r\n", "\n" or a lone "\r" ends one,
 // and '#' starts a comment. With `relative` (a part of the file), relative indices are recorded
 // there instead of resolved, and line and face numbers count from the part's start.
@@ -67,36 +138,40 @@ void parse_lines(const std::string& path, std::string_view text, Polygons& out,
     size_t face_number = 0;
     size_t at = 0;
     for (size_t line_number = 1; at < text.size(); ++line_number) {
-        // A plain scan: string_view::find_first_of calls memchr on the two-character set once
-        // per character of the text, which was a fifth of the load.
-        size_t line_end = at;
-        while (line_end < text.size() && text[line_end] != '\n' && text[line_end] != '\r')
-            ++line_end;
-        TextCursor line(path, text.substr(at, line_end - at), '#', line_number);
-        // Keywords compared as characters: == on a string_view calls memcmp.
-        const std::string_view keyword = line.word_on_line();
-        const char key = keyword.size() == 1 ? keyword[0] : '\0';
-        if (key == 'v') {
-            // x y z, read strictly and correctly rounded; a w or a vertex colour may follow.
-            Position p;
-            for (double& coordinate : p) {
-                const std::string_view word = line.word_on_line();
-                if (word.empty()) line.fail("a vertex has fewer than 3 coordinates");
-                coordinate = line.to_double(word, "vertex coordinate");
+        size_t line_end = quick_line(text, at, out, &face_number);
+        if (line_end == std::string_view::npos) {
+            // The strict reading. A plain scan: string_view::find_first_of calls memchr on the
+            // two-character set once per character of the text.
+            line_end = at;
+            while (line_end < text.size() && text[line_end] != '\n' && text[line_end] != '\r')
+                ++line_end;
+            TextCursor line(path, text.substr(at, line_end - at), '#', line_number);
+            // Keywords compared as characters: == on a string_view calls memcmp.
+            const std::string_view keyword = line.word_on_line();
+            const char key = keyword.size() == 1 ? keyword[0] : '\0';
+            if (key == 'v') {
+                // x y z, read strictly and correctly rounded; a w or a vertex colour may follow.
+                Position p;
+                for (double& coordinate : p) {
+                    const std::string_view word = line.word_on_line();
+                    if (word.empty()) line.fail("a vertex has fewer than 3 coordinates");
+                    coordinate = line.to_double(word, "vertex coordinate");
+                }
+                out.positions.push_back(p);
+            } else if (key == 'f') {
+                ++face_number;
+                uint32_t corners = 0;
+                for (std::string_view corner = line.word_on_line(); !corner.empty();
+                     corner = line.word_on_line()) {
+                    bool is_relative = false;
+                    out.corners.push_back(corner_index(line, corner, out.positions.size(),
+                                                       face_number,
+                                                       relative ? &is_relative : nullptr));
+                    if (is_relative) relative->push_back(out.corners.size() - 1);
+                    ++corners;
+                }
+                out.corner_counts.push_back(corners);
             }
-            out.positions.push_back(p);
-        } else if (key == 'f') {
-            ++face_number;
-            uint32_t corners = 0;
-            for (std::string_view corner = line.word_on_line(); !corner.empty();
-                 corner = line.word_on_line()) {
-                bool is_relative = false;
-                out.corners.push_back(corner_index(line, corner, out.positions.size(), face_number,
-                                                   relative ? &is_relative : nullptr));
-                if (is_relative) relative->push_back(out.corners.size() - 1);
-                ++corners;
-            }
-            out.corner_counts.push_back(corners);
         }
         at = line_end;
         if (at < text.size() && text[at++] == '\r' && at < text.size() && text[at] == '\n') ++at;
@@ -119,8 +194,8 @@ struct Part {
 }  // namespace
 
 Polygons read_obj(const std::string& path, const ParseReport& report) {
-    const std::string bytes = read_whole_file(path);
-    const std::string_view text(bytes);
+    const FileBytes file = read_whole_file(path);
+    const std::string_view text = file.view();
     Polygons out;
     out.first_index = 1;
 

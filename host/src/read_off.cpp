@@ -37,7 +37,8 @@ std::string_view next_header_word(TextCursor& text, const char* what) {
 }  // namespace
 
 Polygons read_off(const std::string& path, const ParseReport& report) {
-    const std::string bytes = read_whole_file(path);
+    const FileBytes file = read_whole_file(path);
+    const std::string_view bytes = file.view();
     ParseProgress progress(report, bytes.size());
     TextCursor text(path, bytes, '#');
 

@@ -143,7 +143,7 @@ void assign_roles(const TextCursor& text, std::vector<Element>& elements) {
     if (!has_vertices) text.fail("the header declares no 'vertex' element");
 }
 
-Header read_header(const std::string& path, const std::string& bytes) {
+Header read_header(const std::string& path, std::string_view bytes) {
     TextCursor text(path, bytes);
     if (text.word_on_line() != "ply" || !text.line_done())
         text.fail("this is not a PLY file: it does not start with the line 'ply'");
@@ -239,7 +239,7 @@ std::string record_name(const Element& element, uint64_t record) {
            std::to_string(element.count) + ")";
 }
 
-void read_binary_body(const std::string& path, const Header& header, const std::string& bytes,
+void read_binary_body(const std::string& path, const Header& header, std::string_view bytes,
                       Polygons& out, ParseProgress& progress) {
     const bool big_endian = header.format == Format::BinaryBigEndian;
     const char* at = bytes.data() + header.body_offset;
@@ -287,7 +287,7 @@ void read_binary_body(const std::string& path, const Header& header, const std::
 
 // One record per line, as the format's reference implementation reads it: a line with fewer or
 // more values than the header declares is an error, not a shifted read.
-void read_ascii_body(const std::string& path, const Header& header, const std::string& bytes,
+void read_ascii_body(const std::string& path, const Header& header, std::string_view bytes,
                      Polygons& out, ParseProgress& progress) {
     TextCursor text(path, std::string_view(bytes).substr(header.body_offset), 0, header.body_line);
     const auto value = [&](std::string_view word, Scalar type, std::string_view what) {
@@ -338,7 +338,8 @@ void read_ascii_body(const std::string& path, const Header& header, const std::s
 
 Polygons read_ply(const std::string& path, const ParseReport& report) {
     // Phase 1: the header, and the declared counts against the file size.
-    const std::string bytes = read_whole_file(path);
+    const FileBytes file = read_whole_file(path);
+    const std::string_view bytes = file.view();
     ParseProgress progress(report, bytes.size());
     const Header header = read_header(path, bytes);
     check_counts_fit(path, header, bytes.size() - header.body_offset);

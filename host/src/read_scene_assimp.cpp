@@ -134,7 +134,7 @@ void append_node(const aiScene& scene, const aiNode& node, const Matrix& parent_
 // buffers) from disk, found as assimp finds them beside the mesh file's path.
 class InputInMemory : public Assimp::DefaultIOSystem {
   public:
-    InputInMemory(const std::string& path, const std::string& bytes) : path_(path), bytes_(bytes) {}
+    InputInMemory(const std::string& path, std::string_view bytes) : path_(path), bytes_(bytes) {}
     bool Exists(const char* file) const override {
         return file == path_ || Assimp::DefaultIOSystem::Exists(file);
     }
@@ -146,10 +146,10 @@ class InputInMemory : public Assimp::DefaultIOSystem {
 
   private:
     const std::string& path_;
-    const std::string& bytes_;
+    std::string_view bytes_;
 };
 
-Polygons import_scene(const std::string& path, const std::string& bytes) {
+Polygons import_scene(const std::string& path, std::string_view bytes) {
     // Phase 1: import. Validation rejects out-of-range indices; polygons are left to the shared
     // triangulation, and identical vertices are joined later, for all formats at once.
     AssimpErrorLog errors;
@@ -172,7 +172,7 @@ Polygons import_scene(const std::string& path, const std::string& bytes) {
 // The child's address-space budget: room for the importer's work, plus far more than
 // the mesh data the input files can hold (assimp keeps a few copies of it), capped by the host
 // budget.
-uint64_t import_memory_limit(const std::string& path, const std::string& bytes) {
+uint64_t import_memory_limit(const std::string& path, std::string_view bytes) {
     std::error_code error;
     uint64_t input = bytes.size();
     // A .gltf names its binary buffers; they are input too. (Its JSON is parsed here only to
@@ -238,7 +238,7 @@ void write_vector(int fd, const std::vector<T, Allocator>& v) {
 }
 
 // The child: imports and writes either 'P' and the polygons, or 'E' and a message; never returns.
-[[noreturn]] void run_import_child(const std::string& path, const std::string& bytes,
+[[noreturn]] void run_import_child(const std::string& path, std::string_view bytes,
                                    uint64_t memory_limit, int fd) {
     // Die with the parent; take Ctrl-C and SIGTERM as a plain process would (the CLI blocks them
     // in every thread for its watcher, and the mask is inherited).
@@ -325,7 +325,8 @@ std::string how_it_ended(int status) {
 
 Polygons read_scene_assimp(const std::string& path) {
     // The file is read here, once (the child inherits the bytes).
-    const std::string file = read_whole_file(path);
+    const FileBytes mesh_file = read_whole_file(path);
+    const std::string_view file = mesh_file.view();
     const uint64_t memory_limit = import_memory_limit(path, file);
 
     // Phase 1: the import, in a child process.

@@ -26,7 +26,7 @@ void expect(const TextCursor& text, std::string_view word, std::string_view keyw
 }
 
 // Binary floats are exact in double, so the corners are the file's values bit for bit.
-Polygons read_binary(const std::string& path, const std::string& bytes, ParseProgress& progress) {
+Polygons read_binary(const std::string& path, std::string_view bytes, ParseProgress& progress) {
     if (bytes.size() < kBinaryHeaderBytes)
         fail(path, "the file does not start with 'solid' (ASCII STL) and is shorter than the " +
                        std::to_string(kBinaryHeaderBytes) + "-byte header of a binary STL");
@@ -57,7 +57,7 @@ Polygons read_binary(const std::string& path, const std::string& bytes, ParsePro
 // solid NAME / facet normal N N N / outer loop / vertex X Y Z (3 or more) / endloop / endfacet
 // ... / endsolid NAME, several solids in a row; keywords in any case. Coordinates are parsed
 // correctly rounded. The normal's words are not parsed: writers put "nan" there for slivers.
-Polygons read_ascii(const std::string& path, const std::string& text, ParseProgress& progress) {
+Polygons read_ascii(const std::string& path, std::string_view text, ParseProgress& progress) {
     TextCursor cursor(path, text);
     Polygons out;
     while (!cursor.at_end()) {
@@ -103,7 +103,8 @@ Polygons read_ascii(const std::string& path, const std::string& text, ParseProgr
 }  // namespace
 
 Polygons read_stl(const std::string& path, const ParseReport& report) {
-    const std::string bytes = read_whole_file(path);
+    const FileBytes file = read_whole_file(path);
+    const std::string_view bytes = file.view();
     ParseProgress progress(report, bytes.size());
     // A binary file is recognised by its size, which its facet count fixes: many binary writers
     // start the header with "solid" too.
@@ -113,8 +114,7 @@ Polygons read_stl(const std::string& path, const ParseReport& report) {
             return read_binary(path, bytes, progress);
     }
     const size_t start = bytes.find_first_not_of(" \t\r\n");
-    if (start != std::string::npos &&
-        same_keyword(std::string_view(bytes).substr(start, 5), "solid"))
+    if (start != std::string_view::npos && same_keyword(bytes.substr(start, 5), "solid"))
         return read_ascii(path, bytes, progress);
     return read_binary(path, bytes, progress);
 }
