@@ -649,6 +649,51 @@ TEST_F(MeshFiles, ObjLinesReadTheSameWhateverTheirSpacingAndLineEnds) {
     }
 }
 
+// OFF and ascii PLY numbers read the same whether they take the one-pass reading (a plain number
+// ending where its word does) or the strict one (a comment right after a number, 19 digits, a
+// sign, other blanks). Expected positions worked out by hand from the text.
+TEST_F(MeshFiles, OffAndAsciiPlyNumbersReadTheSameWhateverTheirSpelling) {
+    const Vec3 expected[4] = {{1, 2, 3}, {4.5, -0.0, 60}, {7, 8, 9}, {0.125, 0.25, 0.5}};
+    const std::string off =
+        "OFF\n4 2 0\n"
+        "1 2 3\n"
+        "+4.5\t-0\v6e1#comment\n"
+        "7\f8 9 1 0 0 # a normal after x y z\r\n"
+        "0.125 0.25 +0.5\n"
+        "3 0 1 +2\n"
+        "0000000000000000003 0000000000000000000 2 3#x\n";
+    const std::string ply =
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty uchar red\nproperty float x\n"
+        "property double y\nproperty int z\nelement face 2\n"
+        "property list uchar int vertex_indices\nend_header\n"
+        "1.5 1 2 3\n"  // red is skipped, unread
+        "0 +4.5\t-0\v60\n"
+        "0 7\f8 9\r\n"
+        "0 0.125 0.25 +000000000000000000000000000000000001\n"
+        "3 0 1 +2\n"
+        "0000000000000000003 0000000000000000000 2 3\n";
+    for (const auto& [name, text] : {std::pair{"spellings.off", off}, {"spellings.ply", ply}}) {
+        SCOPED_TRACE(name);
+        const Mesh mesh = oclvox::load_mesh(write(name, text));
+        ASSERT_EQ(mesh.triangles.size(), 2u);
+        const int corners[2][3] = {{0, 1, 2}, {0, 2, 3}};
+        for (int t = 0; t < 2; ++t)
+            for (int c = 0; c < 3; ++c) {
+                Vec3 want = expected[corners[t][c]];
+                if (name == std::string("spellings.ply") && corners[t][c] == 3) want[2] = 1;
+                EXPECT_EQ(mesh.positions[mesh.triangles[t][c]], want) << t << " " << c;
+            }
+    }
+    EXPECT_TRUE(contains(input_error_of(write("negative.off",
+                                              "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n"
+                                              "-3 0 1 2\n")),
+                         "line 6: the corner count '-3' is negative"));
+    EXPECT_TRUE(contains(input_error_of(write("comment.off",
+                                              "OFF\n3 1 0\n0 0 0\n1 0#0\n0 1 0\n"
+                                              "3 0 1 2\n")),
+                         "line 4: the z coordinate is missing"));
+}
+
 TEST_F(MeshFiles, OffAndPlyFaceIndexOutOfRangeFails) {
     EXPECT_TRUE(
         contains(input_error_of(write("index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n")),
@@ -712,6 +757,18 @@ TEST_F(MeshFiles, HostileFilesFailFastWithoutCrashing) {
                                std::string(reinterpret_cast<const char*>(corners), sizeof corners) +
                                std::string("\xff\xff\xff\x7f", 4))),
                  "the file ends inside 'face' record 0"));
+    // Records of one size, read where they lie, after a list that took more than its length byte:
+    // the third vertex's last coordinate is missing.
+    const std::string face = std::string("\x03", 1) + std::string(12, '\0');
+    EXPECT_TRUE(contains(
+        input_error_of(write("short-vertices.ply",
+                             "ply\nformat binary_little_endian 1.0\nelement face 1\n"
+                             "property list uchar int vertex_indices\nelement vertex 3\n"
+                             "property float x\nproperty float y\nproperty float z\nend_header\n" +
+                                 face +
+                                 std::string(reinterpret_cast<const char*>(corners),
+                                             sizeof corners - sizeof(float)))),
+        "the file ends inside 'vertex' record 2 (of 3)"));
     input_error_of(write("long-list-ascii.ply",
                          "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                          "property float y\nproperty float z\nelement face 1\n"

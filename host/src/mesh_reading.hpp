@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <charconv>
 #include <cstdint>
 #include <cstring>
 #include <functional>
@@ -152,12 +153,67 @@ class TextCursor {
     }
     uint64_t to_count(std::string_view word, std::string_view what) const;
 
+    // The next word on the line as a number, read where it starts, in one pass, when it is a plain
+    // one (the common case): the value from_chars gives (a decimal, or for integers up to 18
+    // digits) and the word ends where the number does. Otherwise the cursor stays, and the strict
+    // reading of the word (to_double, to_integer) either reads it the same or names the problem.
+    bool quick_double(double* value) {
+        skip_blanks();
+        const char* const first = text_.data() + at_;
+        const char* const last = text_.data() + text_.size();
+        const char* const digits = first != last && *first == '+' ? first + 1 : first;
+        const auto parsed = std::from_chars(digits, last, *value);
+        if (parsed.ec != std::errc() || !ends_number(parsed.ptr)) return false;
+        at_ = size_t(parsed.ptr - text_.data());
+        return true;
+    }
+    bool quick_integer(int64_t* value) {
+        skip_blanks();
+        const char* c = text_.data() + at_;
+        const char* const last = text_.data() + text_.size();
+        const bool negative = c != last && *c == '-';
+        if (c != last && (*c == '-' || *c == '+')) ++c;
+        const char* const digits = c;
+        int64_t read = 0;
+        for (; c != last && unsigned(*c) - unsigned('0') <= 9 && c - digits < 18; ++c)
+            read = 10 * read + int64_t(*c - '0');
+        if (c == digits || !ends_number(c)) return false;
+        *value = negative ? -read : read;
+        at_ = size_t(c - text_.data());
+        return true;
+    }
+    double double_on_line(std::string_view what) {
+        double value;
+        return quick_double(&value) ? value : to_double(word_on_line(), what);
+    }
+    int64_t integer_on_line(std::string_view what) {
+        int64_t value;
+        return quick_integer(&value) ? value : to_integer(word_on_line(), what);
+    }
+    bool quick_count(uint64_t* value) {
+        const size_t start = at_;
+        int64_t read;
+        if (!quick_integer(&read) || read < 0) {
+            at_ = start;  // to_count names a negative count
+            return false;
+        }
+        *value = uint64_t(read);
+        return true;
+    }
+    uint64_t count_on_line(std::string_view what) {
+        uint64_t value;
+        return quick_count(&value) ? value : to_count(word_on_line(), what);
+    }
+
     [[noreturn]] void fail(const std::string& problem) const;
 
   private:
     // Space, tab, CR, VT and FF.
     static bool is_blank(char c) { return c == ' ' || (c >= '\t' && c <= '\r' && c != '\n'); }
     bool ends_word(char c) const { return c == '\n' || is_blank(c) || c == comment_; }
+    bool ends_number(const char* c) const {
+        return c == text_.data() + text_.size() || ends_word(*c);
+    }
     void skip_blanks() {
         while (at_ < text_.size() && is_blank(text_[at_])) ++at_;
         if (comment_ != 0 && at_ < text_.size() && text_[at_] == comment_)

@@ -2,6 +2,7 @@
 // polygons of any size. One vertex and one face per line, as writers put them: values after a
 // vertex's x y z (normals, colours, texture coordinates) and after a face's indices (a colour)
 // are read past.
+#include <algorithm>
 #include <limits>
 
 #include "mesh_reading.hpp"
@@ -74,6 +75,7 @@ Polygons read_off(const std::string& path, const ParseReport& report) {
     Polygons out;
     out.positions.reserve(vertex_count);
     out.corner_counts.reserve(face_count);
+    out.corners.reserve(std::min(3 * face_count, left / 2));  // a corner takes 2 bytes or more
 
     // Phase 3: vertices, correctly rounded.
     for (uint64_t v = 0; v < vertex_count; ++v) {
@@ -81,8 +83,7 @@ Polygons read_off(const std::string& path, const ParseReport& report) {
             text.fail("the file ends after " + std::to_string(v) + " of the " +
                       std::to_string(vertex_count) + " vertices that the header declares");
         Position p;
-        for (int axis = 0; axis < 3; ++axis)
-            p[axis] = text.to_double(text.word_on_line(), kAxisCoordinate[axis]);
+        for (int axis = 0; axis < 3; ++axis) p[axis] = text.double_on_line(kAxisCoordinate[axis]);
         out.positions.push_back(p);
         text.skip_line();
         progress.at(text.offset());
@@ -93,11 +94,11 @@ Polygons read_off(const std::string& path, const ParseReport& report) {
         if (!text.next_nonblank_line())
             text.fail("the file ends after " + std::to_string(f) + " of the " +
                       std::to_string(face_count) + " faces that the header declares");
-        const uint64_t corners = text.to_count(text.word_on_line(), "corner count");
+        const uint64_t corners = text.count_on_line("corner count");
         if (corners > std::numeric_limits<uint32_t>::max())
             text.fail("a face has " + std::to_string(corners) + " corners");
         for (uint64_t k = 0; k < corners; ++k)
-            out.corners.push_back(text.to_integer(text.word_on_line(), "vertex index"));
+            out.corners.push_back(text.integer_on_line("vertex index"));
         out.corner_counts.push_back(uint32_t(corners));
         text.skip_line();
         progress.at(text.offset());

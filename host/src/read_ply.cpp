@@ -3,6 +3,10 @@
 // named vertex_indices or vertex_index, with any integer length and index types. Every other
 // element and property, lists included, is read past. Coordinates become doubles exactly (binary)
 // or correctly rounded from their text (ascii, whatever type the header gives them).
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <limits>
 
 #include "mesh_reading.hpp"
@@ -239,6 +243,42 @@ std::string record_name(const Element& element, uint64_t record) {
            std::to_string(element.count) + ")";
 }
 
+// A binary element whose properties are all scalars: every record has the same size, so the
+// records can be read where they lie, on all cores (a scan's vertices, most of a binary file).
+// Returns the offset past the element; fails naming the first record the file cannot hold.
+const char* read_fixed_records(const std::string& path, const Element& element, bool big_endian,
+                               const char* at, const char* end, Polygons& out) {
+    uint64_t record_size = 0;
+    struct Coordinate {
+        uint64_t offset;
+        Scalar type;
+        int axis;
+    };
+    std::vector<Coordinate> coordinates;
+    for (const Property& property : element.properties) {
+        if (property.role != Role::Skip)
+            coordinates.push_back({record_size, property.value, int(property.role) - int(Role::X)});
+        record_size += size_of(property.value);
+    }
+    const uint64_t fit = uint64_t(end - at) / record_size;
+    if (element.count > fit) fail(path, "the file ends inside " + record_name(element, fit));
+    if (element.name == "vertex") {
+        const size_t first = out.positions.size();
+        out.positions.resize(first + size_t(element.count), Position{0, 0, 0});
+        tbb::parallel_for(tbb::blocked_range<uint64_t>(0, element.count, 4096),
+                          [&](const tbb::blocked_range<uint64_t>& records) {
+                              for (uint64_t r = records.begin(); r < records.end(); ++r) {
+                                  const char* const record = at + r * record_size;
+                                  Position& position = out.positions[first + size_t(r)];
+                                  for (const Coordinate& c : coordinates)
+                                      position[c.axis] = binary_scalar<double>(
+                                          c.type, record + c.offset, big_endian);
+                              }
+                          });
+    }
+    return at + element.count * record_size;
+}
+
 void read_binary_body(const std::string& path, const Header& header, std::string_view bytes,
                       Polygons& out, ParseProgress& progress) {
     const bool big_endian = header.format == Format::BinaryBigEndian;
@@ -246,6 +286,15 @@ void read_binary_body(const std::string& path, const Header& header, std::string
     const char* const end = bytes.data() + bytes.size();
     for (const Element& element : header.elements) {
         if (element.properties.empty()) continue;  // its records take no bytes
+        if (std::none_of(element.properties.begin(), element.properties.end(),
+                         [](const Property& property) { return property.is_list; })) {
+            at = read_fixed_records(path, element, big_endian, at, end, out);
+            progress.at(uint64_t(at - bytes.data()));
+            continue;
+        }
+        // Records with lists (faces), one after the other: each one's size is known only once
+        // its lists' lengths are read.
+        const bool is_vertex = element.name == "vertex";
         for (uint64_t record = 0; record < element.count; ++record) {
             const auto need = [&](uint64_t count, uint64_t size) {
                 if (count > uint64_t(end - at) / size)
@@ -279,7 +328,7 @@ void read_binary_body(const std::string& path, const Header& header, std::string
                 }
                 at += uint64_t(length) * entry_size;
             }
-            if (element.name == "vertex") out.positions.push_back(position);
+            if (is_vertex) out.positions.push_back(position);
             progress.at(uint64_t(at - bytes.data()));
         }
     }
@@ -305,22 +354,37 @@ void read_ascii_body(const std::string& path, const Header& header, std::string_
                               " has fewer values than the header declares");
                 return word;
             };
+            // A coordinate, read in one pass where it is a plain number, else strictly.
+            const auto coordinate = [&](const Property& property) {
+                const bool floating = is_floating(property.value);
+                double quick;
+                int64_t quick_whole;
+                if (floating ? text.quick_double(&quick) : text.quick_integer(&quick_whole))
+                    return floating ? quick : double(quick_whole);
+                return value(next_word(), property.value, property.described);
+            };
             Position position{0, 0, 0};
             for (const Property& property : element.properties) {
                 if (!property.is_list) {
-                    const std::string_view word = next_word();
-                    if (property.role != Role::Skip)
-                        position[int(property.role) - int(Role::X)] =
-                            value(word, property.value, property.described);
+                    if (property.role == Role::Skip)
+                        next_word();
+                    else
+                        position[int(property.role) - int(Role::X)] = coordinate(property);
                     continue;
                 }
-                const uint64_t length = text.to_count(next_word(), "list length");
+                uint64_t length;
+                if (!text.quick_count(&length)) length = text.to_count(next_word(), "list length");
                 if (property.role == Role::Corners && length > std::numeric_limits<uint32_t>::max())
                     text.fail(record_name(element, record) + " has too many corners");
                 for (uint64_t k = 0; k < length; ++k) {
-                    const std::string_view word = next_word();
-                    if (property.role == Role::Corners)
-                        out.corners.push_back(text.to_integer(word, "vertex index"));
+                    if (property.role != Role::Corners) {
+                        next_word();
+                        continue;
+                    }
+                    int64_t index;
+                    if (!text.quick_integer(&index))
+                        index = text.to_integer(next_word(), "vertex index");
+                    out.corners.push_back(index);
                 }
                 if (property.role == Role::Corners) out.corner_counts.push_back(uint32_t(length));
             }
@@ -349,6 +413,15 @@ Polygons read_ply(const std::string& path, const ParseReport& report) {
             if (element.count > std::numeric_limits<uint32_t>::max())
                 fail(path, "more than 2^32 vertices, which 32-bit triangle indices cannot address");
             out.positions.reserve(element.count);
+        } else if (element.name == "face" && header.format != Format::Ascii) {
+            // Room for triangles, which most files hold, up to the corners the body can hold (the
+            // header's count is checked only against a byte a record).
+            out.corner_counts.reserve(element.count);
+            uint64_t entry_size = 1;
+            for (const Property& property : element.properties)
+                if (property.role == Role::Corners) entry_size = size_of(property.value);
+            out.corners.reserve(
+                std::min(3 * element.count, (bytes.size() - header.body_offset) / entry_size));
         }
 
     // Phase 2: the body, in element order (faces may come before vertices).

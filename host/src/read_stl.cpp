@@ -84,7 +84,7 @@ Polygons read_ascii(const std::string& path, std::string_view text, ParseProgres
             for (; same_keyword(word, "vertex"); word = cursor.word(), ++corners) {
                 Position p;
                 for (int axis = 0; axis < 3; ++axis)
-                    p[axis] = cursor.to_double(cursor.word_on_line(), kAxisCoordinate[axis]);
+                    p[axis] = cursor.double_on_line(kAxisCoordinate[axis]);
                 out.positions.push_back(p);
             }
             expect(cursor, word, "endloop");
