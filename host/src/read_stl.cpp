@@ -1,5 +1,8 @@
 // STL, ASCII and binary. Every facet keeps its own three corners here; load_mesh welds equal
 // positions afterwards, which is what gives an STL mesh a shared topology.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cctype>
 
@@ -25,7 +28,20 @@ void expect(const TextCursor& text, std::string_view word, std::string_view keyw
     text.fail("expected '" + std::string(keyword) + "', found " + quoted(word));
 }
 
-// Binary floats are exact in double, so the corners are the file's values bit for bit.
+// Facet f of a binary file into its place in out. Binary floats are exact in double, so the
+// corners are the file's values bit for bit; the stored normal (the first 12 bytes) is ignored:
+// the corners define the facet.
+void read_binary_facet(std::string_view bytes, size_t f, Polygons& out) {
+    const char* const facet = bytes.data() + kBinaryHeaderBytes + f * kBinaryFacetBytes;
+    for (size_t corner = 0; corner < 3; ++corner) {
+        Position& p = out.positions[3 * f + corner];
+        for (size_t axis = 0; axis < 3; ++axis)
+            p[axis] = load_scalar<float>(facet + 12 + 12 * corner + 4 * axis, false);
+        out.corners[3 * f + corner] = int64_t(3 * f + corner);
+    }
+    out.corner_counts[f] = 3;
+}
+
 Polygons read_binary(const std::string& path, std::string_view bytes, ParseProgress& progress) {
     if (bytes.size() < kBinaryHeaderBytes)
         fail(path, "the file does not start with 'solid' (ASCII STL) and is shorter than the " +
@@ -34,22 +50,22 @@ Polygons read_binary(const std::string& path, std::string_view bytes, ParseProgr
     require_room(path, facets, kBinaryFacetBytes, bytes.size() - kBinaryHeaderBytes,
                  "facets (binary STL)");
 
+    // Facets of one size, read where they lie, on all cores a wave at a time (the progress
+    // between waves, as a serial read would report it).
     Polygons out;
-    out.positions.reserve(size_t(facets) * 3);
-    out.corners.reserve(size_t(facets) * 3);
-    out.corner_counts.reserve(facets);
-    const char* facet = bytes.data() + kBinaryHeaderBytes;
-    for (uint32_t f = 0; f < facets; ++f, facet += kBinaryFacetBytes) {
-        // The stored normal (first 12 bytes) is ignored: the corners define the facet.
-        for (int corner = 0; corner < 3; ++corner) {
-            Position p;
-            for (int axis = 0; axis < 3; ++axis)
-                p[axis] = load_scalar<float>(facet + 12 + 12 * corner + 4 * axis, false);
-            out.positions.push_back(p);
-        }
-        const int64_t first = int64_t(out.positions.size()) - 3;
-        out.add_triangle(first, first + 1, first + 2);
-        progress.at(uint64_t(facet - bytes.data()));
+    out.positions.resize(size_t(facets) * 3);
+    out.corners.resize(size_t(facets) * 3);
+    out.corner_counts.resize(facets);
+    constexpr size_t kWave = 65536;
+    for (size_t first = 0; first < facets; first += kWave) {
+        const size_t end = std::min<size_t>(facets, first + kWave);
+        tbb::parallel_for(tbb::blocked_range<size_t>(first, end, 4096),
+                          [&](const tbb::blocked_range<size_t>& range) {
+                              for (size_t f = range.begin(); f < range.end(); ++f)
+                                  read_binary_facet(bytes, f, out);
+                          });
+        for (size_t f = first; f < end; ++f)
+            progress.at(kBinaryHeaderBytes + (f + 1) * kBinaryFacetBytes);
     }
     return out;
 }
