@@ -1683,4 +1683,28 @@ TEST_F(MeshFiles, LoadingReportsProgressInEveryFormatAndCancels) {
     }
 }
 
+// Large OFF and ascii PLY bodies are read in parts on all cores: the mesh is the one written, and
+// a bad value on the last line, or a file one face short, is named as one pass names it.
+TEST_F(MeshFiles, LargeOffAndAsciiPlyReadInPartsAsInOnePass) {
+    const Mesh mesh = sheet(300);
+    const std::string texts[] = {off_text(mesh), ply_bytes(mesh, PlyEncoding::Ascii, true)};
+    const char* const names[] = {"large.off", "large.ply"};
+    const std::string short_messages[] = {"the file ends after 179999 of the 180000 faces",
+                                          "the file ends before 'face' record 179999 (of 180000)"};
+    for (int f = 0; f < 2; ++f) {
+        SCOPED_TRACE(names[f]);
+        const std::string& text = texts[f];
+        ASSERT_GT(text.size(), size_t(3) << 20);
+        expect_same_triangles(oclvox::load_mesh(write(names[f], text)), mesh, names[f]);
+        // The last line, "3 a b c\n", its last index made a word that is no number.
+        const size_t last_line = size_t(std::count(text.begin(), text.end(), '\n'));
+        const std::string bad = text.substr(0, text.size() - 1) + "x\n";
+        const std::string message = input_error_of(write(names[f], bad));
+        EXPECT_TRUE(contains(message, "line " + std::to_string(last_line) + ": ")) << message;
+        const size_t before_last = text.rfind('\n', text.size() - 2) + 1;
+        EXPECT_TRUE(contains(input_error_of(write(names[f], text.substr(0, before_last))),
+                             short_messages[f]));
+    }
+}
+
 }  // namespace

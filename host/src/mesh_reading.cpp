@@ -6,8 +6,10 @@
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <atomic>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -110,7 +112,8 @@ bool TextCursor::line_done() {
 }
 
 void TextCursor::skip_line() {
-    while (at_ < text_.size() && text_[at_] != '\n') ++at_;
+    const void* const end = std::memchr(text_.data() + at_, '\n', text_.size() - at_);
+    at_ = end ? size_t(static_cast<const char*>(end) - text_.data()) : text_.size();
     if (at_ < text_.size()) {
         ++at_;
         ++line_;
@@ -162,6 +165,60 @@ uint64_t TextCursor::to_count(std::string_view word, std::string_view what) cons
     const int64_t value = to_integer(word, what);
     if (value < 0) fail("the " + std::string(what) + " " + quoted(word) + " is negative");
     return uint64_t(value);
+}
+
+std::vector<std::string_view> text_parts(std::string_view text) {
+    std::vector<std::string_view> parts;
+    for (size_t at = 0; at < text.size();) {
+        size_t end = text.find('\n', std::min(text.size(), at + kTextPartBytes));
+        end = end == std::string_view::npos ? text.size() : end + 1;
+        parts.push_back(text.substr(at, end - at));
+        at = end;
+    }
+    return parts;
+}
+
+bool parse_parts(const std::vector<std::string_view>& parts, uint64_t first_offset,
+                 uint64_t file_bytes, const ParseReport& report,
+                 const std::function<void(size_t)>& parse) {
+    constexpr size_t kPartsPerWave = 16;
+    std::atomic<bool> failed{false};
+    uint64_t done = first_offset;
+    for (size_t first = 0; first < parts.size(); first += kPartsPerWave) {
+        const size_t end = std::min(parts.size(), first + kPartsPerWave);
+        tbb::parallel_for(first, end, [&](size_t i) {
+            try {
+                parse(i);
+            } catch (const InputError&) {
+                failed = true;
+            }
+        });
+        for (size_t i = first; i < end; ++i) done += parts[i].size();
+        if (report) report(done, file_bytes);
+    }
+    return !failed;
+}
+
+void append_parts(Polygons& out, const std::vector<const Polygons*>& parts) {
+    std::vector<size_t> first_corner(parts.size() + 1, out.corners.size());
+    std::vector<size_t> first_polygon(parts.size() + 1, out.corner_counts.size());
+    size_t positions = out.positions.size();
+    for (size_t i = 0; i < parts.size(); ++i) {
+        positions += parts[i]->positions.size();
+        first_corner[i + 1] = first_corner[i] + parts[i]->corners.size();
+        first_polygon[i + 1] = first_polygon[i] + parts[i]->corner_counts.size();
+    }
+    out.positions.reserve(positions);
+    for (const Polygons* part : parts)
+        out.positions.insert(out.positions.end(), part->positions.begin(), part->positions.end());
+    out.corners.resize(first_corner.back());
+    out.corner_counts.resize(first_polygon.back());
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+        std::copy(parts[i]->corners.begin(), parts[i]->corners.end(),
+                  out.corners.begin() + ptrdiff_t(first_corner[i]));
+        std::copy(parts[i]->corner_counts.begin(), parts[i]->corner_counts.end(),
+                  out.corner_counts.begin() + ptrdiff_t(first_polygon[i]));
+    });
 }
 
 // ---------------------------------------------------------------------------------------------

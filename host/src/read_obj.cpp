@@ -14,7 +14,6 @@
 // and the parts joined in order; relative indices are resolved once the vertices before each part
 // are known. A part that fails sends the whole file through the plain one-pass parse, so an error
 // is the first one in the file, with its line number.
-#include <tbb/parallel_for.h>
 
 #include <charconv>
 
@@ -179,16 +178,9 @@ void parse_lines(const std::string& path, std::string_view text, Polygons& out,
     }
 }
 
-// A file is parsed in parts of about this many bytes, each ending after a '\n', in parallel a
-// wave of kPartsPerWave parts at a time (progress and cancelling between waves).
-constexpr size_t kPartBytes = size_t(1) << 20;
-constexpr size_t kPartsPerWave = 16;
-
 struct Part {
-    std::string_view text;
     Polygons polygons;
     RelativeCorners relative;
-    bool failed = false;
 };
 
 }  // namespace
@@ -199,86 +191,51 @@ Polygons read_obj(const std::string& path, const ParseReport& report) {
     Polygons out;
     out.first_index = 1;
 
-    // Phase 1: parts of whole lines. (Cut after a '\n', a part never splits a "\r\n"; a file
-    // without any is one part.)
-    std::vector<Part> parts;
-    for (size_t at = 0; at < text.size();) {
-        size_t end = text.find('\n', std::min(text.size(), at + kPartBytes));
-        end = end == std::string_view::npos ? text.size() : end + 1;
-        parts.emplace_back().text = text.substr(at, end - at);
-        at = end;
-    }
-    // One part: the plain parse, with its progress.
-    if (parts.size() <= 1) {
+    // Phase 1: parts of whole lines (text_parts); one part takes the plain parse, with its
+    // progress.
+    const std::vector<std::string_view> texts = text_parts(text);
+    if (texts.size() <= 1) {
         ParseProgress progress(report, text.size());
         parse_lines(path, text, out, nullptr, &progress);
         return out;
     }
 
-    // Phase 2: the parts in parallel. A part that fails is parsed again below with the whole file,
-    // so that the error is the one a plain parse meets first, with its line number.
-    size_t done_bytes = 0;
-    for (size_t first = 0; first < parts.size(); first += kPartsPerWave) {
-        const size_t end = std::min(parts.size(), first + kPartsPerWave);
-        tbb::parallel_for(first, end, [&](size_t i) {
-            // Room for the vertices and corners of a part made only of vertex lines of 16 bytes
-            // or more, or only of corners of 6 bytes or faces of 16 (real files' are longer):
-            // pages of it that stay unused are never touched, where growing the vectors would
-            // copy and fault in each size again. A denser part grows as it needs (the bounds a
-            // part's bytes set, 7 bytes a vertex and 2 a corner, would reserve address space of
-            // eight times the file).
-            const size_t bytes = parts[i].text.size();
-            parts[i].polygons.positions.reserve(bytes / 16 + 1);
-            parts[i].polygons.corners.reserve(bytes / 6 + 1);
-            parts[i].polygons.corner_counts.reserve(bytes / 16 + 1);
-            try {
-                parse_lines(path, parts[i].text, parts[i].polygons, &parts[i].relative, nullptr);
-            } catch (const InputError&) {
-                parts[i].failed = true;
-            }
-        });
-        for (size_t i = first; i < end; ++i) done_bytes += parts[i].text.size();
-        if (report) report(done_bytes, text.size());
-    }
+    // Phase 2: the parts in parallel, relative indices recorded (the vertices before a part are
+    // not known yet).
+    std::vector<Part> parts(texts.size());
+    bool parsed = parse_parts(texts, 0, text.size(), report, [&](size_t i) {
+        // Room for the vertices and corners of a part made only of vertex lines of 16 bytes or
+        // more, or only of corners of 6 bytes or faces of 16 (real files' are longer): pages of
+        // it that stay unused are never touched, where growing the vectors would copy and fault
+        // in each size again. A denser part grows as it needs (the bounds a part's bytes set, 7
+        // bytes a vertex and 2 a corner, would reserve address space of eight times the file).
+        const size_t bytes = texts[i].size();
+        parts[i].polygons.positions.reserve(bytes / 16 + 1);
+        parts[i].polygons.corners.reserve(bytes / 6 + 1);
+        parts[i].polygons.corner_counts.reserve(bytes / 16 + 1);
+        parse_lines(path, texts[i], parts[i].polygons, &parts[i].relative, nullptr);
+    });
 
-    // Phase 3: the parts joined, relative indices counted back from all the vertices before them.
-    bool failed = false;
-    size_t vertices = 0, corners = 0, polygons = 0;
+    // Phase 3: relative indices counted back from all the vertices before their part, and the
+    // parts joined. A failed part, or a relative index before the first vertex, sends the whole
+    // file through the plain parse, which fails where the part did, with the line's number.
+    size_t vertices = 0;
     for (Part& part : parts) {
-        failed = failed || part.failed;
         for (const size_t c : part.relative) {
             part.polygons.corners[c] += int64_t(vertices);
-            failed = failed || part.polygons.corners[c] < 0;
+            parsed = parsed && part.polygons.corners[c] >= 0;
         }
         vertices += part.polygons.positions.size();
-        corners += part.polygons.corners.size();
-        polygons += part.polygons.corner_counts.size();
     }
-    if (failed) {
+    if (!parsed) {
         Polygons again;
         again.first_index = 1;
         parse_lines(path, text, again, nullptr, nullptr);
-        return again;  // (the plain parse fails where a part did)
+        return again;
     }
-    // The corners and counts (most of the bytes) are copied to their places on all cores: fresh
-    // pages fault in at a few microseconds each, so a serial join took a sixth of the load.
-    out.positions.reserve(vertices);
-    for (const Part& part : parts)
-        out.positions.insert(out.positions.end(), part.polygons.positions.begin(),
-                             part.polygons.positions.end());
-    out.corners.resize(corners);
-    out.corner_counts.resize(polygons);
-    std::vector<size_t> first_corner(parts.size() + 1, 0), first_polygon(parts.size() + 1, 0);
-    for (size_t i = 0; i < parts.size(); ++i) {
-        first_corner[i + 1] = first_corner[i] + parts[i].polygons.corners.size();
-        first_polygon[i + 1] = first_polygon[i] + parts[i].polygons.corner_counts.size();
-    }
-    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
-        const Polygons& p = parts[i].polygons;
-        std::copy(p.corners.begin(), p.corners.end(), out.corners.begin() + first_corner[i]);
-        std::copy(p.corner_counts.begin(), p.corner_counts.end(),
-                  out.corner_counts.begin() + first_polygon[i]);
-    });
+    std::vector<const Polygons*> joined;
+    for (const Part& part : parts) joined.push_back(&part.polygons);
+    append_parts(out, joined);
     return out;
 }
 

@@ -2,6 +2,8 @@
 // polygons of any size. One vertex and one face per line, as writers put them: values after a
 // vertex's x y z (normals, colours, texture coordinates) and after a face's indices (a colour)
 // are read past.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <limits>
 
@@ -33,6 +35,66 @@ bool read_keyword(const TextCursor& text, std::string_view keyword) {
 std::string_view next_header_word(TextCursor& text, const char* what) {
     if (!text.next_nonblank_line()) text.fail(std::string("the file ends before the ") + what);
     return text.word_on_line();
+}
+
+// A vertex record: x y z, correctly rounded (the values after them are read past).
+void read_vertex(TextCursor& text, Position& position) {
+    for (int axis = 0; axis < 3; ++axis)
+        position[axis] = text.double_on_line(kAxisCoordinate[axis]);
+}
+
+// A face record: the corner count, then the corners' indices, which are checked (negative, past
+// the end) when they are triangulated.
+void read_face(TextCursor& text, Polygons& out) {
+    const uint64_t corners = text.count_on_line("corner count");
+    if (corners > std::numeric_limits<uint32_t>::max())
+        text.fail("a face has " + std::to_string(corners) + " corners");
+    for (uint64_t k = 0; k < corners; ++k)
+        out.corners.push_back(text.integer_on_line("vertex index"));
+    out.corner_counts.push_back(uint32_t(corners));
+}
+
+// The records of a body of several parts (text_parts) on all cores: each part's records (its
+// lines with a word) are counted first, so every part knows the number of its first record and
+// whether it holds vertices (into their places) or faces (joined in order afterwards); records
+// past the declared ones are not read, as in one pass. False, with out as it was, where a part
+// fails or the records are too few: one pass then names the problem.
+bool read_records_in_parts(const std::string& path, std::string_view bytes, size_t body,
+                           uint64_t vertex_count, uint64_t face_count, const ParseReport& report,
+                           Polygons& out) {
+    const std::vector<std::string_view> parts = text_parts(bytes.substr(body));
+    std::vector<uint64_t> first_record(parts.size() + 1, 0);
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+        TextCursor text(path, parts[i], '#');
+        for (; text.next_nonblank_line(); text.skip_line()) ++first_record[i + 1];
+    });
+    for (size_t i = 0; i < parts.size(); ++i) first_record[i + 1] += first_record[i];
+    const uint64_t records = vertex_count + face_count;
+    if (first_record.back() < records) return false;
+
+    out.positions.resize(vertex_count);
+    std::vector<Polygons> faces(parts.size());
+    const bool parsed = parse_parts(parts, body, bytes.size(), report, [&](size_t i) {
+        faces[i].corner_counts.reserve(parts[i].size() / 8);  // "3 0 1 2\n" or longer
+        faces[i].corners.reserve(parts[i].size() / 2);
+        TextCursor text(path, parts[i], '#');
+        for (uint64_t r = first_record[i]; r < std::min(first_record[i + 1], records); ++r) {
+            text.next_nonblank_line();
+            if (r < vertex_count)
+                read_vertex(text, out.positions[r]);
+            else
+                read_face(text, faces[i]);
+            text.skip_line();
+        }
+    });
+    if (!parsed) {
+        out.positions.clear();
+        return false;
+    }
+    std::vector<const Polygons*> joined;
+    for (const Polygons& part : faces) joined.push_back(&part);
+    append_parts(out, joined);
+    return true;
 }
 
 }  // namespace
@@ -77,29 +139,25 @@ Polygons read_off(const std::string& path, const ParseReport& report) {
     out.corner_counts.reserve(face_count);
     out.corners.reserve(std::min(3 * face_count, left / 2));  // a corner takes 2 bytes or more
 
-    // Phase 3: vertices, correctly rounded.
+    // Phase 3: the records, in parts on all cores where the body is large, else (or where that
+    // fails) in one pass.
+    if (bytes.size() - text.offset() > kTextPartBytes &&
+        read_records_in_parts(path, bytes, text.offset(), vertex_count, face_count, report, out))
+        return out;
     for (uint64_t v = 0; v < vertex_count; ++v) {
         if (!text.next_nonblank_line())
             text.fail("the file ends after " + std::to_string(v) + " of the " +
                       std::to_string(vertex_count) + " vertices that the header declares");
-        Position p;
-        for (int axis = 0; axis < 3; ++axis) p[axis] = text.double_on_line(kAxisCoordinate[axis]);
-        out.positions.push_back(p);
+        out.positions.emplace_back();
+        read_vertex(text, out.positions.back());
         text.skip_line();
         progress.at(text.offset());
     }
-
-    // Phase 4: faces. Indices are checked (negative, past the end) when they are triangulated.
     for (uint64_t f = 0; f < face_count; ++f) {
         if (!text.next_nonblank_line())
             text.fail("the file ends after " + std::to_string(f) + " of the " +
                       std::to_string(face_count) + " faces that the header declares");
-        const uint64_t corners = text.count_on_line("corner count");
-        if (corners > std::numeric_limits<uint32_t>::max())
-            text.fail("a face has " + std::to_string(corners) + " corners");
-        for (uint64_t k = 0; k < corners; ++k)
-            out.corners.push_back(text.integer_on_line("vertex index"));
-        out.corner_counts.push_back(uint32_t(corners));
+        read_face(text, out);
         text.skip_line();
         progress.at(text.offset());
     }

@@ -334,63 +334,123 @@ void read_binary_body(const std::string& path, const Header& header, std::string
     }
 }
 
-// One record per line, as the format's reference implementation reads it: a line with fewer or
-// more values than the header declares is an error, not a shifted read.
+// One ascii record, on the line the cursor is at: its values in the header's order, the vertex
+// element's coordinates into `position` and the face list's corners into out. A line with fewer
+// or more values than the header declares is an error, not a shifted read (as the format's
+// reference implementation reads it).
+void read_ascii_record(TextCursor& text, const Element& element, uint64_t record,
+                       Position& position, Polygons& out) {
+    const auto next_word = [&]() {
+        const std::string_view word = text.word_on_line();
+        if (word.empty())
+            text.fail(record_name(element, record) + " has fewer values than the header declares");
+        return word;
+    };
+    // A coordinate, read in one pass where it is a plain number, else strictly.
+    const auto coordinate = [&](const Property& property) {
+        const bool floating = is_floating(property.value);
+        double quick;
+        int64_t quick_whole;
+        if (floating ? text.quick_double(&quick) : text.quick_integer(&quick_whole))
+            return floating ? quick : double(quick_whole);
+        const std::string_view word = next_word();
+        return floating ? text.to_double(word, property.described)
+                        : double(text.to_integer(word, property.described));
+    };
+    for (const Property& property : element.properties) {
+        if (!property.is_list) {
+            if (property.role == Role::Skip)
+                next_word();
+            else
+                position[int(property.role) - int(Role::X)] = coordinate(property);
+            continue;
+        }
+        uint64_t length;
+        if (!text.quick_count(&length)) length = text.to_count(next_word(), "list length");
+        if (property.role == Role::Corners && length > std::numeric_limits<uint32_t>::max())
+            text.fail(record_name(element, record) + " has too many corners");
+        for (uint64_t k = 0; k < length; ++k) {
+            if (property.role != Role::Corners) {
+                next_word();
+                continue;
+            }
+            int64_t index;
+            if (!text.quick_integer(&index)) index = text.to_integer(next_word(), "vertex index");
+            out.corners.push_back(index);
+        }
+        if (property.role == Role::Corners) out.corner_counts.push_back(uint32_t(length));
+    }
+    if (!text.line_done())
+        text.fail(record_name(element, record) + " has more values than the header declares");
+}
+
+// The ascii records of a body of several parts (text_parts) on all cores, as read_off's
+// read_records_in_parts: each part's records (its lines with a word) are counted first, so every
+// part knows which element and record its lines hold; vertices go into their places, each part's
+// faces are joined in order afterwards, and lines past the declared records are not read. False,
+// with out as it was, where a part fails or the records are too few: one pass then names the
+// problem.
+bool read_ascii_records_in_parts(const std::string& path, const Header& header,
+                                 std::string_view bytes, const ParseReport& report, Polygons& out) {
+    const std::vector<std::string_view> parts = text_parts(bytes.substr(header.body_offset));
+    std::vector<uint64_t> first_record(parts.size() + 1, 0);
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+        TextCursor text(path, parts[i]);
+        for (; text.next_nonblank_line(); text.skip_line()) ++first_record[i + 1];
+    });
+    for (size_t i = 0; i < parts.size(); ++i) first_record[i + 1] += first_record[i];
+    // The elements that take lines (those with properties), with their first record's number.
+    std::vector<std::pair<uint64_t, const Element*>> elements;
+    uint64_t records = 0, vertex_first = 0;
+    for (const Element& element : header.elements) {
+        if (element.properties.empty()) continue;
+        if (element.name == "vertex") {
+            vertex_first = records;
+            out.positions.resize(element.count);
+        }
+        elements.push_back({records, &element});
+        records += element.count;
+    }
+    if (first_record.back() < records) {
+        out.positions.clear();
+        return false;
+    }
+
+    std::vector<Polygons> faces(parts.size());
+    const bool parsed = parse_parts(parts, header.body_offset, bytes.size(), report, [&](size_t i) {
+        TextCursor text(path, parts[i]);
+        size_t e = 0;
+        for (uint64_t r = first_record[i]; r < std::min(first_record[i + 1], records); ++r) {
+            while (e + 1 < elements.size() && elements[e + 1].first <= r) ++e;
+            const Element& element = *elements[e].second;
+            text.next_nonblank_line();
+            Position position{0, 0, 0};
+            read_ascii_record(text, element, r - elements[e].first, position, faces[i]);
+            if (element.name == "vertex") out.positions[r - vertex_first] = position;
+            text.skip_line();
+        }
+    });
+    if (!parsed) {
+        out.positions.clear();
+        return false;
+    }
+    std::vector<const Polygons*> joined;
+    for (const Polygons& part : faces) joined.push_back(&part);
+    append_parts(out, joined);
+    return true;
+}
+
+// The ascii body in one pass: record after record, element after element.
 void read_ascii_body(const std::string& path, const Header& header, std::string_view bytes,
                      Polygons& out, ParseProgress& progress) {
-    TextCursor text(path, std::string_view(bytes).substr(header.body_offset), 0, header.body_line);
-    const auto value = [&](std::string_view word, Scalar type, std::string_view what) {
-        return is_floating(type) ? text.to_double(word, what) : double(text.to_integer(word, what));
-    };
+    TextCursor text(path, bytes.substr(header.body_offset), 0, header.body_line);
     for (const Element& element : header.elements) {
         if (element.properties.empty()) continue;
         for (uint64_t record = 0; record < element.count; ++record) {
             if (!text.next_nonblank_line())
                 text.fail("the file ends before " + record_name(element, record));
-            const auto next_word = [&]() {
-                const std::string_view word = text.word_on_line();
-                if (word.empty())
-                    text.fail(record_name(element, record) +
-                              " has fewer values than the header declares");
-                return word;
-            };
-            // A coordinate, read in one pass where it is a plain number, else strictly.
-            const auto coordinate = [&](const Property& property) {
-                const bool floating = is_floating(property.value);
-                double quick;
-                int64_t quick_whole;
-                if (floating ? text.quick_double(&quick) : text.quick_integer(&quick_whole))
-                    return floating ? quick : double(quick_whole);
-                return value(next_word(), property.value, property.described);
-            };
             Position position{0, 0, 0};
-            for (const Property& property : element.properties) {
-                if (!property.is_list) {
-                    if (property.role == Role::Skip)
-                        next_word();
-                    else
-                        position[int(property.role) - int(Role::X)] = coordinate(property);
-                    continue;
-                }
-                uint64_t length;
-                if (!text.quick_count(&length)) length = text.to_count(next_word(), "list length");
-                if (property.role == Role::Corners && length > std::numeric_limits<uint32_t>::max())
-                    text.fail(record_name(element, record) + " has too many corners");
-                for (uint64_t k = 0; k < length; ++k) {
-                    if (property.role != Role::Corners) {
-                        next_word();
-                        continue;
-                    }
-                    int64_t index;
-                    if (!text.quick_integer(&index))
-                        index = text.to_integer(next_word(), "vertex index");
-                    out.corners.push_back(index);
-                }
-                if (property.role == Role::Corners) out.corner_counts.push_back(uint32_t(length));
-            }
-            if (!text.line_done())
-                text.fail(record_name(element, record) +
-                          " has more values than the header declares");
+            read_ascii_record(text, element, record, position, out);
             text.skip_line();
             if (element.name == "vertex") out.positions.push_back(position);
             progress.at(header.body_offset + text.offset());
@@ -424,10 +484,13 @@ Polygons read_ply(const std::string& path, const ParseReport& report) {
                 std::min(3 * element.count, (bytes.size() - header.body_offset) / entry_size));
         }
 
-    // Phase 2: the body, in element order (faces may come before vertices).
-    if (header.format == Format::Ascii)
-        read_ascii_body(path, header, bytes, out, progress);
-    else
+    // Phase 2: the body, in element order (faces may come before vertices); a large ascii body
+    // in parts on all cores, or in one pass where that fails.
+    if (header.format == Format::Ascii) {
+        if (bytes.size() - header.body_offset <= kTextPartBytes ||
+            !read_ascii_records_in_parts(path, header, bytes, report, out))
+            read_ascii_body(path, header, bytes, out, progress);
+    } else
         read_binary_body(path, header, bytes, out, progress);
     return out;
 }
