@@ -199,6 +199,37 @@ bool parse_parts(const std::vector<std::string_view>& parts, uint64_t first_offs
     return !failed;
 }
 
+bool read_records_in_parts(const std::string& path, std::string_view bytes, size_t body,
+                           char comment, uint64_t records, const ParseReport& report,
+                           const std::function<void(TextCursor&, uint64_t, Polygons&)>& read,
+                           Polygons& out) {
+    const std::vector<std::string_view> parts = text_parts(bytes.substr(body));
+    std::vector<uint64_t> first_record(parts.size() + 1, 0);
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+        TextCursor text(path, parts[i], comment);
+        for (; text.next_nonblank_line(); text.skip_line()) ++first_record[i + 1];
+    });
+    for (size_t i = 0; i < parts.size(); ++i) first_record[i + 1] += first_record[i];
+    if (first_record.back() < records) return false;
+
+    std::vector<Polygons> polygons(parts.size());
+    const bool parsed = parse_parts(parts, body, bytes.size(), report, [&](size_t i) {
+        polygons[i].corner_counts.reserve(parts[i].size() / 8);  // "3 0 1 2\n" or longer
+        polygons[i].corners.reserve(parts[i].size() / 2);
+        TextCursor text(path, parts[i], comment);
+        for (uint64_t r = first_record[i]; r < std::min(first_record[i + 1], records); ++r) {
+            text.next_nonblank_line();
+            read(text, r, polygons[i]);
+            text.skip_line();
+        }
+    });
+    if (!parsed) return false;
+    std::vector<const Polygons*> joined;
+    for (const Polygons& part : polygons) joined.push_back(&part);
+    append_parts(out, joined);
+    return true;
+}
+
 void append_parts(Polygons& out, const std::vector<const Polygons*>& parts) {
     std::vector<size_t> first_corner(parts.size() + 1, out.corners.size());
     std::vector<size_t> first_polygon(parts.size() + 1, out.corner_counts.size());

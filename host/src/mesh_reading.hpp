@@ -68,24 +68,6 @@ Polygons read_ply(const std::string& path, const ParseReport& report = {});
 Polygons read_off(const std::string& path, const ParseReport& report = {});
 Polygons read_scene_assimp(const std::string& path);  // glTF 2.0, GLB, 3MF
 
-// Large text files are parsed in parts of about kTextPartBytes on all cores. text_parts cuts the
-// text into parts that each end after a '\n' (so no part splits a line, nor a "\r\n"; a text
-// without one is a single part).
-constexpr size_t kTextPartBytes = size_t(1) << 20;
-std::vector<std::string_view> text_parts(std::string_view text);
-
-// Calls parse(i) for every part on all cores, a wave of parts at a time, and after each wave
-// reports the file offset its parts reach (`first_offset` is the first part's; the report may
-// throw Cancelled). Returns false if parse threw InputError for any part: the caller then parses
-// the whole file in one pass, so that the error is the first in the file, with its line number.
-bool parse_parts(const std::vector<std::string_view>& parts, uint64_t first_offset,
-                 uint64_t file_bytes, const ParseReport& report,
-                 const std::function<void(size_t)>& parse);
-
-// Appends the parts' positions, corners and corner counts to out, part after part (the corners
-// and counts, most of the bytes, on all cores: fresh pages fault in at a few microseconds each).
-void append_parts(Polygons& out, const std::vector<const Polygons*>& parts);
-
 // Checks every index and splits every polygon into triangles that cover exactly the polygon (ear
 // clipping in the plane the polygon faces most; a convex polygon gets the fan from its first
 // corner). Polygons of fewer than 3 corners (points, lines) are not surfaces and are dropped.
@@ -245,6 +227,36 @@ class TextCursor {
     size_t line_;
     size_t at_ = 0;
 };
+
+// Large text files are parsed in parts of about kTextPartBytes on all cores. text_parts cuts the
+// text into parts that each end after a '\n' (so no part splits a line, nor a "\r\n"; a text
+// without one is a single part).
+constexpr size_t kTextPartBytes = size_t(1) << 20;
+std::vector<std::string_view> text_parts(std::string_view text);
+
+// Calls parse(i) for every part on all cores, a wave of parts at a time, and after each wave
+// reports the file offset its parts reach (`first_offset` is the first part's; the report may
+// throw Cancelled). Returns false if parse threw InputError for any part: the caller then parses
+// the whole file in one pass, so that the error is the first in the file, with its line number.
+bool parse_parts(const std::vector<std::string_view>& parts, uint64_t first_offset,
+                 uint64_t file_bytes, const ParseReport& report,
+                 const std::function<void(size_t)>& parse);
+
+// Reads a text body of one record a line (the lines TextCursor finds a word on, after
+// `comment`), the first `records` of them, in parts on all cores: each part's records are counted
+// first, so that read(text, r, polygons) is called for every record with its number r, the cursor
+// on its line (in order within a part, each part's faces into a polygons of its own; the parts'
+// polygons are then appended to out in order). Lines past the records are not read, as in one
+// pass. False where a part fails (InputError) or the records are fewer: the caller then reads the
+// body in one pass, which names the problem (out then holds nothing more).
+bool read_records_in_parts(const std::string& path, std::string_view bytes, size_t body,
+                           char comment, uint64_t records, const ParseReport& report,
+                           const std::function<void(TextCursor&, uint64_t, Polygons&)>& read,
+                           Polygons& out);
+
+// Appends the parts' positions, corners and corner counts to out, part after part (the corners
+// and counts, most of the bytes, on all cores: fresh pages fault in at a few microseconds each).
+void append_parts(Polygons& out, const std::vector<const Polygons*>& parts);
 
 using detail::load_scalar;
 

@@ -2,8 +2,6 @@
 // polygons of any size. One vertex and one face per line, as writers put them: values after a
 // vertex's x y z (normals, colours, texture coordinates) and after a face's indices (a colour)
 // are read past.
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <limits>
 
@@ -54,49 +52,6 @@ void read_face(TextCursor& text, Polygons& out) {
     out.corner_counts.push_back(uint32_t(corners));
 }
 
-// The records of a body of several parts (text_parts) on all cores: each part's records (its
-// lines with a word) are counted first, so every part knows the number of its first record and
-// whether it holds vertices (into their places) or faces (joined in order afterwards); records
-// past the declared ones are not read, as in one pass. False, with out as it was, where a part
-// fails or the records are too few: one pass then names the problem.
-bool read_records_in_parts(const std::string& path, std::string_view bytes, size_t body,
-                           uint64_t vertex_count, uint64_t face_count, const ParseReport& report,
-                           Polygons& out) {
-    const std::vector<std::string_view> parts = text_parts(bytes.substr(body));
-    std::vector<uint64_t> first_record(parts.size() + 1, 0);
-    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
-        TextCursor text(path, parts[i], '#');
-        for (; text.next_nonblank_line(); text.skip_line()) ++first_record[i + 1];
-    });
-    for (size_t i = 0; i < parts.size(); ++i) first_record[i + 1] += first_record[i];
-    const uint64_t records = vertex_count + face_count;
-    if (first_record.back() < records) return false;
-
-    out.positions.resize(vertex_count);
-    std::vector<Polygons> faces(parts.size());
-    const bool parsed = parse_parts(parts, body, bytes.size(), report, [&](size_t i) {
-        faces[i].corner_counts.reserve(parts[i].size() / 8);  // "3 0 1 2\n" or longer
-        faces[i].corners.reserve(parts[i].size() / 2);
-        TextCursor text(path, parts[i], '#');
-        for (uint64_t r = first_record[i]; r < std::min(first_record[i + 1], records); ++r) {
-            text.next_nonblank_line();
-            if (r < vertex_count)
-                read_vertex(text, out.positions[r]);
-            else
-                read_face(text, faces[i]);
-            text.skip_line();
-        }
-    });
-    if (!parsed) {
-        out.positions.clear();
-        return false;
-    }
-    std::vector<const Polygons*> joined;
-    for (const Polygons& part : faces) joined.push_back(&part);
-    append_parts(out, joined);
-    return true;
-}
-
 }  // namespace
 
 Polygons read_off(const std::string& path, const ParseReport& report) {
@@ -141,9 +96,20 @@ Polygons read_off(const std::string& path, const ParseReport& report) {
 
     // Phase 3: the records, in parts on all cores where the body is large, else (or where that
     // fails) in one pass.
-    if (bytes.size() - text.offset() > kTextPartBytes &&
-        read_records_in_parts(path, bytes, text.offset(), vertex_count, face_count, report, out))
-        return out;
+    if (bytes.size() - text.offset() > kTextPartBytes) {
+        out.positions.resize(vertex_count);
+        if (read_records_in_parts(
+                path, bytes, text.offset(), '#', vertex_count + face_count, report,
+                [&](TextCursor& line, uint64_t r, Polygons& faces) {
+                    if (r < vertex_count)
+                        read_vertex(line, out.positions[r]);
+                    else
+                        read_face(line, faces);
+                },
+                out))
+            return out;
+        out.positions.clear();
+    }
     for (uint64_t v = 0; v < vertex_count; ++v) {
         if (!text.next_nonblank_line())
             text.fail("the file ends after " + std::to_string(v) + " of the " +

@@ -384,60 +384,39 @@ void read_ascii_record(TextCursor& text, const Element& element, uint64_t record
         text.fail(record_name(element, record) + " has more values than the header declares");
 }
 
-// The ascii records of a body of several parts (text_parts) on all cores, as read_off's
-// read_records_in_parts: each part's records (its lines with a word) are counted first, so every
-// part knows which element and record its lines hold; vertices go into their places, each part's
-// faces are joined in order afterwards, and lines past the declared records are not read. False,
-// with out as it was, where a part fails or the records are too few: one pass then names the
-// problem.
-bool read_ascii_records_in_parts(const std::string& path, const Header& header,
-                                 std::string_view bytes, const ParseReport& report, Polygons& out) {
-    const std::vector<std::string_view> parts = text_parts(bytes.substr(header.body_offset));
-    std::vector<uint64_t> first_record(parts.size() + 1, 0);
-    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
-        TextCursor text(path, parts[i]);
-        for (; text.next_nonblank_line(); text.skip_line()) ++first_record[i + 1];
-    });
-    for (size_t i = 0; i < parts.size(); ++i) first_record[i + 1] += first_record[i];
-    // The elements that take lines (those with properties), with their first record's number.
-    std::vector<std::pair<uint64_t, const Element*>> elements;
+// A large ascii body in parts on all cores (read_records_in_parts): the elements that take
+// lines (those with properties) one after the other, vertices into their places. False, with
+// out as it was, where that fails.
+bool read_ascii_body_in_parts(const std::string& path, const Header& header, std::string_view bytes,
+                              const ParseReport& report, Polygons& out) {
+    std::vector<uint64_t> first_record;  // of each element that takes lines
+    std::vector<const Element*> elements;
+    const Element* vertex_element = nullptr;
     uint64_t records = 0, vertex_first = 0;
     for (const Element& element : header.elements) {
         if (element.properties.empty()) continue;
         if (element.name == "vertex") {
+            vertex_element = &element;
             vertex_first = records;
-            out.positions.resize(element.count);
         }
-        elements.push_back({records, &element});
+        first_record.push_back(records);
+        elements.push_back(&element);
         records += element.count;
     }
-    if (first_record.back() < records) {
-        out.positions.clear();
-        return false;
-    }
-
-    std::vector<Polygons> faces(parts.size());
-    const bool parsed = parse_parts(parts, header.body_offset, bytes.size(), report, [&](size_t i) {
-        TextCursor text(path, parts[i]);
-        size_t e = 0;
-        for (uint64_t r = first_record[i]; r < std::min(first_record[i + 1], records); ++r) {
-            while (e + 1 < elements.size() && elements[e + 1].first <= r) ++e;
-            const Element& element = *elements[e].second;
-            text.next_nonblank_line();
+    out.positions.resize(vertex_element ? vertex_element->count : 0);
+    const bool read = read_records_in_parts(
+        path, bytes, header.body_offset, 0, records, report,
+        [&](TextCursor& text, uint64_t r, Polygons& faces) {
+            const size_t e = size_t(std::upper_bound(first_record.begin(), first_record.end(), r) -
+                                    first_record.begin()) -
+                             1;
             Position position{0, 0, 0};
-            read_ascii_record(text, element, r - elements[e].first, position, faces[i]);
-            if (element.name == "vertex") out.positions[r - vertex_first] = position;
-            text.skip_line();
-        }
-    });
-    if (!parsed) {
-        out.positions.clear();
-        return false;
-    }
-    std::vector<const Polygons*> joined;
-    for (const Polygons& part : faces) joined.push_back(&part);
-    append_parts(out, joined);
-    return true;
+            read_ascii_record(text, *elements[e], r - first_record[e], position, faces);
+            if (elements[e] == vertex_element) out.positions[r - vertex_first] = position;
+        },
+        out);
+    if (!read) out.positions.clear();
+    return read;
 }
 
 // The ascii body in one pass: record after record, element after element.
@@ -488,7 +467,7 @@ Polygons read_ply(const std::string& path, const ParseReport& report) {
     // in parts on all cores, or in one pass where that fails.
     if (header.format == Format::Ascii) {
         if (bytes.size() - header.body_offset <= kTextPartBytes ||
-            !read_ascii_records_in_parts(path, header, bytes, report, out))
+            !read_ascii_body_in_parts(path, header, bytes, report, out))
             read_ascii_body(path, header, bytes, out, progress);
     } else
         read_binary_body(path, header, bytes, out, progress);
