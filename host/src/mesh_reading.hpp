@@ -1,6 +1,7 @@
 // Pieces the mesh readers (read_*.cpp) share: what a reader produces, the file's bytes, a text
-// cursor with strict number parsing, the guard that checks declared sizes against the file before
-// anything is allocated for them, and the one polygon triangulation that every format goes through.
+// cursor with strict number parsing, the reading of large texts in parts on all cores, the guard
+// that checks declared sizes against the file before anything is allocated for them, and the one
+// polygon triangulation that every format goes through.
 #pragma once
 
 #include <array>
