@@ -100,6 +100,15 @@ void require_room(const std::string& path, uint64_t count, uint64_t min_bytes_ea
 // A word as it may be quoted in a message: non-printable bytes escaped, long words cut.
 std::string quoted(std::string_view word);
 
+// The number from_chars reads at `first` (after a '+' sign, which writers may emit and the strict
+// readings skip too) into *value; the end of it, or nullptr where none is read. The one-pass
+// readings (TextCursor::quick_double, OBJ's common lines) then check that a word ends there.
+inline const char* plain_double(const char* first, const char* last, double* value) {
+    const auto parsed =
+        std::from_chars(first != last && *first == '+' ? first + 1 : first, last, *value);
+    return parsed.ec == std::errc() ? parsed.ptr : nullptr;
+}
+
 // Whitespace-separated words of a text file, with the line number for messages. Only space,
 // tab, CR, VT and FF separate words, so a NUL byte is part of a word and fails its parse.
 class TextCursor {
@@ -160,12 +169,10 @@ class TextCursor {
     // reading of the word (to_double, to_integer) either reads it the same or names the problem.
     bool quick_double(double* value) {
         skip_blanks();
-        const char* const first = text_.data() + at_;
-        const char* const last = text_.data() + text_.size();
-        const char* const digits = first != last && *first == '+' ? first + 1 : first;
-        const auto parsed = std::from_chars(digits, last, *value);
-        if (parsed.ec != std::errc() || !ends_number(parsed.ptr)) return false;
-        at_ = size_t(parsed.ptr - text_.data());
+        const char* const end =
+            plain_double(text_.data() + at_, text_.data() + text_.size(), value);
+        if (!end || !ends_number(end)) return false;
+        at_ = size_t(end - text_.data());
         return true;
     }
     bool quick_integer(int64_t* value) {

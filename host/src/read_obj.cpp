@@ -15,8 +15,6 @@
 // are known. A part that fails sends the whole file through the plain one-pass parse, so an error
 // is the first one in the file, with its line number.
 
-#include <charconv>
-
 #include "mesh_reading.hpp"
 
 namespace oclvox::mesh_reading {
@@ -90,10 +88,9 @@ size_t quick_line(std::string_view text, size_t at, Polygons& out, size_t* face_
         Position position;
         for (double& coordinate : position) {
             skip_blanks();
-            const char* const first = p != end && *p == '+' ? p + 1 : p;  // as skip_plus
-            const auto parsed = std::from_chars(first, end, coordinate);
-            if (parsed.ec != std::errc() || !at_word_end(parsed.ptr)) return kNot;
-            p = parsed.ptr;
+            const char* const number_end = plain_double(p, end, &coordinate);
+            if (!number_end || !at_word_end(number_end)) return kNot;
+            p = number_end;
         }
         out.positions.push_back(position);
         return line_end();
