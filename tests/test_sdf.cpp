@@ -269,7 +269,8 @@ TEST(Sdf, DeviceMatchesReferenceBitForBit) {
 // Beyond the band a full-grid field searches the tree over all the triangles, so it is exact
 // everywhere: within 1e-4 voxel of a double-precision brute force, above and below. The sphere's
 // interior is where jump flooding (before the tree) was 0.041 voxel off; the random triangles
-// (slivers, some reaching out of the grid) make a deeper tree with boxes that overlap.
+// (slivers, some reaching out of the grid) make a deeper tree with boxes that overlap; 40,000 of
+// them make a tree whose upper levels build in parallel (above 16,384 triangles a subtree).
 TEST(Sdf, FullGridDistancesAreExactEverywhere) {
     const double vs = 0.25;
     const Mesh sphere = icosphere(kCentre, 2.0, 2);
@@ -280,7 +281,23 @@ TEST(Sdf, FullGridDistancesAreExactEverywhere) {
     Grid random_grid;
     random_grid.dims = {32, 32, 32};
     const Mesh random = random_triangles(300, 3.0, 29.0, 3.0, 11);  // all inside the grid
-    for (const auto& [m, grid] : {std::pair{&sphere, g}, {&box, g}, {&random, random_grid}}) {
+    Grid many_grid;
+    many_grid.dims = {8, 8, 8};
+    // A shell of small triangles 9 to 10 voxels around the grid's centre: every voxel is past
+    // the band, and each part of the shell is the nearest for some voxels.
+    Mesh many;
+    std::mt19937 rng(13);
+    std::normal_distribution<double> direction;
+    std::uniform_real_distribution<double> radius(9.0, 10.0), offset(-0.4, 0.4);
+    for (int t = 0; t < 40000; ++t) {
+        Vec3d a{direction(rng), direction(rng), direction(rng)};
+        const double scale = radius(rng) / std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        for (double& c : a) c = 4.0 + c * scale;
+        add_triangle(many, a, {a[0] + offset(rng), a[1] + offset(rng), a[2]},
+                     {a[0], a[1] + offset(rng), a[2] + offset(rng)});
+    }
+    for (const auto& [m, grid] :
+         {std::pair{&sphere, g}, {&box, g}, {&random, random_grid}, {&many, many_grid}}) {
         const ScalarField f = unsigned_distance(device(), *m, grid, band(2.0, true));
         expect_identical(f, unsigned_distance_reference(*m, grid, band(2.0, true)));
         const std::vector<double> exact = brute_force_distance(*m, grid);

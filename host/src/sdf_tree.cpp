@@ -2,8 +2,11 @@
 // band (ov_tree_distance2 in kernels/sdf_math.h): boxes split at the median centroid of their
 // longest axis down to a few triangles, stored depth first: a node's first child follows it, and
 // the first child's skip link is the second.
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "sdf_internal.hpp"
 
@@ -50,14 +53,31 @@ float widened(double x, double margin, bool up) {
     return f;
 }
 
+// Subtrees over more triangles than this build their two halves in parallel.
+constexpr size_t kParallelTriangles = 16384;
+
 struct Builder {
     const std::vector<Box>& boxes;
     SdfTree& tree;
+    // The nodes of a subtree over n > kLeafTriangles triangles. The tree splits at the middle,
+    // so this depends on n alone: every subtree's place in the depth-first order is known before
+    // it is built, and subtrees build in parallel into the nodes laid out for them.
+    std::map<size_t, size_t> subtree_nodes;
 
-    // Appends the subtree of order[begin, end) depth first.
-    void build(size_t begin, size_t end) {
-        const size_t node = tree.nodes.size();
-        tree.nodes.emplace_back();
+    size_t nodes_of(size_t n) const { return n <= kLeafTriangles ? 1 : subtree_nodes.at(n); }
+    // Fills subtree_nodes for every size the tree over n triangles holds (a few per level: the
+    // halves of n at depth d are the floor and ceiling of n / 2^d), and returns nodes_of(n).
+    size_t count_nodes(size_t n) {
+        if (n <= kLeafTriangles) return 1;
+        if (const auto known = subtree_nodes.find(n); known != subtree_nodes.end())
+            return known->second;
+        const size_t nodes = 1 + count_nodes(n / 2) + count_nodes(n - n / 2);
+        subtree_nodes[n] = nodes;
+        return nodes;
+    }
+
+    // Builds the subtree of order[begin, end) depth first from node `node` on.
+    void build(size_t begin, size_t end, size_t node) {
         Box box, centres;
         for (size_t p = begin; p < end; ++p) {
             const Box& b = boxes[tree.order[p]];
@@ -72,26 +92,32 @@ struct Builder {
             out.lo[a] = widened(box.lo[a], margin, false);
             out.hi[a] = widened(box.hi[a], margin, true);
         }
+        out.skip = unsigned(node + nodes_of(end - begin));
         if (end - begin <= kLeafTriangles) {
             out.first = unsigned(begin);
             out.count = unsigned(end - begin);
-        } else {
-            // The median by centroid along the longest axis of the centroids (ties by index, so
-            // the tree does not depend on the sort).
-            int axis = 0;
-            for (int a = 1; a < 3; ++a)
-                if (centres.hi[a] - centres.lo[a] > centres.hi[axis] - centres.lo[axis]) axis = a;
-            const size_t middle = begin + (end - begin) / 2;
-            auto centre = [&](uint32_t t) { return boxes[t].lo[axis] + boxes[t].hi[axis]; };
-            std::nth_element(tree.order.begin() + ptrdiff_t(begin),
-                             tree.order.begin() + ptrdiff_t(middle),
-                             tree.order.begin() + ptrdiff_t(end), [&](uint32_t a, uint32_t b) {
-                                 return centre(a) < centre(b) || (centre(a) == centre(b) && a < b);
-                             });
-            build(begin, middle);
-            build(middle, end);
+            return;
         }
-        tree.nodes[node].skip = unsigned(tree.nodes.size());
+        // The median by centroid along the longest axis of the centroids (ties by index, so the
+        // tree depends neither on the sort nor on the threads).
+        int axis = 0;
+        for (int a = 1; a < 3; ++a)
+            if (centres.hi[a] - centres.lo[a] > centres.hi[axis] - centres.lo[axis]) axis = a;
+        const size_t middle = begin + (end - begin) / 2;
+        auto centre = [&](uint32_t t) { return boxes[t].lo[axis] + boxes[t].hi[axis]; };
+        std::nth_element(tree.order.begin() + ptrdiff_t(begin),
+                         tree.order.begin() + ptrdiff_t(middle),
+                         tree.order.begin() + ptrdiff_t(end), [&](uint32_t a, uint32_t b) {
+                             return centre(a) < centre(b) || (centre(a) == centre(b) && a < b);
+                         });
+        auto first_half = [&] { build(begin, middle, node + 1); };
+        auto second_half = [&] { build(middle, end, node + 1 + nodes_of(middle - begin)); };
+        if (end - begin > kParallelTriangles) {
+            tbb::parallel_invoke(first_half, second_half);
+        } else {
+            first_half();
+            second_half();
+        }
     }
 };
 
@@ -104,8 +130,9 @@ SdfTree build_sdf_tree(const std::vector<OvSdfTriangle>& triangles) {
     for (size_t t = 0; t < triangles.size(); ++t) boxes[t] = triangle_box(triangles[t]);
     tree.order.resize(triangles.size());
     for (size_t t = 0; t < triangles.size(); ++t) tree.order[t] = uint32_t(t);
-    tree.nodes.reserve(2 * triangles.size() / kLeafTriangles + 1);
-    Builder{boxes, tree}.build(0, triangles.size());
+    Builder builder{boxes, tree, {}};
+    tree.nodes.resize(builder.count_nodes(triangles.size()));
+    builder.build(0, triangles.size(), 0);
     return tree;
 }
 
