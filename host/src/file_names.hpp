@@ -2,14 +2,20 @@
 // whatever needs a file's folder.
 #pragma once
 
-#include <cctype>
 #include <string>
 
 namespace oclvox::detail {
 
+// ASCII lower case: A-Z become a-z and every other byte stays, whatever the process's locale
+// (std::tolower follows it: a Turkish one lowers 'I' to a dotless i, and it is a library call per
+// character, a tenth of reading an ASCII STL).
+inline char ascii_lower(char c) {
+    return c >= 'A' && c <= 'Z' ? char(c - 'A' + 'a') : c;
+}
+
 // ASCII lower case, for case-insensitive names (extensions, option values, device names).
 inline std::string lowercase(std::string text) {
-    for (char& c : text) c = char(std::tolower(static_cast<unsigned char>(c)));
+    for (char& c : text) c = ascii_lower(c);
     return text;
 }
 

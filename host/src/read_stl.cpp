@@ -4,8 +4,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <cctype>
 
+#include "file_names.hpp"
 #include "mesh_reading.hpp"
 
 namespace oclvox::mesh_reading {
@@ -17,9 +17,8 @@ constexpr uint64_t kBinaryFacetBytes = 50;   // normal, 3 corners (12 floats), a
 
 bool same_keyword(std::string_view word, std::string_view keyword) {
     return word.size() == keyword.size() &&
-           std::equal(word.begin(), word.end(), keyword.begin(), [](char a, char b) {
-               return std::tolower(static_cast<unsigned char>(a)) == b;
-           });
+           std::equal(word.begin(), word.end(), keyword.begin(),
+                      [](char a, char b) { return detail::ascii_lower(a) == b; });
 }
 
 void expect(const TextCursor& text, std::string_view word, std::string_view keyword) {
