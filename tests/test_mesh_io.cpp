@@ -1707,4 +1707,38 @@ TEST_F(MeshFiles, LargeOffAndAsciiPlyReadInPartsAsInOnePass) {
     }
 }
 
+// A large ASCII STL is read in parts on all cores, cut where a line starts with "facet": the
+// mesh is the one written, whether as one solid or as many (solid boundaries inside parts), and
+// a file whose last facet lacks a corner, or that ends inside a solid, fails as one pass fails.
+TEST_F(MeshFiles, LargeAsciiStlReadsInPartsAsInOnePass) {
+    const Mesh mesh = sheet(100);
+    const std::string one_solid = ascii_stl_text(mesh);
+    ASSERT_GT(one_solid.size(), size_t(2) << 20);
+    // The same facets as 20 solids: an "endsolid" and a "solid" line before every 1000th facet.
+    std::string solids;
+    size_t facet = 0;
+    for (size_t at = one_solid.find("  facet"); at != std::string::npos;) {
+        const size_t next = one_solid.find("  facet", at + 1);
+        if (facet > 0 && facet % 1000 == 0) solids += "endsolid a\nsolid b\n";
+        solids += one_solid.substr(
+            at, next == std::string::npos ? one_solid.rfind("endsolid") - at : next - at);
+        at = next;
+        ++facet;
+    }
+    solids = "solid a\n" + solids + "endsolid b\n";
+    for (const auto& [name, text] : {std::pair{"one.stl", one_solid}, {"many.stl", solids}}) {
+        SCOPED_TRACE(name);
+        expect_same_triangles(oclvox::load_mesh(write(name, text)), mesh, name);
+    }
+    // The last facet's last corner removed (7 lines a facet, then "endsolid").
+    const size_t last_vertex = one_solid.rfind("      vertex");
+    const std::string short_facet =
+        one_solid.substr(0, last_vertex) + one_solid.substr(one_solid.find('\n', last_vertex) + 1);
+    EXPECT_TRUE(contains(input_error_of(write("short.stl", short_facet)),
+                         "a facet has 2 vertices; it needs 3"));
+    EXPECT_TRUE(contains(
+        input_error_of(write("open.stl", one_solid.substr(0, one_solid.rfind("endsolid")))),
+        "the file ends inside a solid (no 'endsolid')"));
+}
+
 }  // namespace
