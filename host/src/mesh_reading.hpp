@@ -109,6 +109,22 @@ inline const char* plain_double(const char* first, const char* last, double* val
     return parsed.ec == std::errc() ? parsed.ptr : nullptr;
 }
 
+// The whole number at `first`: an optional sign, then 1 to 18 digits (which cannot overflow),
+// read as from_chars would read them, into *value; the end of the digits read, or nullptr where
+// there are none. Where the word goes on (more digits, other characters) the caller takes its
+// strict reading.
+inline const char* plain_integer(const char* first, const char* last, int64_t* value) {
+    const bool negative = first != last && *first == '-';
+    if (first != last && (*first == '-' || *first == '+')) ++first;
+    const char* c = first;
+    int64_t read = 0;
+    for (; c != last && unsigned(*c) - unsigned('0') <= 9 && c - first < 18; ++c)
+        read = 10 * read + int64_t(*c - '0');
+    if (c == first) return nullptr;
+    *value = negative ? -read : read;
+    return c;
+}
+
 // Whitespace-separated words of a text file, with the line number for messages. Only space,
 // tab, CR, VT and FF separate words, so a NUL byte is part of a word and fails its parse.
 class TextCursor {
@@ -146,20 +162,11 @@ class TextCursor {
     // word, trailing characters or a value out of range fail with the file and line.
     double to_double(std::string_view word, std::string_view what) const;
     int64_t to_integer(std::string_view word, std::string_view what) const {
-        // Up to 18 digits after an optional sign cannot overflow: read here, as from_chars would
-        // read them. Anything else, errors included, goes the strict way.
-        const char* c = word.data();
-        const char* const last = c + word.size();
-        const bool negative = c != last && *c == '-';
-        if (c != last && (*c == '-' || *c == '+')) ++c;
-        if (c == last || last - c > 18) return to_integer_strictly(word, what);
+        // A plain whole number is read here; anything else, errors included, the strict way.
+        const char* const last = word.data() + word.size();
         int64_t value = 0;
-        for (; c != last; ++c) {
-            const unsigned digit = unsigned(*c) - unsigned('0');
-            if (digit > 9) return to_integer_strictly(word, what);
-            value = 10 * value + int64_t(digit);
-        }
-        return negative ? -value : value;
+        if (plain_integer(word.data(), last, &value) == last && !word.empty()) return value;
+        return to_integer_strictly(word, what);
     }
     uint64_t to_count(std::string_view word, std::string_view what) const;
 
@@ -177,17 +184,10 @@ class TextCursor {
     }
     bool quick_integer(int64_t* value) {
         skip_blanks();
-        const char* c = text_.data() + at_;
-        const char* const last = text_.data() + text_.size();
-        const bool negative = c != last && *c == '-';
-        if (c != last && (*c == '-' || *c == '+')) ++c;
-        const char* const digits = c;
-        int64_t read = 0;
-        for (; c != last && unsigned(*c) - unsigned('0') <= 9 && c - digits < 18; ++c)
-            read = 10 * read + int64_t(*c - '0');
-        if (c == digits || !ends_number(c)) return false;
-        *value = negative ? -read : read;
-        at_ = size_t(c - text_.data());
+        const char* const end =
+            plain_integer(text_.data() + at_, text_.data() + text_.size(), value);
+        if (!end || !ends_number(end)) return false;
+        at_ = size_t(end - text_.data());
         return true;
     }
     double double_on_line(std::string_view what) {
@@ -215,9 +215,10 @@ class TextCursor {
 
     [[noreturn]] void fail(const std::string& problem) const;
 
-  private:
-    // Space, tab, CR, VT and FF.
+    // Space, tab, CR, VT and FF: what separates words on a line.
     static bool is_blank(char c) { return c == ' ' || (c >= '\t' && c <= '\r' && c != '\n'); }
+
+  private:
     bool ends_word(char c) const { return c == '\n' || is_blank(c) || c == comment_; }
     bool ends_number(const char* c) const {
         return c == text_.data() + text_.size() || ends_word(*c);

@@ -15,6 +15,8 @@
 // are known. A part that fails sends the whole file through the plain one-pass parse, so an error
 // is the first one in the file, with its line number.
 
+#include <limits>
+
 #include "mesh_reading.hpp"
 
 namespace oclvox::mesh_reading {
@@ -73,10 +75,10 @@ size_t quick_line(std::string_view text, size_t at, Polygons& out, size_t* face_
     const char* const end = text.data() + text.size();
     // A blank, the comment sign or a line end ends a word (TextCursor's word ends).
     auto at_word_end = [&](const char* q) {
-        return q == end || *q == ' ' || (*q >= '\t' && *q <= '\r') || *q == '#';
+        return q == end || TextCursor::is_blank(*q) || *q == '\n' || *q == '#';
     };
     auto skip_blanks = [&] {  // (TextCursor's blanks, but for the CR that ends a line here)
-        while (p != end && (*p == ' ' || *p == '\t' || *p == '\v' || *p == '\f')) ++p;
+        while (p != end && TextCursor::is_blank(*p) && *p != '\r') ++p;
     };
     auto line_end = [&] {
         while (p != end && *p != '\n' && *p != '\r') ++p;
@@ -98,18 +100,19 @@ size_t quick_line(std::string_view text, size_t at, Polygons& out, size_t* face_
     const size_t corners_before = out.corners.size();
     uint32_t corners = 0;
     for (skip_blanks(); p != end && !at_word_end(p); skip_blanks()) {
-        // v, v/vt, v//vn or v/vt/vn (or more parts, as corner_index reads them): digits each,
-        // all but the vertex's possibly empty, none zero. Nine digits fit in 32 bits.
-        uint32_t vertex = 0;
+        // v, v/vt, v//vn or v/vt/vn (or more parts, as corner_index reads them): unsigned digits
+        // each, all but the vertex's possibly empty, none zero, within 32 bits.
+        int64_t vertex = 0;
         for (int part = 0;; ++part) {
-            const char* const digits = p;
-            uint32_t value = 0;
-            while (p != end && unsigned(*p - '0') <= 9 && p - digits < 9)
-                value = 10 * value + unsigned(*p++ - '0');
-            if ((p != digits && value == 0) || (p == digits && part == 0)) {
+            const bool sign = p != end && (*p == '-' || *p == '+');  // (relative: strict)
+            int64_t value = 0;
+            const char* const digits_end = sign ? nullptr : plain_integer(p, end, &value);
+            if (sign || (digits_end ? value == 0 || value > std::numeric_limits<int32_t>::max()
+                                    : part == 0)) {
                 out.corners.resize(corners_before);
                 return kNot;
             }
+            if (digits_end) p = digits_end;
             if (part == 0) vertex = value;
             if (p == end || *p != '/') break;
             ++p;
@@ -118,7 +121,7 @@ size_t quick_line(std::string_view text, size_t at, Polygons& out, size_t* face_
             out.corners.resize(corners_before);
             return kNot;
         }
-        out.corners.push_back(int64_t(vertex) - 1);
+        out.corners.push_back(vertex - 1);
         ++corners;
     }
     out.corner_counts.push_back(corners);

@@ -145,12 +145,9 @@ Polygons read_ascii(const std::string& path, std::string_view text, ParseProgres
 // Whether the line at `line` starts (after blanks) with the word "facet", in any case.
 bool starts_with_facet(std::string_view text, size_t line) {
     size_t at = line;
-    while (at < text.size() && (text[at] == ' ' || (text[at] >= '\t' && text[at] <= '\r')) &&
-           text[at] != '\n')
-        ++at;
+    while (at < text.size() && TextCursor::is_blank(text[at])) ++at;
     return same_keyword(text.substr(at, 5), "facet") &&
-           (at + 5 == text.size() || text[at + 5] == ' ' ||
-            (text[at + 5] >= '\t' && text[at + 5] <= '\r'));
+           (at + 5 == text.size() || TextCursor::is_blank(text[at + 5]) || text[at + 5] == '\n');
 }
 
 // An ASCII file of several parts (text_parts) on all cores: each part from its first line that
