@@ -27,6 +27,16 @@ void expect(const TextCursor& text, std::string_view word, std::string_view keyw
     text.fail("expected '" + std::string(keyword) + "', found " + quoted(word));
 }
 
+// Every corner is its own position (load_mesh welds them): corner k is position k.
+void number_corners(Polygons& out) {
+    out.corners.resize(out.positions.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, out.corners.size(), 65536),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                          for (size_t k = range.begin(); k < range.end(); ++k)
+                              out.corners[k] = int64_t(k);
+                      });
+}
+
 // Facet f of a binary file into its place in out. Binary floats are exact in double, so the
 // corners are the file's values bit for bit; the stored normal (the first 12 bytes) is ignored:
 // the corners define the facet.
@@ -36,7 +46,6 @@ void read_binary_facet(std::string_view bytes, size_t f, Polygons& out) {
         Position& p = out.positions[3 * f + corner];
         for (size_t axis = 0; axis < 3; ++axis)
             p[axis] = load_scalar<float>(facet + 12 + 12 * corner + 4 * axis, false);
-        out.corners[3 * f + corner] = int64_t(3 * f + corner);
     }
     out.corner_counts[f] = 3;
 }
@@ -53,7 +62,6 @@ Polygons read_binary(const std::string& path, std::string_view bytes, ParseProgr
     // between waves, as a serial read would report it).
     Polygons out;
     out.positions.resize(size_t(facets) * 3);
-    out.corners.resize(size_t(facets) * 3);
     out.corner_counts.resize(facets);
     constexpr size_t kWave = 65536;
     for (size_t first = 0; first < facets; first += kWave) {
@@ -66,6 +74,7 @@ Polygons read_binary(const std::string& path, std::string_view bytes, ParseProgr
         for (size_t f = first; f < end; ++f)
             progress.at(kBinaryHeaderBytes + (f + 1) * kBinaryFacetBytes);
     }
+    number_corners(out);
     return out;
 }
 
@@ -92,16 +101,6 @@ void read_facet(TextCursor& cursor, Polygons& out) {
     if (corners < 3)
         cursor.fail("a facet has " + std::to_string(corners) + " vertices; it needs 3");
     out.corner_counts.push_back(corners);
-}
-
-// Every corner is its own position (load_mesh welds them): corner k is position k.
-void number_corners(Polygons& out) {
-    out.corners.resize(out.positions.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, out.corners.size(), 65536),
-                      [&](const tbb::blocked_range<size_t>& range) {
-                          for (size_t k = range.begin(); k < range.end(); ++k)
-                              out.corners[k] = int64_t(k);
-                      });
 }
 
 // The words from the cursor on, solids and their facets, into out; `inside`: whether they start
