@@ -2,6 +2,7 @@
 // specification (not from the writer), and must give back exactly the voxels that were written.
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -528,7 +529,8 @@ struct VdbOccupancy {
     openvdb::Vec3i dims;
 };
 
-VdbOccupancy read_vdb_occupancy(const std::string& path, bool expand = true) {
+// The "occupancy" grid of a .vdb, read by OpenVDB.
+openvdb::BoolGrid::Ptr read_occupancy_grid(const std::string& path) {
     openvdb::initialize();
     openvdb::io::File file(path);
     file.open();
@@ -536,6 +538,11 @@ VdbOccupancy read_vdb_occupancy(const std::string& path, bool expand = true) {
         openvdb::gridPtrCast<openvdb::BoolGrid>(file.readGrid("occupancy"));
     file.close();
     if (!grid) throw std::runtime_error("occupancy is not a BoolGrid");
+    return grid;
+}
+
+VdbOccupancy read_vdb_occupancy(const std::string& path, bool expand = true) {
+    const openvdb::BoolGrid::Ptr grid = read_occupancy_grid(path);
     VdbOccupancy result;
     result.active_count = grid->activeVoxelCount();
     for (auto it = grid->cbeginValueOn(); it; ++it) {
@@ -1344,6 +1351,77 @@ TEST_F(WriterTest, VdbOfManyBrickGroupsHasExactlyTheSetVoxels) {
         box_and_noise(make_grid({130, 70, 90}), 8, {16, 8, 24}, {48, 40, 64}, 90, 4, 99);
     ASSERT_GT(voxels.brick_indices().size(), 3 * 256u);
     written_vdb_holding_exactly(path("groups.vdb"), voxels);
+}
+
+// The file OpenVDB's own writer makes of the same voxels: a BoolGrid with our file's metadata
+// and transform, set voxel by voxel through OpenVDB's API, pruned, and written by io::Stream
+// with the active-mask compression (its statistics metadata worked out by OpenVDB).
+std::string openvdb_written_occupancy(const std::string& ours, const SparseVoxels& voxels) {
+    const openvdb::BoolGrid::Ptr grid = read_occupancy_grid(ours)->copyWithNewTree();
+    for (const char* stat :
+         {openvdb::GridBase::META_FILE_BBOX_MIN, openvdb::GridBase::META_FILE_BBOX_MAX,
+          openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::GridBase::META_FILE_VOXEL_COUNT,
+          openvdb::GridBase::META_FILE_COMPRESSION, openvdb::GridBase::META_FILE_DELAYED_LOAD})
+        grid->removeMeta(stat);
+    openvdb::BoolGrid::Accessor access = grid->getAccessor();
+    voxels.for_each([&](int64_t i, int64_t j, int64_t k) {
+        access.setValueOn(openvdb::Coord(int(i), int(j), int(k)), true);
+    });
+    grid->tree().prune();
+    std::ostringstream out;
+    openvdb::io::Stream stream(out);
+    stream.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK);
+    stream.write(openvdb::GridCPtrVec{grid});
+    return out.str();
+}
+
+// The bytes of our .vdb are those of OpenVDB's writer for the same voxels but for the file's
+// random UUID (36 characters after the 21 header bytes): the tree, its order, its tiles and the
+// statistics metadata are laid out as OpenVDB lays them out.
+void expect_vdb_bytes_of_openvdbs_writer(const std::string& file, const SparseVoxels& voxels) {
+    oclvox::write_voxels(file, voxels);
+    const std::string ours = read_bytes(file);
+    std::string theirs = openvdb_written_occupancy(file, voxels);
+    constexpr size_t kUuidAt = 21, kUuidSize = 36;
+    ASSERT_GT(theirs.size(), kUuidAt + kUuidSize);
+    ASSERT_GT(ours.size(), kUuidAt + kUuidSize);
+    theirs.replace(kUuidAt, kUuidSize, ours, kUuidAt, kUuidSize);
+    ASSERT_EQ(ours.size(), theirs.size());
+    const auto differ = std::mismatch(ours.begin(), ours.end(), theirs.begin());
+    EXPECT_TRUE(differ.first == ours.end())
+        << "first difference at byte " << (differ.first - ours.begin()) << " of " << ours.size();
+}
+
+TEST_F(WriterTest, VdbIsByteForByteWhatOpenVdbsWriterMakesOfTheSameVoxels) {
+    openvdb::initialize();
+    // Bricks of 4 and 12 share leaves between bricks; 8, 16 and 64 hold whole ones. The mixed
+    // pattern has full leaves (tiles) and partial ones.
+    for (int brick : {4, 8, 12, 16, 64}) {
+        SCOPED_TRACE("brick " + std::to_string(brick));
+        expect_vdb_bytes_of_openvdbs_writer(path("m.vdb"), mixed_voxels(brick));
+    }
+    // Several root entries (a grid over 4096 voxels along x) and upper nodes.
+    {
+        SCOPED_TRACE("far apart");
+        const SparseVoxels voxels = make_voxels(
+            make_grid({5000, 300, 20}),
+            {{0, 0, 0}, {4095, 0, 0}, {4096, 299, 19}, {4999, 128, 7}, {130, 5, 9}}, 64);
+        expect_vdb_bytes_of_openvdbs_writer(path("far.vdb"), voxels);
+    }
+    // A full lower node (128^3 aligned) is a tile of its upper node, beside partial ones.
+    {
+        SCOPED_TRACE("full lower node");
+        SparseVoxels voxels(make_grid({140, 136, 130}), 32);
+        voxels.set_box({0, 0, 0}, {128, 128, 128});
+        voxels.set_box({128, 3, 5}, {140, 136, 9});
+        voxels.set(139, 135, 129);
+        expect_vdb_bytes_of_openvdbs_writer(path("full.vdb"), voxels);
+    }
+    {
+        SCOPED_TRACE("no voxels");
+        expect_vdb_bytes_of_openvdbs_writer(path("empty.vdb"),
+                                            SparseVoxels(make_grid({9, 9, 9}), 8));
+    }
 }
 
 TEST_F(WriterTest, VdbReadsBackThroughOpenVdbsPythonModule) {
