@@ -1323,8 +1323,8 @@ VdbOccupancy written_vdb_holding_exactly(const std::string& file, const SparseVo
 }
 
 TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits) {
-    // Bricks of 4 and 12 share leaves (one pass through an accessor); 8, 16 and 64 hold whole
-    // leaves (built in parallel, brick by brick).
+    // Bricks of 4 and 12 share leaves between bricks (merged after sorting); 8, 16 and 64 hold
+    // whole leaves.
     for (int brick : {4, 8, 12, 16, 64}) {
         SCOPED_TRACE("brick " + std::to_string(brick));
         // The mixed pattern has whole 8^3 leaves (pruned to tiles) and partial ones.
@@ -1343,9 +1343,8 @@ TEST_F(WriterTest, VdbActiveVoxelsAreExactlyTheSetVoxelsWithCentresInWorldUnits)
     }
 }
 
-// Whole-leaf bricks are built 256 at a time, each group's leaves inserted into the tree while
-// the next group is built: a grid of over a thousand active bricks of 8 (several groups, sparse
-// noise in every brick and a solid box pruned to tiles) reads back with exactly its voxels.
+// A grid of over a thousand active bricks of 8 (sparse noise in every brick and a solid box
+// pruned to tiles) reads back with exactly its voxels.
 TEST_F(WriterTest, VdbOfManyBrickGroupsHasExactlyTheSetVoxels) {
     const SparseVoxels voxels =
         box_and_noise(make_grid({130, 70, 90}), 8, {16, 8, 24}, {48, 40, 64}, 90, 4, 99);

@@ -38,6 +38,7 @@
 
 #include "atomic_file.hpp"
 #include "bit_count.hpp"
+#include "block_writer.hpp"
 #include "brick_layout.hpp"
 #include "vdb_format.hpp"
 #include "writers.hpp"
@@ -129,16 +130,13 @@ std::vector<LeafBits> sorted_leaves(const SparseVoxels& voxels) {
                     const std::array<int64_t, 3> o{corner[0] + bx * SparseVoxels::kBlock,
                                                    corner[1] + by * SparseVoxels::kBlock,
                                                    corner[2] + bz * SparseVoxels::kBlock};
-                    uint32_t* place;
-                    if (whole_leaves) {
-                        place = &slot[size_t(bx / 2 + n * (by / 2 + n * (bz / 2)))];
-                    } else {
-                        place = &slot_of_key.try_emplace(leaf_key(o[0], o[1], o[2]), UINT32_MAX)
-                                     .first->second;
-                    }
+                    const uint64_t key = leaf_key(o[0], o[1], o[2]);
+                    uint32_t* place = whole_leaves
+                                          ? &slot[size_t(bx / 2 + n * (by / 2 + n * (bz / 2)))]
+                                          : &slot_of_key.try_emplace(key, UINT32_MAX).first->second;
                     if (*place == UINT32_MAX) {
                         *place = uint32_t(own.size());
-                        own.push_back(LeafBits{leaf_key(o[0], o[1], o[2]), {}});
+                        own.push_back(LeafBits{key, {}});
                     }
                     add_block(own[*place].words, o, mask);
                 }
@@ -215,62 +213,44 @@ TreeShape tree_shape(const std::vector<LeafBits>& leaves) {
     return shape;
 }
 
-// Bytes gathered for the file and written in large pieces.
-class ByteSink {
-  public:
-    explicit ByteSink(std::ostream& out) : out_(out) { bytes_.reserve(kPiece); }
-    ~ByteSink() = default;
-    template <class T>
-    void put(const T& value) {
-        append(&value, sizeof(T));
-    }
-    void append(const void* data, size_t size) {
-        const char* p = static_cast<const char*>(data);
-        bytes_.insert(bytes_.end(), p, p + size);
-        if (bytes_.size() >= kPiece) flush();
-    }
-    void flush() {
-        out_.write(bytes_.data(), std::streamsize(bytes_.size()));
-        bytes_.clear();
-    }
-
-  private:
-    static constexpr size_t kPiece = size_t(4) << 20;
-    std::ostream& out_;
-    std::vector<char> bytes_;
-};
+// The bytes of `value` as they lie in memory, as OpenVDB writes its masks and coordinates (its
+// files are little-endian, as is every host it supports).
+template <class T>
+void put_bytes(BlockWriter& sink, const T& value) {
+    sink.bytes(reinterpret_cast<const char*>(&value), sizeof(T));
+}
 
 // An internal node's topology before its children: child mask, value mask (the active tiles),
 // the mask-compressed tile values: metadata 0 (every inactive value is the background), then the
 // active tiles' values.
 template <size_t kEntries>
-void put_node_masks(ByteSink& sink, const std::vector<uint32_t>& children,
+void put_node_masks(BlockWriter& sink, const std::vector<uint32_t>& children,
                     const std::vector<uint32_t>& tiles) {
     std::array<uint64_t, kEntries / 64> child_mask{}, value_mask{};
     for (const uint32_t c : children) child_mask[c >> 6] |= uint64_t(1) << (c & 63);
     for (const uint32_t t : tiles) value_mask[t >> 6] |= uint64_t(1) << (t & 63);
-    sink.append(child_mask.data(), sizeof(child_mask));
-    sink.append(value_mask.data(), sizeof(value_mask));
-    sink.put(int8_t(0));
-    for (size_t i = 0; i < tiles.size(); ++i) sink.put(true);
+    put_bytes(sink, child_mask);
+    put_bytes(sink, value_mask);
+    sink.little_endian(int8_t(0));
+    for (size_t i = 0; i < tiles.size(); ++i) sink.little_endian(uint8_t(1));
 }
 
-void put_topology(ByteSink& sink, const std::vector<LeafBits>& leaves, const TreeShape& shape) {
-    sink.put(int32_t(1));  // buffer count
-    sink.put(false);       // background
+void put_topology(BlockWriter& sink, const std::vector<LeafBits>& leaves, const TreeShape& shape) {
+    sink.little_endian(int32_t(1));  // buffer count
+    sink.little_endian(uint8_t(0));  // background
     uint32_t root_tiles = 0;
     for (const UpperNode& upper : shape.uppers) root_tiles += upper.full();
-    sink.put(root_tiles);
-    sink.put(uint32_t(shape.uppers.size() - root_tiles));
+    sink.little_endian(root_tiles);
+    sink.little_endian(uint32_t(shape.uppers.size() - root_tiles));
     auto put_origin = [&](uint64_t upper_key) {
         const auto o = leaf_origin(upper_key << (kUpperBits + kLowerBits));
-        sink.append(o.data(), sizeof(o));
+        put_bytes(sink, o);
     };
     for (const UpperNode& upper : shape.uppers)
         if (upper.full()) {
             put_origin(upper.key);
-            sink.put(true);  // value
-            sink.put(true);  // active
+            sink.little_endian(uint8_t(1));  // value
+            sink.little_endian(uint8_t(1));  // active
         }
     std::vector<uint32_t> children, tiles;
     for (const UpperNode& upper : shape.uppers) {
@@ -291,22 +271,22 @@ void put_topology(ByteSink& sink, const std::vector<LeafBits>& leaves, const Tre
                 (is_full(leaves[i]) ? tiles : children).push_back(uint32_t(leaves[i].key & 4095));
             put_node_masks<Lower::NUM_VALUES>(sink, children, tiles);
             for (size_t i = lower.first; i < lower.end; ++i)
-                if (!is_full(leaves[i])) sink.append(leaves[i].words, sizeof(leaves[i].words));
+                if (!is_full(leaves[i])) put_bytes(sink, leaves[i].words);
         }
     }
 }
 
 // Each leaf OpenVDB keeps (those not pruned to a tile), in order: value mask, origin, values
 // (which are the mask: set voxels are true, the rest false).
-void put_buffers(ByteSink& sink, const std::vector<LeafBits>& leaves, const TreeShape& shape,
+void put_buffers(BlockWriter& sink, const std::vector<LeafBits>& leaves, const TreeShape& shape,
                  const std::function<void(size_t)>& done_leaves) {
     for (const LowerNode& lower : shape.lowers) {
         for (size_t i = lower.first; i < lower.end; ++i) {
             if (is_full(leaves[i])) continue;  // a tile (so are all leaves of a full node)
             const auto o = leaf_origin(leaves[i].key);
-            sink.append(leaves[i].words, sizeof(leaves[i].words));
-            sink.append(o.data(), sizeof(o));
-            sink.append(leaves[i].words, sizeof(leaves[i].words));
+            put_bytes(sink, leaves[i].words);
+            put_bytes(sink, o);
+            put_bytes(sink, leaves[i].words);
         }
         done_leaves(lower.end);
     }
@@ -413,8 +393,8 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
 
     // Phase 3: the file: the prefix, the tree's topology, its leaves' buffers.
     write_file_atomically(path, [&](std::ostream& out) {
-        ByteSink sink(out);
-        sink.append(prefix.data(), prefix.size());
+        BlockWriter sink(out);
+        sink.bytes(prefix.data(), prefix.size());
         put_topology(sink, leaves, shape);
         put_buffers(sink, leaves, shape,
                     [&](size_t done) { progress.report(file, done, leaves.size()); });
