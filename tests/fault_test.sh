@@ -291,22 +291,26 @@ fi
 
 # ---------------------------------------------------------------------------------------------
 # OpenVDB's module (liboclvox_vdb.so, which a shared liboclvox loads from its own folder on the
-# first .vdb) missing: the .vdb is refused naming the module, nothing is left, and the other
-# formats still write. liboclvox is run from a copy in a folder without the module.
+# first .vdb that needs OpenVDB: a field written, a .vdb read) missing: the field .vdb is refused
+# naming the module, nothing is left, and the occupancy .vdb (written without OpenVDB) and the
+# other formats still write. liboclvox is run from a copy in a folder without the module.
 # ---------------------------------------------------------------------------------------------
 library=$(ldd "$OCLVOX" 2>/dev/null | awk '$1 ~ /^liboclvox\.so/ {print $3}')
 if [ -n "$library" ]; then
     mkdir -p "$WORK/lonely" "$WORK/module"
     cp -L "$library" "$WORK/lonely/"
-    LD_LIBRARY_PATH=$WORK/lonely run voxelize "$MESH" -r 32 -q -o "$WORK/module/out.vdb"
+    LD_LIBRARY_PATH=$WORK/lonely run sdf "$MESH" -r 32 -q -o "$WORK/module/field.vdb"
     vdb_rc=$RC vdb_err=$ERR vdb_left=$(listing "$WORK/module")
+    LD_LIBRARY_PATH=$WORK/lonely run voxelize "$MESH" -r 32 -q -o "$WORK/module/out.vdb"
+    occupancy_rc=$RC
     LD_LIBRARY_PATH=$WORK/lonely run voxelize "$MESH" -r 32 -q -o "$WORK/module/out.binvox"
     if [ "$vdb_rc" -eq 1 ] && grep -q "the module liboclvox_vdb.so beside liboclvox, could not be loaded" <<<"$vdb_err" &&
-        [ -z "$vdb_left" ] && [ "$RC" -eq 0 ] && [ "$(listing "$WORK/module")" = "out.binvox " ]; then
-        pass "OpenVDB's module missing: .vdb refused naming it, nothing left; .binvox still written"
+        [ -z "$vdb_left" ] && [ "$occupancy_rc" -eq 0 ] && [ "$RC" -eq 0 ] &&
+        [ "$(listing "$WORK/module")" = "out.binvox out.vdb " ]; then
+        pass "OpenVDB's module missing: field .vdb refused naming it, nothing left; occupancy .vdb and .binvox still written"
     else
-        fail "OpenVDB's module missing: .vdb refused naming it, other formats written" \
-            "vdb: exit $vdb_rc, left: $vdb_left, stderr: ${vdb_err:0:300}; binvox: exit $RC"
+        fail "OpenVDB's module missing: field .vdb refused naming it, other outputs written" \
+            "field vdb: exit $vdb_rc, left: $vdb_left, stderr: ${vdb_err:0:300}; occupancy vdb: exit $occupancy_rc; binvox: exit $RC; left: $(listing "$WORK/module")"
     fi
 else
     pass "OpenVDB's module: $OCLVOX links liboclvox statically, OpenVDB with it (nothing to load)"

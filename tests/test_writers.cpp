@@ -1352,16 +1352,27 @@ TEST_F(WriterTest, VdbOfManyBrickGroupsHasExactlyTheSetVoxels) {
     written_vdb_holding_exactly(path("groups.vdb"), voxels);
 }
 
-// The file OpenVDB's own writer makes of the same voxels: a BoolGrid with our file's metadata
-// and transform, set voxel by voxel through OpenVDB's API, pruned, and written by io::Stream
-// with the active-mask compression (its statistics metadata worked out by OpenVDB).
-std::string openvdb_written_occupancy(const std::string& ours, const SparseVoxels& voxels) {
-    const openvdb::BoolGrid::Ptr grid = read_occupancy_grid(ours)->copyWithNewTree();
-    for (const char* stat :
-         {openvdb::GridBase::META_FILE_BBOX_MIN, openvdb::GridBase::META_FILE_BBOX_MAX,
-          openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::GridBase::META_FILE_VOXEL_COUNT,
-          openvdb::GridBase::META_FILE_COMPRESSION, openvdb::GridBase::META_FILE_DELAYED_LOAD})
-        grid->removeMeta(stat);
+// The file OpenVDB's own writer makes of the same voxels: a BoolGrid named "occupancy" of class
+// "unknown", voxel (i, j, k) at index (i, j, k) centred in world space at origin + (i + 0.5) *
+// voxel_size, our grid's metadata, set voxel by voxel through OpenVDB's API, pruned, and written
+// by io::Stream with the active-mask compression (its statistics metadata worked out by OpenVDB).
+// Built from the grid alone, not from our file, so a wrong transform or metadata value shows.
+std::string openvdb_written_occupancy(const SparseVoxels& voxels) {
+    const Grid& g = voxels.grid();
+    const openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
+    grid->setName("occupancy");
+    grid->setGridClass(openvdb::GRID_UNKNOWN);
+    const openvdb::math::Transform::Ptr transform =
+        openvdb::math::Transform::createLinearTransform(g.voxel_size);
+    transform->postTranslate(openvdb::Vec3d(g.origin[0] + 0.5 * g.voxel_size,
+                                            g.origin[1] + 0.5 * g.voxel_size,
+                                            g.origin[2] + 0.5 * g.voxel_size));
+    grid->setTransform(transform);
+    grid->insertMeta("oclvox_origin",
+                     openvdb::Vec3DMetadata(openvdb::Vec3d(g.origin[0], g.origin[1], g.origin[2])));
+    grid->insertMeta("oclvox_voxel_size", openvdb::DoubleMetadata(g.voxel_size));
+    grid->insertMeta("oclvox_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(
+                                        int(g.dims[0]), int(g.dims[1]), int(g.dims[2]))));
     openvdb::BoolGrid::Accessor access = grid->getAccessor();
     voxels.for_each([&](int64_t i, int64_t j, int64_t k) {
         access.setValueOn(openvdb::Coord(int(i), int(j), int(k)), true);
@@ -1380,7 +1391,7 @@ std::string openvdb_written_occupancy(const std::string& ours, const SparseVoxel
 void expect_vdb_bytes_of_openvdbs_writer(const std::string& file, const SparseVoxels& voxels) {
     oclvox::write_voxels(file, voxels);
     const std::string ours = read_bytes(file);
-    std::string theirs = openvdb_written_occupancy(file, voxels);
+    std::string theirs = openvdb_written_occupancy(voxels);
     constexpr size_t kUuidAt = 21, kUuidSize = 36;
     ASSERT_GT(theirs.size(), kUuidAt + kUuidSize);
     ASSERT_GT(ours.size(), kUuidAt + kUuidSize);

@@ -2,15 +2,15 @@
 #include "vdb_format.hpp"
 
 #include "atomic_file.hpp"
+#include "writers.hpp"
 
 namespace oclvox::detail {
 
 openvdb::math::Transform::Ptr voxel_centre_transform(const Grid& grid) {
     openvdb::math::Transform::Ptr transform =
         openvdb::math::Transform::createLinearTransform(grid.voxel_size);
-    transform->postTranslate(openvdb::Vec3d(grid.origin[0] + 0.5 * grid.voxel_size,
-                                            grid.origin[1] + 0.5 * grid.voxel_size,
-                                            grid.origin[2] + 0.5 * grid.voxel_size));
+    const std::array<double, 3> centre = vdb_index_origin(grid);
+    transform->postTranslate(openvdb::Vec3d(centre[0], centre[1], centre[2]));
     return transform;
 }
 

@@ -13,8 +13,8 @@ namespace oclvox::detail {
 
 // OpenVDB's index space has its sample (i, j, k) at index point (i, j, k); ours has voxel
 // (i, j, k) centred at origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size. So the transform scales
-// by voxel_size and translates by origin + 0.5 * voxel_size: the same integer (i, j, k) addresses
-// the same voxel in both, and world positions agree.
+// by voxel_size and translates to vdb_index_origin (writers.hpp): the same integer (i, j, k)
+// addresses the same voxel in both, and world positions agree.
 openvdb::math::Transform::Ptr voxel_centre_transform(const Grid& grid);
 
 // Sets `vdb`'s transform, name and class, and records our grid as metadata: "oclvox_origin"

@@ -1,13 +1,11 @@
 // The table of OpenVDB's functions, compiled with them (see vdb_module.hpp).
 #include "field_vdb.hpp"
 #include "vdb_module.hpp"
-#include "writers.hpp"
 
 namespace oclvox::detail {
 
 const VdbFunctions& linked_vdb_functions() {
     static const VdbFunctions functions = {
-        write_vdb,
         static_cast<void (*)(const std::string&, const Grid&, double, const FieldLayer&,
                              ProgressPhases&)>(write_field_vdb),
         static_cast<void (*)(const std::string&, const SparseField&, ProgressPhases&)>(

@@ -2,7 +2,8 @@
 // linked with BIND_NOW: loading it binds 52,402 symbols, about 30 ms of every process on the
 // 2-core VM, whether or not the run reads or writes a .vdb. So the shared liboclvox leaves it out,
 // and loads it with these functions (the module liboclvox_vdb, beside liboclvox) on the first
-// .vdb; a static liboclvox (the Python wheel, the tests) links them in.
+// .vdb field; a static liboclvox (the Python wheel, the tests) links them in. (Occupancy .vdb
+// files are written without OpenVDB: write_vdb.cpp.)
 #pragma once
 
 #include <string>
@@ -14,8 +15,6 @@ namespace oclvox::detail {
 
 // The module and liboclvox are built together; the struct changes with them.
 struct VdbFunctions {
-    void (*write_voxels)(const std::string& path, const SparseVoxels& voxels,
-                         ProgressPhases& progress);
     void (*write_field)(const std::string& path, const Grid& grid, double band_voxels,
                         const FieldLayer& layer, ProgressPhases& progress);
     void (*write_sparse_field)(const std::string& path, const SparseField& field,

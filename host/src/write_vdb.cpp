@@ -1,25 +1,33 @@
 // OpenVDB occupancy writer: a BoolGrid named "occupancy", voxel (i, j, k) at index (i, j, k),
-// value true and active where the voxel is set, background false; placed in world units by the
-// shared voxel-centre transform (vdb_format.hpp) with our grid recorded as metadata.
+// value true and active where the voxel is set, background false; placed in world units by a
+// transform that puts index (i, j, k) at our voxel's centre, with our grid recorded as metadata.
 //
 // Why BoolGrid rather than MaskGrid: both hold one active bit per voxel in 8^3 leaves and cost
 // about the same, but BoolGrid is the type OpenVDB's Python module, Houdini and Blender read,
 // while MaskGrid is missing from pyopenvdb. The grid class is "unknown": it is neither a level
 // set nor a fog volume.
 //
-// Why the tree is serialized here rather than by OpenVDB: building OpenVDB's tree (a heap
+// Why the file is serialized here rather than by OpenVDB: building OpenVDB's tree (a heap
 // allocation per leaf, freed again after) and its serial writer, several small writes per leaf,
-// cost more than the voxelization they write (bunny00 at 4096^3: 0.8 s against 0.5 s). The file
-// holds nothing but the leaves' bit masks, their origins and the internal nodes' masks, all of
-// which follow from the bricks. So the leaves are made straight from the bricks on all cores,
-// put in OpenVDB's order, and written in large pieces, the tree laid out exactly as OpenVDB's
-// writer lays out the same tree once pruned (full leaves and full internal nodes as active tiles;
-// the tests compare the bytes with OpenVDB's own file). OpenVDB itself writes everything before
-// the tree (header, grid descriptor, metadata, transform) from a grid with an empty tree; the
-// statistics metadata it would add from the tree are worked out here.
+// cost more than the voxelization they write (bunny00 at 4096^3: 0.8 s against 0.5 s), and
+// loading OpenVDB at all (the module liboclvox_vdb, vdb_module.hpp) costs ~30 ms, more than a
+// 1024^3 voxelization of buildings. The file holds nothing but a fixed header, a few metadata
+// values, the transform, the leaves' bit masks, their origins and the internal nodes' masks, all
+// of which follow from the grid and the bricks. So the leaves are made straight from the bricks on
+// all cores, put in OpenVDB's order, and written in large pieces, laid out exactly as OpenVDB's
+// io::Stream lays out the same grid once pruned (full leaves and full internal nodes as active
+// tiles); the tests compare the bytes with OpenVDB's own file, and read it back through OpenVDB's
+// C++ and Python APIs. The field writers (field_vdb.cpp) still go through OpenVDB.
 //
-// The layout (OpenVDB file format 224, tree Root -> Internal<5> -> Internal<4> -> Leaf<bool, 3>,
-// compression "active mask" only):
+// The layout (OpenVDB file format 224 as OpenVDB 10.0 writes it to a stream, one grid, tree
+// Root -> Internal<5> -> Internal<4> -> Leaf<bool, 3>, compression "active mask" only; integers
+// little-endian, a string is its int32 length and its characters):
+//   header: int64 magic, uint32 file version, uint32 library major and minor version, uint8 0
+//     (no grid offsets: a stream), 36 characters of a random UUID, int32 0 (file metadata).
+//   grid: int32 1 (grid count); descriptor: name, tree type, "" (no instance parent), three int64
+//     0 (offsets, unknown to a stream); uint32 compression flags; metadata: int32 count, each
+//     entry (in name order) its name, type name, int32 size, value; transform: its map's type
+//     name, then translation, scale, voxel size, 1 / scale, its square, half of it (Vec3d each).
 //   topology: int32 1 (buffer count); root: bool background, uint32 tiles, uint32 children, each
 //     tile (int32 x, y, z, bool value, bool active), each child (int32 x, y, z, its topology);
 //     internal node: child mask, value mask, one byte 0 (inactive values are all background)
@@ -31,29 +39,37 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <array>
 #include <climits>
 #include <cstring>
-#include <sstream>
+#include <random>
 #include <unordered_map>
 
 #include "atomic_file.hpp"
 #include "bit_count.hpp"
 #include "block_writer.hpp"
 #include "brick_layout.hpp"
-#include "vdb_format.hpp"
 #include "writers.hpp"
 
 namespace oclvox::detail {
 
 namespace {
 
-using Tree = openvdb::BoolTree;
-using Root = Tree::RootNodeType;
-using Upper = Root::ChildNodeType;   // Internal<5>: 32^3 children of 128^3 voxels
-using Lower = Upper::ChildNodeType;  // Internal<4>: 16^3 leaves
-using Leaf = Tree::LeafNodeType;     // 8^3 voxels
-static_assert(Leaf::LOG2DIM == 3 && Lower::LOG2DIM == 4 && Upper::LOG2DIM == 5,
-              "the layout below is OpenVDB's standard 5-4-3 tree");
+// OpenVDB's standard 5-4-3 tree: a leaf holds 8^3 voxels, a lower node 16^3 leaves, an upper
+// node 32^3 lower nodes (4096^3 voxels).
+constexpr size_t kLowerEntries = size_t(1) << 12, kUpperEntries = size_t(1) << 15;
+
+// The file format this writer lays out, and the library whose writer it follows.
+constexpr uint32_t kFileVersion = 224, kLibraryMajor = 10, kLibraryMinor = 0;
+constexpr uint32_t kCompressActiveMask = 0x2;  // io::COMPRESS_ACTIVE_MASK
+
+// The bytes of a BoolTree's parts as tools::memUsage counts them (OpenVDB 10 on a 64-bit host),
+// for the "file_mem_bytes" metadata: the tree and root objects, each internal node's table of
+// 8-byte entries, its two masks and its origin, each leaf object. The byte-for-byte test against
+// OpenVDB's writer checks them.
+constexpr uint64_t kTreeBytes = 1232, kRootBytes = 72, kLeafBytes = 144;
+constexpr uint64_t kUpperBytes = kUpperEntries * 8 + 2 * kUpperEntries / 8 + 12;
+constexpr uint64_t kLowerBytes = kLowerEntries * 8 + 2 * kLowerEntries / 8 + 12;
 
 // The 16 bits x + 4y + 16z (y, z in 0..3) of a block mask shifted right by x, as bits y * 8 + z:
 // their place in an OpenVDB leaf word.
@@ -178,13 +194,13 @@ struct LowerNode {
     uint64_t key;       // of its leaves, less their lower offset
     size_t first, end;  // its leaves in the sorted list
     size_t full_leaves = 0;
-    bool full() const { return full_leaves == size_t(Lower::NUM_VALUES); }
+    bool full() const { return full_leaves == kLowerEntries; }
 };
 struct UpperNode {
     uint64_t key;       // its root entry
     size_t first, end;  // its lower nodes
     size_t full_lowers = 0;
-    bool full() const { return full_lowers == size_t(Upper::NUM_VALUES); }
+    bool full() const { return full_lowers == kUpperEntries; }
 };
 
 struct TreeShape {
@@ -261,7 +277,7 @@ void put_topology(BlockWriter& sink, const std::vector<LeafBits>& leaves, const 
         for (size_t l = upper.first; l < upper.end; ++l)
             (shape.lowers[l].full() ? tiles : children)
                 .push_back(uint32_t(shape.lowers[l].key & 32767));
-        put_node_masks<Upper::NUM_VALUES>(sink, children, tiles);
+        put_node_masks<kUpperEntries>(sink, children, tiles);
         for (size_t l = upper.first; l < upper.end; ++l) {
             const LowerNode& lower = shape.lowers[l];
             if (lower.full()) continue;
@@ -269,7 +285,7 @@ void put_topology(BlockWriter& sink, const std::vector<LeafBits>& leaves, const 
             tiles.clear();
             for (size_t i = lower.first; i < lower.end; ++i)
                 (is_full(leaves[i]) ? tiles : children).push_back(uint32_t(leaves[i].key & 4095));
-            put_node_masks<Lower::NUM_VALUES>(sink, children, tiles);
+            put_node_masks<kLowerEntries>(sink, children, tiles);
             for (size_t i = lower.first; i < lower.end; ++i)
                 if (!is_full(leaves[i])) put_bytes(sink, leaves[i].words);
         }
@@ -292,12 +308,45 @@ void put_buffers(BlockWriter& sink, const std::vector<LeafBits>& leaves, const T
     }
 }
 
-// The statistics metadata OpenVDB's writer adds (GridBase::addStatsMetadata): the active
-// voxels' box and count, and the tree's memory as tools::memUsage counts it.
-void add_stats_metadata(openvdb::GridBase& vdb, const std::vector<LeafBits>& leaves,
-                        const TreeShape& shape) {
-    openvdb::CoordBBox box;  // empty
-    uint64_t active = 0;
+void put_string(BlockWriter& sink, const std::string& text) {
+    sink.little_endian(int32_t(text.size()));
+    sink.text(text);
+}
+
+// A random (version 4) UUID in lowercase hex, as OpenVDB puts one in every file it writes.
+std::string random_uuid() {
+    std::random_device entropy;
+    std::array<uint8_t, 16> bits{};
+    for (uint8_t& b : bits) b = uint8_t(entropy());
+    bits[6] = uint8_t((bits[6] & 0x0f) | 0x40);  // version 4
+    bits[8] = uint8_t((bits[8] & 0x3f) | 0x80);  // the RFC 4122 variant
+    static const char kHex[] = "0123456789abcdef";
+    std::string text;
+    for (size_t i = 0; i < bits.size(); ++i) {
+        if (i == 4 || i == 6 || i == 8 || i == 10) text += '-';
+        text += kHex[bits[i] >> 4];
+        text += kHex[bits[i] & 15];
+    }
+    return text;
+}
+
+// The statistics OpenVDB's writer records of a tree (GridBase::addStatsMetadata): the active
+// voxels' box (inclusive; an empty box runs from INT32_MAX to INT32_MIN, as OpenVDB's does), their
+// count, and the tree's memory as tools::memUsage counts it.
+struct TreeStatistics {
+    std::array<int32_t, 3> box_min{INT32_MAX, INT32_MAX, INT32_MAX},
+        box_max{INT32_MIN, INT32_MIN, INT32_MIN};
+    uint64_t active = 0, memory = 0;
+};
+
+TreeStatistics tree_statistics(const std::vector<LeafBits>& leaves, const TreeShape& shape) {
+    TreeStatistics stats;
+    auto expand = [&](const std::array<int32_t, 3>& c) {
+        for (int a = 0; a < 3; ++a) {
+            stats.box_min[a] = std::min(stats.box_min[a], c[a]);
+            stats.box_max[a] = std::max(stats.box_max[a], c[a]);
+        }
+    };
     for (const LeafBits& leaf : leaves) {
         const auto o = leaf_origin(leaf.key);
         uint64_t yz = 0;
@@ -307,7 +356,7 @@ void add_stats_metadata(openvdb::GridBase& vdb, const std::vector<LeafBits>& lea
             x_lo = std::min(x_lo, x);
             x_hi = x;
             yz |= leaf.words[x];
-            active += uint64_t(popcount64(leaf.words[x]));
+            stats.active += uint64_t(popcount64(leaf.words[x]));
         }
         int y_lo = 8, y_hi = -1;
         uint64_t z_bits = 0;
@@ -319,16 +368,9 @@ void add_stats_metadata(openvdb::GridBase& vdb, const std::vector<LeafBits>& lea
             z_bits |= row;
         }
         const int z_lo = __builtin_ctzll(z_bits), z_hi = 63 - __builtin_clzll(z_bits);
-        box.expand(openvdb::Coord(o[0] + x_lo, o[1] + y_lo, o[2] + z_lo));
-        box.expand(openvdb::Coord(o[0] + x_hi, o[1] + y_hi, o[2] + z_hi));
+        expand({o[0] + x_lo, o[1] + y_lo, o[2] + z_lo});
+        expand({o[0] + x_hi, o[1] + y_hi, o[2] + z_hi});
     }
-    // Node sizes as tools::memUsage counts them: the tree and root objects, each internal node's
-    // table and masks and origin, each leaf object.
-    auto internal_bytes = [](auto node) {
-        using Node = decltype(node);
-        return uint64_t(Node::NUM_VALUES * sizeof(typename Node::UnionType) +
-                        typename Node::NodeMaskType().memUsage() * 2 + sizeof(openvdb::Coord));
-    };
     uint64_t uppers = 0, lowers = 0, kept_leaves = 0;
     for (const UpperNode& upper : shape.uppers) {
         if (upper.full()) continue;
@@ -340,61 +382,88 @@ void add_stats_metadata(openvdb::GridBase& vdb, const std::vector<LeafBits>& lea
             kept_leaves += (lower.end - lower.first) - lower.full_leaves;
         }
     }
-    const uint64_t memory = sizeof(Tree) + sizeof(Root) + uppers * internal_bytes(Upper()) +
-                            lowers * internal_bytes(Lower()) + kept_leaves * sizeof(Leaf);
-    vdb.insertMeta(openvdb::GridBase::META_FILE_BBOX_MIN,
-                   openvdb::Vec3IMetadata(box.min().asVec3i()));
-    vdb.insertMeta(openvdb::GridBase::META_FILE_BBOX_MAX,
-                   openvdb::Vec3IMetadata(box.max().asVec3i()));
-    vdb.insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES,
-                   openvdb::Int64Metadata(openvdb::Int64(memory)));
-    vdb.insertMeta(openvdb::GridBase::META_FILE_VOXEL_COUNT,
-                   openvdb::Int64Metadata(openvdb::Int64(active)));
+    stats.memory = kTreeBytes + kRootBytes + uppers * kUpperBytes + lowers * kLowerBytes +
+                   kept_leaves * kLeafBytes;
+    return stats;
+}
+
+// Everything before the tree: header, grid descriptor, compression, metadata, transform.
+void put_grid_prefix(BlockWriter& sink, const Grid& grid, const TreeStatistics& stats) {
+    sink.little_endian(int64_t(0x56444220));  // " BDV"
+    sink.little_endian(kFileVersion);
+    sink.little_endian(kLibraryMajor);
+    sink.little_endian(kLibraryMinor);
+    sink.little_endian(uint8_t(0));  // no grid offsets
+    sink.text(random_uuid());
+    sink.little_endian(int32_t(0));  // file metadata
+    sink.little_endian(int32_t(1));  // grids
+    const std::string name = "occupancy";
+    put_string(sink, name);
+    put_string(sink, "Tree_bool_5_4_3");
+    put_string(sink, "");
+    for (int i = 0; i < 3; ++i) sink.little_endian(int64_t(0));
+    sink.little_endian(kCompressActiveMask);
+
+    // The grid's metadata, in name order (OpenVDB keeps them in a std::map).
+    auto put_entry = [&](const char* key, const char* type, size_t size) {
+        put_string(sink, key);
+        put_string(sink, type);
+        sink.little_endian(int32_t(size));
+    };
+    auto put_text = [&](const char* key, const std::string& value) {
+        put_entry(key, "string", value.size());
+        sink.text(value);
+    };
+    auto put_vec3i = [&](const char* key, const std::array<int32_t, 3>& value) {
+        put_entry(key, "vec3i", 12);
+        for (const int32_t v : value) sink.little_endian(v);
+    };
+    auto put_int64 = [&](const char* key, uint64_t value) {
+        put_entry(key, "int64", 8);
+        sink.little_endian(int64_t(value));
+    };
+    sink.little_endian(int32_t(10));
+    put_text("class", "unknown");
+    put_vec3i("file_bbox_max", stats.box_max);
+    put_vec3i("file_bbox_min", stats.box_min);
+    put_text("file_compression", "active values");
+    put_int64("file_mem_bytes", stats.memory);
+    put_int64("file_voxel_count", stats.active);
+    put_text("name", name);
+    put_vec3i("oclvox_dims", {int32_t(grid.dims[0]), int32_t(grid.dims[1]), int32_t(grid.dims[2])});
+    put_entry("oclvox_origin", "vec3d", 24);
+    for (const double v : grid.origin) sink.little_endian(v);
+    put_entry("oclvox_voxel_size", "double", 8);
+    sink.little_endian(grid.voxel_size);
+
+    // The transform: OpenVDB's UniformScaleTranslateMap with its derived values, computed as
+    // its constructor computes them.
+    put_string(sink, "UniformScaleTranslateMap");
+    const double scale = grid.voxel_size, inverse = 1.0 / scale;
+    for (const double t : vdb_index_origin(grid)) sink.little_endian(t);
+    for (const double v :
+         {scale, scale, scale, scale, scale, scale, inverse, inverse, inverse, inverse * inverse,
+          inverse * inverse, inverse * inverse, inverse / 2, inverse / 2, inverse / 2})
+        sink.little_endian(v);
 }
 
 }  // namespace
 
 void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress) {
-    openvdb::initialize();
     const size_t gather = progress.add(1), file = progress.add(2);
 
-    // Phase 1: the leaves from the bricks, in OpenVDB's order, and the nodes above them.
+    // Phase 1: the leaves from the bricks, in OpenVDB's order, the nodes above them, and the
+    // statistics the metadata records.
     progress.report(gather, 0, 1);
     const std::vector<LeafBits> leaves = sorted_leaves(voxels);
     const TreeShape shape = tree_shape(leaves);
+    const TreeStatistics stats = tree_statistics(leaves, shape);
     progress.report(gather, 1, 1);
 
-    // Phase 2: what precedes the tree, as OpenVDB writes it for this grid with an empty tree:
-    // the file header, the grid descriptor, the compression flags, the metadata (ours and the
-    // statistics of the real tree), the transform. The empty tree's own topology (buffer count,
-    // background, no tiles, no children) is the 13 bytes that end it.
-    const uint32_t compression = openvdb::io::COMPRESS_ACTIVE_MASK;
-    openvdb::BoolGrid::Ptr vdb = openvdb::BoolGrid::create(false);
-    place_vdb_grid(*vdb, voxels.grid(), "occupancy", openvdb::GRID_UNKNOWN);
-    add_stats_metadata(*vdb, leaves, shape);
-    vdb->insertMeta(openvdb::GridBase::META_FILE_COMPRESSION,
-                    openvdb::StringMetadata(openvdb::io::compressionToString(compression)));
-    std::ostringstream head;
-    {
-        openvdb::io::Stream stream(head);
-        stream.setCompression(compression);
-        stream.setGridStatsMetadataEnabled(false);  // added above, from the real tree
-        stream.write(openvdb::GridCPtrVec{vdb});
-    }
-    std::string prefix = std::move(head).str();
-    static const char kEmptyTree[13] = {1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
-    if (prefix.size() < sizeof(kEmptyTree) ||
-        std::memcmp(prefix.data() + prefix.size() - sizeof(kEmptyTree), kEmptyTree,
-                    sizeof(kEmptyTree)) != 0)
-        throw OutputError("writing '" + path +
-                          "': this OpenVDB library does not end a grid with the empty tree's "
-                          "topology as file format 224 does");
-    prefix.resize(prefix.size() - sizeof(kEmptyTree));
-
-    // Phase 3: the file: the prefix, the tree's topology, its leaves' buffers.
+    // Phase 2: the file: what precedes the tree, the tree's topology, its leaves' buffers.
     write_file_atomically(path, [&](std::ostream& out) {
         BlockWriter sink(out);
-        sink.bytes(prefix.data(), prefix.size());
+        put_grid_prefix(sink, voxels.grid(), stats);
         put_topology(sink, leaves, shape);
         put_buffers(sink, leaves, shape,
                     [&](size_t done) { progress.report(file, done, leaves.size()); });

@@ -1,7 +1,6 @@
 // write_voxels: chooses the output format from the file extension.
 #include "file_names.hpp"
 #include "oclvox/oclvox.hpp"
-#include "vdb_module.hpp"
 #include "writers.hpp"
 
 namespace oclvox {
@@ -23,8 +22,7 @@ void write_voxels(const std::string& path, const SparseVoxels& voxels,
 
     const std::string extension = detail::lowercase_extension(path);
     detail::ProgressPhases phases(progress, "writing " + path);
-    if (extension == ".vdb")
-        return detail::vdb_functions_to_write(path).write_voxels(path, voxels, phases);
+    if (extension == ".vdb") return detail::write_vdb(path, voxels, phases);
     if (extension == ".binvox") return detail::write_binvox(path, voxels, phases);
     if (extension == ".npy") return detail::write_npy(path, voxels, phases);
     if (extension == ".vox") return detail::write_vox(path, voxels, phases);

@@ -4,6 +4,7 @@
 // place, so that a cancel (Cancelled, from any report) leaves no file.
 #pragma once
 
+#include <array>
 #include <string>
 
 #include "oclvox/oclvox.hpp"
@@ -37,7 +38,16 @@ void write_cube_mesh_ply(const std::string& path, const SparseVoxels& voxels,
 void write_cube_mesh_stl(const std::string& path, const SparseVoxels& voxels,
                          ProgressPhases& progress, int64_t slab_layers = 0);
 
-// OpenVDB occupancy: a BoolGrid "occupancy", voxel (i,j,k) at index (i,j,k). See write_vdb.cpp.
+// OpenVDB occupancy: a BoolGrid "occupancy", voxel (i,j,k) at index (i,j,k), written without
+// OpenVDB's library. See write_vdb.cpp.
 void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress);
+
+// Where OpenVDB's index point (0, 0, 0) lies in world units in every .vdb we write: the centre of
+// our voxel (0, 0, 0), so the same integer (i, j, k) addresses the same voxel in both.
+// Inline: OpenVDB's module (vdb_module.hpp) computes it too, and reaches only exported symbols.
+inline std::array<double, 3> vdb_index_origin(const Grid& grid) {
+    return {grid.origin[0] + 0.5 * grid.voxel_size, grid.origin[1] + 0.5 * grid.voxel_size,
+            grid.origin[2] + 0.5 * grid.voxel_size};
+}
 
 }  // namespace oclvox::detail
