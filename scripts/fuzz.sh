@@ -31,7 +31,7 @@ cmake --build build-fuzz -j"$(nproc)" --target "${targets[@]}"
 # Phase 2: run. New inputs go to build-fuzz/corpus/<target>/, never into the repository's seeds.
 # Limits: an input may use at most 2 GiB in all and 1 GiB in one allocation, and run at most 10 s;
 # more is reported as a bug (inputs are a few KiB at most).
-export ASAN_OPTIONS="detect_leaks=1:strict_string_checks=1"
+export ASAN_OPTIONS="use_sigaltstack=0:detect_leaks=1:strict_string_checks=1"  # see sanitize.sh
 export UBSAN_OPTIONS="print_stacktrace=1"
 root=$PWD
 failed=()
