@@ -2,6 +2,7 @@
 // double-precision brute force (Ericson's Voronoi-region closest point, not the library's
 // projection-or-edges formulation).
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -17,6 +18,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <sstream>
 
 #include "oclvox/sdf.hpp"
 #include "sdf_internal.hpp"
@@ -1249,6 +1251,128 @@ TEST(SparseSdf, FilesEqualTheDenseFieldsFiles) {
         std::remove(path.c_str());
     std::remove((sparse_npy + ".json").c_str());
     std::remove((dense_npy + ".json").c_str());
+}
+
+// What OpenVDB's own writer makes of a sparse field: a FloatGrid "sdf" of class level set, a
+// voxel active where |value| < background (set voxel by voxel through OpenVDB's API), every other
+// value signed by OpenVDB's signed flood fill, our grid's transform and metadata, written by
+// io::Stream with active-mask compression. OpenVDB adds "file_delayed_load" metadata (an index
+// for its delayed loading of leaves, which its readers do without); it is cut out of the bytes.
+std::string openvdb_written_level_set(const SparseField& field) {
+    openvdb::initialize();
+    const Grid& g = field.grid();
+    const float background = field.background();
+    const openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
+    grid->setName("sdf");
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    const openvdb::math::Transform::Ptr transform =
+        openvdb::math::Transform::createLinearTransform(g.voxel_size);
+    transform->postTranslate(openvdb::Vec3d(g.origin[0] + 0.5 * g.voxel_size,
+                                            g.origin[1] + 0.5 * g.voxel_size,
+                                            g.origin[2] + 0.5 * g.voxel_size));
+    grid->setTransform(transform);
+    grid->insertMeta("oclvox_origin",
+                     openvdb::Vec3DMetadata(openvdb::Vec3d(g.origin[0], g.origin[1], g.origin[2])));
+    grid->insertMeta("oclvox_voxel_size", openvdb::DoubleMetadata(g.voxel_size));
+    grid->insertMeta("oclvox_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(
+                                        int(g.dims[0]), int(g.dims[1]), int(g.dims[2]))));
+    grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(field.band_voxels()));
+    openvdb::FloatGrid::Accessor access = grid->getAccessor();
+    for (size_t n = 0; n < field.leaf_count(); ++n) {
+        const auto o = field.leaf_origin(field.leaf_indices()[n]);
+        const float* samples = field.leaf_samples(n);
+        for (int64_t z = 0; z < 8 && o[2] + z < g.dims[2]; ++z)
+            for (int64_t y = 0; y < 8 && o[1] + y < g.dims[1]; ++y)
+                for (int64_t x = 0; x < 8 && o[0] + x < g.dims[0]; ++x) {
+                    const float v = samples[x + 8 * (y + 8 * z)];
+                    if (std::abs(v) < background)
+                        access.setValueOn(
+                            openvdb::Coord(int(o[0] + x), int(o[1] + y), int(o[2] + z)), v);
+                }
+    }
+    openvdb::tools::signedFloodFill(grid->tree());
+    std::ostringstream out;
+    openvdb::io::Stream stream(out);
+    stream.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK);
+    stream.write(openvdb::GridCPtrVec{grid});
+    std::string bytes = out.str();
+
+    auto int32_at = [&](size_t at) {
+        int32_t v;
+        std::memcpy(&v, &bytes[at], 4);
+        return v;
+    };
+    auto named = [](const std::string& name) {
+        const int32_t size = int32_t(name.size());
+        return std::string(reinterpret_cast<const char*>(&size), 4) + name;
+    };
+    const size_t entry = bytes.find(named("file_delayed_load"));
+    if (entry == std::string::npos) return bytes;
+    size_t end = entry + 4 + 17;
+    end += 4 + size_t(int32_at(end));                     // its type name
+    end += 4 + size_t(int32_at(end));                     // its value
+    const size_t count = bytes.find(named("class")) - 4;  // the first entry follows the count
+    const int32_t entries = int32_at(count) - 1;
+    bytes.replace(count, 4, reinterpret_cast<const char*>(&entries), 4);
+    bytes.erase(entry, end - entry);
+    return bytes;
+}
+
+void expect_level_set_bytes_of_openvdbs_writer(const SparseField& field) {
+    const std::string path = temp_path("bytes.vdb");
+    write_field(path, field);
+    expect_vdb_bytes_equal_but_uuid(file_bytes(path), openvdb_written_level_set(field));
+    std::remove(path.c_str());
+}
+
+// The bytes of a sparse field's .vdb are those of OpenVDB's writer for the same level set (but
+// for the UUID and OpenVDB's delayed-load index): the leaves' masks and values, the flood fill's
+// signs in leaves, nodes and root tiles, their compression and the statistics metadata.
+TEST(LevelSetFiles, SparseVdbIsByteForByteWhatOpenVdbsWriterMakesOfTheSameLevelSet) {
+    for (const SparseCase& c : sparse_cases()) {
+        SCOPED_TRACE(c.name);
+        expect_level_set_bytes_of_openvdbs_writer(
+            signed_distance_sparse_reference(c.mesh, c.grid, band(2.5)));
+    }
+    {
+        SCOPED_TRACE("no leaves");
+        const Grid g = unit_grid(9, 9, 9);
+        expect_level_set_bytes_of_openvdbs_writer(SparseField(g, 2.0, SparseVoxels(g, 8)));
+    }
+    // Three upper nodes along z (4096 voxels each) with the middle one empty: the flood fill
+    // makes it an inside tile of the root, between two inside leaves. In the last, beside an
+    // inside leaf, a leaf of both signs reaching past the grid's x face, which signs the tiles
+    // after it outside; in the middle a stored leaf with no sample in the band (no leaf).
+    SCOPED_TRACE("root tiles");
+    const Grid g = unit_grid(12, 8, 8200);
+    SparseField field(g, 2.0, SparseVoxels(g, 8));
+    const float bg = field.background();
+    std::vector<float> samples(SparseField::kLeafSamples);
+    std::fill(samples.begin(), samples.end(), -0.5f * bg);
+    field.append_leaf(0, samples.data());  // leaf (0, 0, 0)
+    std::fill(samples.begin(), samples.end(), bg);
+    field.append_leaf(1024, samples.data());  // leaf (0, 0, 512): z 4096, nothing in the band
+    std::fill(samples.begin(), samples.end(), -0.25f * bg);
+    field.append_leaf(2048, samples.data());  // leaf (0, 0, 1024): z 8192
+    for (int z = 0; z < 8; ++z)
+        for (int y = 0; y < 8; ++y)
+            for (int x = 0; x < 8; ++x)
+                samples[size_t(x + 8 * (y + 8 * z))] =
+                    x < 4 ? 0.35f * bg * float(x - 2 * y + z - 1) : bg;
+    field.append_leaf(2049, samples.data());  // leaf (1, 0, 1024): x 8..11 in the grid
+    expect_level_set_bytes_of_openvdbs_writer(field);
+
+    // And OpenVDB reads the gap as inside, from our file.
+    const std::string path = temp_path("root_tiles.vdb");
+    write_field(path, field);
+    openvdb::io::File file(path);
+    file.open();
+    const auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("sdf"));
+    file.close();
+    ASSERT_TRUE(grid);
+    EXPECT_EQ(grid->tree().getValue(openvdb::Coord(3, 3, 6000)), -bg);
+    EXPECT_EQ(grid->tree().getValue(openvdb::Coord(3, 3, 9000)), bg);
+    std::remove(path.c_str());
 }
 
 // ---- level sets read from .vdb ------------------------------------------------------------------

@@ -386,6 +386,19 @@ inline Mesh welded(const Mesh& mesh) {
     return out;
 }
 
+// Two .vdb files' bytes are the same but for the random UUID every file carries (36 characters
+// after the 21 header bytes).
+inline void expect_vdb_bytes_equal_but_uuid(const std::string& ours, std::string theirs) {
+    constexpr size_t kUuidAt = 21, kUuidSize = 36;
+    ASSERT_GT(theirs.size(), kUuidAt + kUuidSize);
+    ASSERT_GT(ours.size(), kUuidAt + kUuidSize);
+    theirs.replace(kUuidAt, kUuidSize, ours, kUuidAt, kUuidSize);
+    ASSERT_EQ(ours.size(), theirs.size());
+    const auto differ = std::mismatch(ours.begin(), ours.end(), theirs.begin());
+    EXPECT_TRUE(differ.first == ours.end())
+        << "first difference at byte " << (differ.first - ours.begin()) << " of " << ours.size();
+}
+
 inline std::string mesh_path(const std::string& name) {
     return std::string(OCLVOX_MESH_DIR) + "/" + name;
 }

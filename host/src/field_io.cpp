@@ -26,6 +26,7 @@
 #include "oclvox/sdf.hpp"
 #include "slabs.hpp"
 #include "vdb_module.hpp"
+#include "vdb_stream.hpp"
 
 namespace oclvox {
 
@@ -627,8 +628,7 @@ void write_field(const std::string& path, const SparseField& field,
                 field.copy_box({0, 0, first}, {d[0], d[1], end}, samples);
             },
             SparseField::kLeaf);
-    if (extension == ".vdb")
-        return detail::vdb_functions_to_write(path).write_sparse_field(path, field, phases);
+    if (extension == ".vdb") return detail::write_level_set_vdb(path, field, phases);
     unknown_field_extension(path, extension);
 }
 

@@ -1,7 +1,8 @@
 // OpenVDB level-set files: sample (i, j, k) of the field at OpenVDB index (i, j, k), placed by
-// the shared voxel-centre transform (vdb_format.hpp). Dense and sparse fields go through the same
-// writer, which takes the field a leaf of OpenVDB's tree (8x8x8 voxels) at a time; the reader
-// turns a level set's leaves and tiles into a sparse field the same way round.
+// the shared voxel-centre transform (vdb_format.hpp). Dense fields are written through OpenVDB's
+// tree, taken a leaf (8x8x8 voxels) at a time, and give the same file as a sparse field of the
+// same values, which write_level_set_vdb.cpp writes without OpenVDB; the reader turns a level
+// set's leaves and tiles into a sparse field.
 #include "field_vdb.hpp"
 
 #include <tbb/blocked_range.h>
@@ -156,21 +157,6 @@ void write_field_vdb(const std::string& path, const Grid& g, double band_voxels,
                   });
         }
     });
-}
-
-void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress) {
-    // The stored leaves only (every sample outside them is the background), in batches that keep
-    // progress coming.
-    constexpr size_t kBatchLeaves = size_t(1) << 14;
-    write_level_set(path, field.grid(), field.band_voxels(), progress, field.leaf_count(),
-                    [&](const LeafBatch& batch) {
-                        for (size_t first = 0; first < field.leaf_count(); first += kBatchLeaves)
-                            batch(std::min(kBatchLeaves, field.leaf_count() - first),
-                                  [&](size_t i, float*, std::array<int64_t, 3>& origin) {
-                                      origin = field.leaf_origin(field.leaf_indices()[first + i]);
-                                      return field.leaf_samples(first + i);
-                                  });
-                    });
 }
 
 namespace {

@@ -14,8 +14,6 @@ namespace oclvox::detail {
 // band_voxels <= 0 takes the largest |value| (every sample is kept in the tree until it is known).
 void write_field_vdb(const std::string& path, const Grid& grid, double band_voxels,
                      const FieldLayer& layer, ProgressPhases& progress);
-// The same from a sparse field's leaves, its band field.band_voxels().
-void write_field_vdb(const std::string& path, const SparseField& field, ProgressPhases& progress);
 // See read_sparse_field (oclvox/sdf.hpp), both forms. Throw InputError.
 SparseField read_field_vdb(const std::string& path);
 SparseField read_field_vdb(const std::string& path, const Grid& lattice, double band_voxels);

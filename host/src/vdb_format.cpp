@@ -30,6 +30,9 @@ void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb,
                     const std::function<void()>& before_rename) {
     write_file_atomically(path, [&](std::ostream& out) {
         openvdb::io::Stream stream(out);
+        // Active-mask compression only, as write_level_set_vdb.cpp and write_vdb.cpp write: Blosc
+        // gains 6-8% on distances and costs about as much time as the rest of the file.
+        stream.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK);
         stream.write(openvdb::GridCPtrVec{vdb});
         if (before_rename) before_rename();
     });

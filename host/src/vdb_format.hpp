@@ -23,8 +23,9 @@ openvdb::math::Transform::Ptr voxel_centre_transform(const Grid& grid);
 void place_vdb_grid(openvdb::GridBase& vdb, const Grid& grid, const std::string& name,
                     openvdb::GridClass grid_class);
 
-// Writes one grid as a .vdb file through a temporary file renamed into place (OutputError), calling
-// before_rename (if set) once the bytes are written: a throw there leaves no file.
+// Writes one grid as a .vdb file (compression "active values") through a temporary file renamed
+// into place (OutputError), calling before_rename (if set) once the bytes are written: a throw
+// there leaves no file.
 void write_vdb_file(const std::string& path, const openvdb::GridBase::Ptr& vdb,
                     const std::function<void()>& before_rename = {});
 

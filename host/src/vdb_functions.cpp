@@ -6,11 +6,7 @@ namespace oclvox::detail {
 
 const VdbFunctions& linked_vdb_functions() {
     static const VdbFunctions functions = {
-        static_cast<void (*)(const std::string&, const Grid&, double, const FieldLayer&,
-                             ProgressPhases&)>(write_field_vdb),
-        static_cast<void (*)(const std::string&, const SparseField&, ProgressPhases&)>(
-            write_field_vdb),
-        static_cast<SparseField (*)(const std::string&)>(read_field_vdb),
+        write_field_vdb, static_cast<SparseField (*)(const std::string&)>(read_field_vdb),
         static_cast<SparseField (*)(const std::string&, const Grid&, double)>(read_field_vdb)};
     return functions;
 }

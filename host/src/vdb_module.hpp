@@ -2,8 +2,9 @@
 // linked with BIND_NOW: loading it binds 52,402 symbols, about 30 ms of every process on the
 // 2-core VM, whether or not the run reads or writes a .vdb. So the shared liboclvox leaves it out,
 // and loads it with these functions (the module liboclvox_vdb, beside liboclvox) on the first
-// .vdb field; a static liboclvox (the Python wheel, the tests) links them in. (Occupancy .vdb
-// files are written without OpenVDB: write_vdb.cpp.)
+// .vdb that needs them; a static liboclvox (the Python wheel, the tests) links them in.
+// (Occupancy and sparse level-set .vdb files are written without OpenVDB: write_vdb.cpp,
+// write_level_set_vdb.cpp.)
 #pragma once
 
 #include <string>
@@ -17,14 +18,12 @@ namespace oclvox::detail {
 struct VdbFunctions {
     void (*write_field)(const std::string& path, const Grid& grid, double band_voxels,
                         const FieldLayer& layer, ProgressPhases& progress);
-    void (*write_sparse_field)(const std::string& path, const SparseField& field,
-                               ProgressPhases& progress);
     SparseField (*read_field)(const std::string& path);
     SparseField (*read_field_onto)(const std::string& path, const Grid& lattice,
                                    double band_voxels);
 };
 
-// The table of the functions compiled beside it (write_vdb.cpp, field_vdb.cpp).
+// The table of the functions compiled beside it (field_vdb.cpp).
 const VdbFunctions& linked_vdb_functions();
 
 // The table, loaded on first use where it is not linked in. Throws OutputError (writing) or

@@ -17,7 +17,8 @@
 // all cores, put in OpenVDB's order, and written in large pieces, laid out exactly as OpenVDB's
 // io::Stream lays out the same grid once pruned (full leaves and full internal nodes as active
 // tiles); the tests compare the bytes with OpenVDB's own file, and read it back through OpenVDB's
-// C++ and Python APIs. The field writers (field_vdb.cpp) still go through OpenVDB.
+// C++ and Python APIs. Sparse level sets are written the same way (write_level_set_vdb.cpp), on
+// the shared layout of vdb_stream.cpp; dense fields still go through OpenVDB (field_vdb.cpp).
 //
 // The layout (OpenVDB file format 224 as OpenVDB 10.0 writes it to a stream, one grid, tree
 // Root -> Internal<5> -> Internal<4> -> Leaf<bool, 3>, compression "active mask" only; integers
@@ -40,36 +41,21 @@
 
 #include <algorithm>
 #include <array>
-#include <climits>
-#include <cstring>
-#include <random>
 #include <unordered_map>
 
 #include "atomic_file.hpp"
-#include "bit_count.hpp"
-#include "block_writer.hpp"
 #include "brick_layout.hpp"
+#include "vdb_stream.hpp"
 #include "writers.hpp"
 
 namespace oclvox::detail {
 
 namespace {
 
-// OpenVDB's standard 5-4-3 tree: a leaf holds 8^3 voxels, a lower node 16^3 leaves, an upper
-// node 32^3 lower nodes (4096^3 voxels).
-constexpr size_t kLowerEntries = size_t(1) << 12, kUpperEntries = size_t(1) << 15;
+using namespace vdb_stream;
 
-// The file format this writer lays out, and the library whose writer it follows.
-constexpr uint32_t kFileVersion = 224, kLibraryMajor = 10, kLibraryMinor = 0;
-constexpr uint32_t kCompressActiveMask = 0x2;  // io::COMPRESS_ACTIVE_MASK
-
-// The bytes of a BoolTree's parts as tools::memUsage counts them (OpenVDB 10 on a 64-bit host),
-// for the "file_mem_bytes" metadata: the tree and root objects, each internal node's table of
-// 8-byte entries, its two masks and its origin, each leaf object. The byte-for-byte test against
-// OpenVDB's writer checks them.
-constexpr uint64_t kTreeBytes = 1232, kRootBytes = 72, kLeafBytes = 144;
-constexpr uint64_t kUpperBytes = kUpperEntries * 8 + 2 * kUpperEntries / 8 + 12;
-constexpr uint64_t kLowerBytes = kLowerEntries * 8 + 2 * kLowerEntries / 8 + 12;
+// A bool leaf object's bytes as tools::memUsage counts them (see vdb_stream.hpp).
+constexpr uint64_t kLeafBytes = 144;
 
 // The 16 bits x + 4y + 16z (y, z in 0..3) of a block mask shifted right by x, as bits y * 8 + z:
 // their place in an OpenVDB leaf word.
@@ -91,26 +77,6 @@ struct LeafBits {
     uint64_t key;
     uint64_t words[8];
 };
-
-// Sorting keys sort leaves as OpenVDB writes them: by root entry (its coordinates, x first),
-// then offset in the upper node, then offset in the lower node. Grid indices are below 2^20, so
-// a root entry's coordinates (index >> 12) fit 8 bits each.
-constexpr int kLowerBits = 12, kUpperBits = 15;
-uint64_t leaf_key(int64_t x, int64_t y, int64_t z) {
-    const uint64_t root = uint64_t(x >> 12) << 16 | uint64_t(y >> 12) << 8 | uint64_t(z >> 12);
-    const uint64_t upper =
-        uint64_t(x >> 7 & 31) << 10 | uint64_t(y >> 7 & 31) << 5 | uint64_t(z >> 7 & 31);
-    const uint64_t lower =
-        uint64_t(x >> 3 & 15) << 8 | uint64_t(y >> 3 & 15) << 4 | uint64_t(z >> 3 & 15);
-    return root << (kUpperBits + kLowerBits) | upper << kLowerBits | lower;
-}
-std::array<int32_t, 3> leaf_origin(uint64_t key) {
-    const uint64_t root = key >> (kUpperBits + kLowerBits), upper = key >> kLowerBits & 32767,
-                   lower = key & 4095;
-    return {int32_t((root >> 16) << 12 | (upper >> 10) << 7 | (lower >> 8) << 3),
-            int32_t((root >> 8 & 255) << 12 | (upper >> 5 & 31) << 7 | (lower >> 4 & 15) << 3),
-            int32_t((root & 255) << 12 | (upper & 31) << 7 | (lower & 15) << 3)};
-}
 
 // ORs block `mask` (at voxel `o`, 4-aligned) into its leaf's words: the block is a 4x4 corner of
 // four of them.
@@ -188,54 +154,6 @@ bool is_full(const LeafBits& leaf) {
     return true;
 }
 
-// The tree above the leaves, as the pruned OpenVDB tree has it: a node whose every entry is an
-// active tile (every leaf, or every lower node, full) is itself an active tile.
-struct LowerNode {
-    uint64_t key;       // of its leaves, less their lower offset
-    size_t first, end;  // its leaves in the sorted list
-    size_t full_leaves = 0;
-    bool full() const { return full_leaves == kLowerEntries; }
-};
-struct UpperNode {
-    uint64_t key;       // its root entry
-    size_t first, end;  // its lower nodes
-    size_t full_lowers = 0;
-    bool full() const { return full_lowers == kUpperEntries; }
-};
-
-struct TreeShape {
-    std::vector<LowerNode> lowers;
-    std::vector<UpperNode> uppers;
-};
-
-TreeShape tree_shape(const std::vector<LeafBits>& leaves) {
-    TreeShape shape;
-    for (size_t i = 0; i < leaves.size(); ++i) {
-        const uint64_t lower_key = leaves[i].key >> kLowerBits;
-        if (shape.lowers.empty() || shape.lowers.back().key != lower_key)
-            shape.lowers.push_back({lower_key, i, i});
-        LowerNode& lower = shape.lowers.back();
-        lower.end = i + 1;
-        lower.full_leaves += is_full(leaves[i]);
-    }
-    for (size_t i = 0; i < shape.lowers.size(); ++i) {
-        const uint64_t upper_key = shape.lowers[i].key >> kUpperBits;
-        if (shape.uppers.empty() || shape.uppers.back().key != upper_key)
-            shape.uppers.push_back({upper_key, i, i});
-        UpperNode& upper = shape.uppers.back();
-        upper.end = i + 1;
-        upper.full_lowers += shape.lowers[i].full();
-    }
-    return shape;
-}
-
-// The bytes of `value` as they lie in memory, as OpenVDB writes its masks and coordinates (its
-// files are little-endian, as is every host it supports).
-template <class T>
-void put_bytes(BlockWriter& sink, const T& value) {
-    sink.bytes(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-
 // An internal node's topology before its children: child mask, value mask (the active tiles),
 // the mask-compressed tile values: metadata 0 (every inactive value is the background), then the
 // active tiles' values.
@@ -308,69 +226,11 @@ void put_buffers(BlockWriter& sink, const std::vector<LeafBits>& leaves, const T
     }
 }
 
-void put_string(BlockWriter& sink, const std::string& text) {
-    sink.little_endian(int32_t(text.size()));
-    sink.text(text);
-}
-
-// A random (version 4) UUID in lowercase hex, as OpenVDB puts one in every file it writes.
-std::string random_uuid() {
-    std::random_device entropy;
-    std::array<uint8_t, 16> bits{};
-    for (uint8_t& b : bits) b = uint8_t(entropy());
-    bits[6] = uint8_t((bits[6] & 0x0f) | 0x40);  // version 4
-    bits[8] = uint8_t((bits[8] & 0x3f) | 0x80);  // the RFC 4122 variant
-    static const char kHex[] = "0123456789abcdef";
-    std::string text;
-    for (size_t i = 0; i < bits.size(); ++i) {
-        if (i == 4 || i == 6 || i == 8 || i == 10) text += '-';
-        text += kHex[bits[i] >> 4];
-        text += kHex[bits[i] & 15];
-    }
-    return text;
-}
-
-// The statistics OpenVDB's writer records of a tree (GridBase::addStatsMetadata): the active
-// voxels' box (inclusive; an empty box runs from INT32_MAX to INT32_MIN, as OpenVDB's does), their
-// count, and the tree's memory as tools::memUsage counts it.
-struct TreeStatistics {
-    std::array<int32_t, 3> box_min{INT32_MAX, INT32_MAX, INT32_MAX},
-        box_max{INT32_MIN, INT32_MIN, INT32_MIN};
-    uint64_t active = 0, memory = 0;
-};
-
+// The statistics of the pruned tree: its active voxels (those of tiles included) and the nodes
+// and leaves it keeps.
 TreeStatistics tree_statistics(const std::vector<LeafBits>& leaves, const TreeShape& shape) {
     TreeStatistics stats;
-    auto expand = [&](const std::array<int32_t, 3>& c) {
-        for (int a = 0; a < 3; ++a) {
-            stats.box_min[a] = std::min(stats.box_min[a], c[a]);
-            stats.box_max[a] = std::max(stats.box_max[a], c[a]);
-        }
-    };
-    for (const LeafBits& leaf : leaves) {
-        const auto o = leaf_origin(leaf.key);
-        uint64_t yz = 0;
-        int x_lo = 8, x_hi = -1;
-        for (int x = 0; x < 8; ++x) {
-            if (!leaf.words[x]) continue;
-            x_lo = std::min(x_lo, x);
-            x_hi = x;
-            yz |= leaf.words[x];
-            stats.active += uint64_t(popcount64(leaf.words[x]));
-        }
-        int y_lo = 8, y_hi = -1;
-        uint64_t z_bits = 0;
-        for (int y = 0; y < 8; ++y) {
-            const uint64_t row = yz >> (8 * y) & 255;
-            if (!row) continue;
-            y_lo = std::min(y_lo, y);
-            y_hi = y;
-            z_bits |= row;
-        }
-        const int z_lo = __builtin_ctzll(z_bits), z_hi = 63 - __builtin_clzll(z_bits);
-        expand({o[0] + x_lo, o[1] + y_lo, o[2] + z_lo});
-        expand({o[0] + x_hi, o[1] + y_hi, o[2] + z_hi});
-    }
+    for (const LeafBits& leaf : leaves) stats.add_leaf(leaf.key, leaf.words);
     uint64_t uppers = 0, lowers = 0, kept_leaves = 0;
     for (const UpperNode& upper : shape.uppers) {
         if (upper.full()) continue;
@@ -387,66 +247,6 @@ TreeStatistics tree_statistics(const std::vector<LeafBits>& leaves, const TreeSh
     return stats;
 }
 
-// Everything before the tree: header, grid descriptor, compression, metadata, transform.
-void put_grid_prefix(BlockWriter& sink, const Grid& grid, const TreeStatistics& stats) {
-    sink.little_endian(int64_t(0x56444220));  // " BDV"
-    sink.little_endian(kFileVersion);
-    sink.little_endian(kLibraryMajor);
-    sink.little_endian(kLibraryMinor);
-    sink.little_endian(uint8_t(0));  // no grid offsets
-    sink.text(random_uuid());
-    sink.little_endian(int32_t(0));  // file metadata
-    sink.little_endian(int32_t(1));  // grids
-    const std::string name = "occupancy";
-    put_string(sink, name);
-    put_string(sink, "Tree_bool_5_4_3");
-    put_string(sink, "");
-    for (int i = 0; i < 3; ++i) sink.little_endian(int64_t(0));
-    sink.little_endian(kCompressActiveMask);
-
-    // The grid's metadata, in name order (OpenVDB keeps them in a std::map).
-    auto put_entry = [&](const char* key, const char* type, size_t size) {
-        put_string(sink, key);
-        put_string(sink, type);
-        sink.little_endian(int32_t(size));
-    };
-    auto put_text = [&](const char* key, const std::string& value) {
-        put_entry(key, "string", value.size());
-        sink.text(value);
-    };
-    auto put_vec3i = [&](const char* key, const std::array<int32_t, 3>& value) {
-        put_entry(key, "vec3i", 12);
-        for (const int32_t v : value) sink.little_endian(v);
-    };
-    auto put_int64 = [&](const char* key, uint64_t value) {
-        put_entry(key, "int64", 8);
-        sink.little_endian(int64_t(value));
-    };
-    sink.little_endian(int32_t(10));
-    put_text("class", "unknown");
-    put_vec3i("file_bbox_max", stats.box_max);
-    put_vec3i("file_bbox_min", stats.box_min);
-    put_text("file_compression", "active values");
-    put_int64("file_mem_bytes", stats.memory);
-    put_int64("file_voxel_count", stats.active);
-    put_text("name", name);
-    put_vec3i("oclvox_dims", {int32_t(grid.dims[0]), int32_t(grid.dims[1]), int32_t(grid.dims[2])});
-    put_entry("oclvox_origin", "vec3d", 24);
-    for (const double v : grid.origin) sink.little_endian(v);
-    put_entry("oclvox_voxel_size", "double", 8);
-    sink.little_endian(grid.voxel_size);
-
-    // The transform: OpenVDB's UniformScaleTranslateMap with its derived values, computed as
-    // its constructor computes them.
-    put_string(sink, "UniformScaleTranslateMap");
-    const double scale = grid.voxel_size, inverse = 1.0 / scale;
-    for (const double t : vdb_index_origin(grid)) sink.little_endian(t);
-    for (const double v :
-         {scale, scale, scale, scale, scale, scale, inverse, inverse, inverse, inverse * inverse,
-          inverse * inverse, inverse * inverse, inverse / 2, inverse / 2, inverse / 2})
-        sink.little_endian(v);
-}
-
 }  // namespace
 
 void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhases& progress) {
@@ -456,14 +256,16 @@ void write_vdb(const std::string& path, const SparseVoxels& voxels, ProgressPhas
     // statistics the metadata records.
     progress.report(gather, 0, 1);
     const std::vector<LeafBits> leaves = sorted_leaves(voxels);
-    const TreeShape shape = tree_shape(leaves);
+    const TreeShape shape = tree_shape(
+        leaves.size(), [&](size_t i) { return leaves[i].key; },
+        [&](size_t i) { return is_full(leaves[i]); });
     const TreeStatistics stats = tree_statistics(leaves, shape);
     progress.report(gather, 1, 1);
 
     // Phase 2: the file: what precedes the tree, the tree's topology, its leaves' buffers.
     write_file_atomically(path, [&](std::ostream& out) {
         BlockWriter sink(out);
-        put_grid_prefix(sink, voxels.grid(), stats);
+        put_grid_prefix(sink, voxels.grid(), {"occupancy", "Tree_bool_5_4_3", "unknown"}, stats);
         put_topology(sink, leaves, shape);
         put_buffers(sink, leaves, shape,
                     [&](size_t done) { progress.report(file, done, leaves.size()); });

@@ -1,0 +1,312 @@
+// OpenVDB level-set writer for sparse fields, without OpenVDB: a FloatGrid named "sdf" of class
+// "level set", sample (i, j, k) at index (i, j, k) (the transform of every .vdb we write), its
+// background the field's, a voxel active where |value| < background, every other value the
+// background signed as OpenVDB's signed flood fill signs it.
+//
+// Why not through OpenVDB (field_vdb.cpp, which still writes dense fields): building its tree
+// allocates each leaf (2 KiB, 0.3 M of them at 2048^3, fresh pages the kernel must clear), and
+// its serial writer then compresses each leaf with Blosc, which gains 6-8% on distances: for
+// bunny00 at 2048^3 the tree was 1.6 s and the file 2.8 s against a 2.5 s field. Here the
+// leaves' masks and signs are worked out on every core from the field's own leaves, which are
+// then written from where they lie.
+//
+// The layout is that of write_vdb.cpp (OpenVDB file format 224, one grid, a 5-4-3 tree,
+// compression "active mask" only) with float values. What differs from a bool tree:
+//   - every value that is not active is +background or -background. OpenVDB's signed flood fill
+//     gives them their sign, bottom up: in a leaf, scanning x, then y, then z (offset order),
+//     each inactive value takes the sign of the last active value met along the scan (the first
+//     active value's before any); in an internal node, each tile takes the sign of the last
+//     child's last value met the same way; at the root, the gaps along z between two upper nodes
+//     with the same x and y whose facing values are both inside become inside tiles (inactive).
+//   - a value array (a leaf's buffer, an internal node's tiles) is written as OpenVDB's
+//     writeCompressedValues writes it: one metadata byte, 0 if every inactive value is
+//     +background, 1 if every one is -background, else 3 and a mask of those that are
+//     +background; then the active values (internal nodes have none).
+//   - the root starts with the background (a float), and its tiles are (x, y, z, value, active).
+//   - a leaf's buffer is its value mask then its compressed values (no origin).
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "atomic_file.hpp"
+#include "bit_count.hpp"
+#include "vdb_stream.hpp"
+
+namespace oclvox::detail {
+
+namespace {
+
+using namespace vdb_stream;
+
+// A float leaf object's bytes as tools::memUsage counts them: the object and its 512 values.
+constexpr uint64_t kLeafBytes = 2144;
+
+constexpr uint8_t kAllOutside = 0, kAllInside = 1, kSelectOutside = 3;  // writeCompressedValues
+
+// A leaf as written: its key, the field's leaf it comes from, its value mask, which of its
+// inactive values are inside (-background) after the flood fill, and whether its first and last
+// values (offsets 0 and 511) are inside, which its parent's flood fill reads.
+struct LevelSetLeaf {
+    uint64_t key;
+    size_t stored;  // the field's n-th stored leaf
+    uint64_t active[8];
+    uint64_t inside[8];
+    bool first_inside, last_inside;
+};
+
+// The metadata byte of a value array whose non-child inactive entries are `outside`
+// (+background) and `inside` (-background) in number.
+uint8_t compression_metadata(size_t outside, size_t inside) {
+    if (inside == 0) return kAllOutside;
+    return outside == 0 ? kAllInside : kSelectOutside;
+}
+
+// The leaf's mask and flood-filled signs from the field's samples (x fastest; those beyond the
+// grid are inactive). False if no sample is within the band: OpenVDB's tree would hold no leaf.
+bool fill_leaf(const float* samples, const std::array<int64_t, 3>& n, float background,
+               LevelSetLeaf& leaf) {
+    bool any = false;
+    for (int x = 0; x < 8; ++x) {
+        uint64_t word = 0;
+        if (x < n[0])
+            for (int y = 0; y < n[1]; ++y)
+                for (int z = 0; z < n[2]; ++z)
+                    if (std::abs(samples[x + 8 * (y + 8 * z)]) < background)
+                        word |= uint64_t(1) << (y << 3 | z);
+        leaf.active[x] = word;
+        any |= word != 0;
+    }
+    if (!any) return false;
+    auto value_inside = [&](int x, int yz) {
+        return samples[x + 8 * ((yz >> 3) + 8 * (yz & 7))] < 0;
+    };
+    // The scan of SignedFloodFillOp's leaf pass: it starts from the first active value's sign.
+    int first_x = 0;
+    while (!leaf.active[first_x]) ++first_x;
+    bool x_inside = value_inside(first_x, __builtin_ctzll(leaf.active[first_x]));
+    for (int x = 0; x < 8; ++x) {
+        const uint64_t on = leaf.active[x];
+        uint64_t inside = 0;
+        if (on & 1) x_inside = value_inside(x, 0);
+        bool y_inside = x_inside;
+        for (int y = 0; y < 8; ++y) {
+            if (on >> (y << 3) & 1) y_inside = value_inside(x, y << 3);
+            bool z_inside = y_inside;
+            for (int z = 0; z < 8; ++z) {
+                const int yz = y << 3 | z;
+                if (on >> yz & 1)
+                    z_inside = value_inside(x, yz);
+                else if (z_inside)
+                    inside |= uint64_t(1) << yz;
+            }
+        }
+        leaf.inside[x] = inside;
+    }
+    leaf.first_inside = (leaf.active[0] & 1) ? value_inside(0, 0) : (leaf.inside[0] & 1) != 0;
+    leaf.last_inside = (leaf.active[7] >> 63) ? value_inside(7, 63) : (leaf.inside[7] >> 63) != 0;
+    return true;
+}
+
+// An internal node of 2^(3 kLog2) entries after the flood fill: which entries are children and
+// which tiles are inside, and whether its first and last values are inside.
+template <int kLog2>
+struct FilledNode {
+    static constexpr size_t kEntries = size_t(1) << (3 * kLog2);
+    std::array<uint64_t, kEntries / 64> children{}, inside{};
+    bool first_inside = false, last_inside = false;
+
+    bool child(size_t i) const { return children[i >> 6] >> (i & 63) & 1; }
+
+    // child_at(i) for each child offset i (increasing): its first and last values' insideness.
+    template <class FirstInside, class LastInside>
+    void fill(const std::vector<uint32_t>& offsets, const FirstInside& child_first,
+              const LastInside& child_last) {
+        std::vector<int32_t> at(kEntries, -1);
+        for (size_t c = 0; c < offsets.size(); ++c) {
+            at[offsets[c]] = int32_t(c);
+            children[offsets[c] >> 6] |= uint64_t(1) << (offsets[c] & 63);
+        }
+        bool x_inside = child_first(0);  // the first child's first value
+        constexpr size_t kDim = size_t(1) << kLog2;
+        for (size_t x = 0; x < kDim; ++x) {
+            const size_t x00 = x << (2 * kLog2);
+            if (at[x00] >= 0) x_inside = child_last(size_t(at[x00]));
+            bool y_inside = x_inside;
+            for (size_t y = 0; y < kDim; ++y) {
+                const size_t xy0 = x00 + (y << kLog2);
+                if (at[xy0] >= 0) y_inside = child_last(size_t(at[xy0]));
+                bool z_inside = y_inside;
+                for (size_t z = 0; z < kDim; ++z) {
+                    const size_t xyz = xy0 + z;
+                    if (at[xyz] >= 0)
+                        z_inside = child_last(size_t(at[xyz]));
+                    else if (z_inside)
+                        inside[xyz >> 6] |= uint64_t(1) << (xyz & 63);
+                }
+            }
+        }
+        first_inside = at[0] >= 0 ? child_first(size_t(at[0])) : (inside[0] & 1) != 0;
+        last_inside = at[kEntries - 1] >= 0 ? child_last(size_t(at[kEntries - 1]))
+                                            : (inside.back() >> 63) != 0;
+    }
+
+    // Child mask, value mask (no active tiles), the tiles' compressed values (none active).
+    void put(BlockWriter& sink) const {
+        put_bytes(sink, children);
+        put_bytes(sink, std::array<uint64_t, kEntries / 64>{});
+        size_t tiles_inside = 0, child_count = 0;
+        for (size_t w = 0; w < kEntries / 64; ++w) {
+            tiles_inside += size_t(popcount64(inside[w]));
+            child_count += size_t(popcount64(children[w]));
+        }
+        const uint8_t metadata =
+            compression_metadata(kEntries - child_count - tiles_inside, tiles_inside);
+        sink.little_endian(metadata);
+        if (metadata != kSelectOutside) return;
+        std::array<uint64_t, kEntries / 64> outside;
+        for (size_t w = 0; w < kEntries / 64; ++w) outside[w] = ~(children[w] | inside[w]);
+        put_bytes(sink, outside);
+    }
+};
+using LowerFill = FilledNode<4>;
+using UpperFill = FilledNode<5>;
+
+// The leaves within the band, in OpenVDB's order, with their masks and signs.
+std::vector<LevelSetLeaf> level_set_leaves(const SparseField& field) {
+    const size_t count = field.leaf_count();
+    std::vector<std::pair<uint64_t, size_t>> order(count);
+    tbb::parallel_for(size_t(0), count, [&](size_t n) {
+        const auto o = field.leaf_origin(field.leaf_indices()[n]);
+        order[n] = {leaf_key(o[0], o[1], o[2]), n};
+    });
+    tbb::parallel_sort(order.begin(), order.end());
+    std::vector<LevelSetLeaf> leaves(count);
+    std::vector<uint8_t> kept(count);
+    const auto& d = field.grid().dims;
+    tbb::parallel_for(size_t(0), count, [&](size_t i) {
+        const size_t n = order[i].second;
+        const auto o = field.leaf_origin(field.leaf_indices()[n]);
+        const std::array<int64_t, 3> inside_grid{std::min<int64_t>(8, d[0] - o[0]),
+                                                 std::min<int64_t>(8, d[1] - o[1]),
+                                                 std::min<int64_t>(8, d[2] - o[2])};
+        LevelSetLeaf& leaf = leaves[i];
+        leaf.key = order[i].first;
+        leaf.stored = n;
+        kept[i] = fill_leaf(field.leaf_samples(n), inside_grid, field.background(), leaf);
+    });
+    size_t used = 0;
+    for (size_t i = 0; i < count; ++i)
+        if (kept[i]) leaves[used++] = leaves[i];
+    leaves.resize(used);
+    return leaves;
+}
+
+// A leaf's buffer: value mask, compressed values (metadata, the mask of +background values if
+// both signs occur, the active values in offset order).
+void put_leaf_buffer(BlockWriter& sink, const LevelSetLeaf& leaf, const float* samples) {
+    put_bytes(sink, leaf.active);
+    size_t inactive = 0, inside = 0;
+    for (int x = 0; x < 8; ++x) {
+        inactive += size_t(64 - popcount64(leaf.active[x]));
+        inside += size_t(popcount64(leaf.inside[x]));
+    }
+    const uint8_t metadata = compression_metadata(inactive - inside, inside);
+    sink.little_endian(metadata);
+    if (metadata == kSelectOutside) {
+        uint64_t outside[8];
+        for (int x = 0; x < 8; ++x) outside[x] = ~(leaf.active[x] | leaf.inside[x]);
+        put_bytes(sink, outside);
+    }
+    for (int x = 0; x < 8; ++x)
+        for (uint64_t on = leaf.active[x]; on; on &= on - 1) {
+            const int yz = __builtin_ctzll(on);
+            sink.little_endian(samples[x + 8 * ((yz >> 3) + 8 * (yz & 7))]);
+        }
+}
+
+}  // namespace
+
+void write_level_set_vdb(const std::string& path, const SparseField& field,
+                         ProgressPhases& progress) {
+    const size_t gather = progress.add(1), file = progress.add(2);
+    const float background = field.background();
+
+    // Phase 1: the leaves in the band, in OpenVDB's order, with their signs; the nodes above
+    // them, flood-filled bottom up; the statistics the metadata records.
+    progress.report(gather, 0, 1);
+    const std::vector<LevelSetLeaf> leaves = level_set_leaves(field);
+    const TreeShape shape = tree_shape(
+        leaves.size(), [&](size_t i) { return leaves[i].key; }, [](size_t) { return false; });
+    std::vector<LowerFill> lowers(shape.lowers.size());
+    tbb::parallel_for(size_t(0), lowers.size(), [&](size_t l) {
+        const LowerNode& node = shape.lowers[l];
+        std::vector<uint32_t> offsets;
+        for (size_t i = node.first; i < node.end; ++i)
+            offsets.push_back(uint32_t(leaves[i].key & (kLowerEntries - 1)));
+        lowers[l].fill(
+            offsets, [&](size_t c) { return leaves[node.first + c].first_inside; },
+            [&](size_t c) { return leaves[node.first + c].last_inside; });
+    });
+    std::vector<UpperFill> uppers(shape.uppers.size());
+    tbb::parallel_for(size_t(0), uppers.size(), [&](size_t u) {
+        const UpperNode& node = shape.uppers[u];
+        std::vector<uint32_t> offsets;
+        for (size_t l = node.first; l < node.end; ++l)
+            offsets.push_back(uint32_t(shape.lowers[l].key & (kUpperEntries - 1)));
+        uppers[u].fill(
+            offsets, [&](size_t c) { return lowers[node.first + c].first_inside; },
+            [&](size_t c) { return lowers[node.first + c].last_inside; });
+    });
+    // The root's inside tiles: the gaps along z between upper nodes of one (x, y) whose facing
+    // values are inside.
+    std::vector<std::array<int32_t, 3>> root_tiles;
+    for (size_t u = 1; u < shape.uppers.size(); ++u) {
+        const auto a = leaf_origin(shape.uppers[u - 1].key << (kUpperBits + kLowerBits));
+        const auto b = leaf_origin(shape.uppers[u].key << (kUpperBits + kLowerBits));
+        if (a[0] != b[0] || a[1] != b[1] || b[2] - a[2] == 4096) continue;
+        if (!uppers[u - 1].last_inside || !uppers[u].first_inside) continue;
+        for (int32_t z = a[2] + 4096; z != b[2]; z += 4096) root_tiles.push_back({a[0], a[1], z});
+    }
+    TreeStatistics stats;
+    for (const LevelSetLeaf& leaf : leaves) stats.add_leaf(leaf.key, leaf.active);
+    stats.memory = kTreeBytes + kRootBytes + shape.uppers.size() * kUpperBytes +
+                   shape.lowers.size() * kLowerBytes + leaves.size() * kLeafBytes;
+    progress.report(gather, 1, 1);
+
+    // Phase 2: the file: what precedes the tree, the tree's topology, its leaves' buffers.
+    write_file_atomically(path, [&](std::ostream& out) {
+        BlockWriter sink(out);
+        put_grid_prefix(sink, field.grid(),
+                        {"sdf", "Tree_float_5_4_3", "level set", field.band_voxels()}, stats);
+        sink.little_endian(int32_t(1));  // buffer count
+        sink.little_endian(background);
+        sink.little_endian(uint32_t(root_tiles.size()));
+        sink.little_endian(uint32_t(shape.uppers.size()));
+        for (const auto& tile : root_tiles) {
+            put_bytes(sink, tile);
+            sink.little_endian(-background);
+            sink.little_endian(uint8_t(0));  // inactive
+        }
+        for (size_t u = 0; u < shape.uppers.size(); ++u) {
+            put_bytes(sink, leaf_origin(shape.uppers[u].key << (kUpperBits + kLowerBits)));
+            uppers[u].put(sink);
+            for (size_t l = shape.uppers[u].first; l < shape.uppers[u].end; ++l) {
+                lowers[l].put(sink);
+                for (size_t i = shape.lowers[l].first; i < shape.lowers[l].end; ++i)
+                    put_bytes(sink, leaves[i].active);
+            }
+        }
+        for (size_t i = 0; i < leaves.size(); ++i) {
+            put_leaf_buffer(sink, leaves[i], field.leaf_samples(leaves[i].stored));
+            if ((i & 4095) == 4095) progress.report(file, i + 1, leaves.size());
+        }
+        sink.flush();
+        progress.finish();
+    });
+}
+
+}  // namespace oclvox::detail
