@@ -1253,15 +1253,15 @@ TEST(SparseSdf, FilesEqualTheDenseFieldsFiles) {
     std::remove((dense_npy + ".json").c_str());
 }
 
-// What OpenVDB's own writer makes of a sparse field: a FloatGrid "sdf" of class level set, a
-// voxel active where |value| < background (set voxel by voxel through OpenVDB's API), every other
-// value signed by OpenVDB's signed flood fill, our grid's transform and metadata, written by
+// What OpenVDB's own writer makes of a field: a FloatGrid "sdf" of class level set, a voxel
+// active where |value(i, j, k)| < background (set voxel by voxel through OpenVDB's API), every
+// other value signed by OpenVDB's signed flood fill, our grid's transform and metadata, written by
 // io::Stream with active-mask compression. OpenVDB adds "file_delayed_load" metadata (an index
 // for its delayed loading of leaves, which its readers do without); it is cut out of the bytes.
-std::string openvdb_written_level_set(const SparseField& field) {
+std::string openvdb_written_level_set(
+    const Grid& g, float background, double band_voxels,
+    const std::function<float(int64_t, int64_t, int64_t)>& value) {
     openvdb::initialize();
-    const Grid& g = field.grid();
-    const float background = field.background();
     const openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
     grid->setName("sdf");
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
@@ -1276,20 +1276,15 @@ std::string openvdb_written_level_set(const SparseField& field) {
     grid->insertMeta("oclvox_voxel_size", openvdb::DoubleMetadata(g.voxel_size));
     grid->insertMeta("oclvox_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(
                                         int(g.dims[0]), int(g.dims[1]), int(g.dims[2]))));
-    grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(field.band_voxels()));
+    grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(band_voxels));
     openvdb::FloatGrid::Accessor access = grid->getAccessor();
-    for (size_t n = 0; n < field.leaf_count(); ++n) {
-        const auto o = field.leaf_origin(field.leaf_indices()[n]);
-        const float* samples = field.leaf_samples(n);
-        for (int64_t z = 0; z < 8 && o[2] + z < g.dims[2]; ++z)
-            for (int64_t y = 0; y < 8 && o[1] + y < g.dims[1]; ++y)
-                for (int64_t x = 0; x < 8 && o[0] + x < g.dims[0]; ++x) {
-                    const float v = samples[x + 8 * (y + 8 * z)];
-                    if (std::abs(v) < background)
-                        access.setValueOn(
-                            openvdb::Coord(int(o[0] + x), int(o[1] + y), int(o[2] + z)), v);
-                }
-    }
+    for (int64_t k = 0; k < g.dims[2]; ++k)
+        for (int64_t j = 0; j < g.dims[1]; ++j)
+            for (int64_t i = 0; i < g.dims[0]; ++i) {
+                const float v = value(i, j, k);
+                if (std::abs(v) < background)
+                    access.setValueOn(openvdb::Coord(int(i), int(j), int(k)), v);
+            }
     openvdb::tools::signedFloodFill(grid->tree());
     std::ostringstream out;
     openvdb::io::Stream stream(out);
@@ -1318,17 +1313,38 @@ std::string openvdb_written_level_set(const SparseField& field) {
     return bytes;
 }
 
+// A sparse field's file, and the dense field's with the band given and with the band found from
+// the samples (the largest |value|, the background then: samples at it are inactive).
 void expect_level_set_bytes_of_openvdbs_writer(const SparseField& field) {
+    const Grid& g = field.grid();
+    const auto at = [&](int64_t i, int64_t j, int64_t k) { return field.at(i, j, k); };
     const std::string path = temp_path("bytes.vdb");
     write_field(path, field);
-    expect_vdb_bytes_equal_but_uuid(file_bytes(path), openvdb_written_level_set(field));
+    expect_vdb_bytes_equal_but_uuid(
+        file_bytes(path),
+        openvdb_written_level_set(g, field.background(), field.band_voxels(), at));
+
+    const ScalarField dense = field.to_dense();
+    write_field(path, dense, field.band_voxels());
+    expect_vdb_bytes_equal_but_uuid(
+        file_bytes(path),
+        openvdb_written_level_set(g, field.background(), field.band_voxels(), at));
+    const size_t per_layer = size_t(g.dims[0]) * size_t(g.dims[1]);
+    write_field(path, g, 0.0, [&](int64_t k, float* out) {
+        std::copy_n(&dense.values[size_t(k) * per_layer], per_layer, out);
+    });
+    float largest = 0;
+    for (const float v : dense.values) largest = std::max(largest, std::abs(v));
+    expect_vdb_bytes_equal_but_uuid(
+        file_bytes(path),
+        openvdb_written_level_set(g, largest, double(largest) / g.voxel_size, at));
     std::remove(path.c_str());
 }
 
-// The bytes of a sparse field's .vdb are those of OpenVDB's writer for the same level set (but
-// for the UUID and OpenVDB's delayed-load index): the leaves' masks and values, the flood fill's
-// signs in leaves, nodes and root tiles, their compression and the statistics metadata.
-TEST(LevelSetFiles, SparseVdbIsByteForByteWhatOpenVdbsWriterMakesOfTheSameLevelSet) {
+// The bytes of a field's .vdb, sparse or dense, are those of OpenVDB's writer for the same level
+// set (but for the UUID and OpenVDB's delayed-load index): the leaves' masks and values, the
+// flood fill's signs in leaves, nodes and root tiles, their compression and the statistics.
+TEST(LevelSetFiles, VdbIsByteForByteWhatOpenVdbsWriterMakesOfTheSameLevelSet) {
     for (const SparseCase& c : sparse_cases()) {
         SCOPED_TRACE(c.name);
         expect_level_set_bytes_of_openvdbs_writer(

@@ -13,10 +13,8 @@ namespace oclvox::detail {
 // Calls write(stream) on a temporary file in the folder of `path`, flushes and closes it, checks
 // for errors, then renames it to `path`. On any failure (including an exception from write) the
 // temporary file is removed and OutputError is thrown naming `path` (never the temporary file)
-// and the reason; a Cancelled from write passes through as it is. Exported from the shared
-// liboclvox, as the module of OpenVDB's functions writes through it (vdb_module.hpp): one list of
-// temporary files to remove when a run is stopped.
-__attribute__((visibility("default"))) void write_file_atomically(
-    const std::string& path, const std::function<void(std::ostream&)>& write);
+// and the reason; a Cancelled from write passes through as it is.
+void write_file_atomically(const std::string& path,
+                           const std::function<void(std::ostream&)>& write);
 
 }  // namespace oclvox::detail

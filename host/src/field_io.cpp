@@ -1,5 +1,6 @@
 // Field files: write_field picks the format by extension; .npy (float32, Fortran order, with a
-// JSON sidecar placing it in space) is written and read here, .vdb in field_vdb.cpp.
+// JSON sidecar placing it in space) is written and read here; .vdb is written by
+// write_level_set_vdb.cpp and read by field_vdb.cpp (OpenVDB's module).
 //
 // .npy format version 1.0 (numpy.org/neps/nep-0001-npy-format.html). Shape (nx, ny, nz) in
 // Fortran order means x fastest, which is exactly ScalarField's layout, so numpy's arr[i, j, k]
@@ -610,8 +611,7 @@ void write_field(const std::string& path, const Grid& grid, double band_voxels,
                                });
     }
     if (extension == ".vdb")
-        return detail::vdb_functions_to_write(path).write_field(path, grid, band_voxels, layer,
-                                                                phases);
+        return detail::write_level_set_vdb(path, grid, band_voxels, layer, phases);
     unknown_field_extension(path, extension);
 }
 

@@ -1,21 +1,16 @@
-// OpenVDB level-set files: sample (i, j, k) of the field at OpenVDB index (i, j, k), placed by
-// the shared voxel-centre transform (vdb_format.hpp). Dense fields are written through OpenVDB's
-// tree, taken a leaf (8x8x8 voxels) at a time, and give the same file as a sparse field of the
-// same values, which write_level_set_vdb.cpp writes without OpenVDB; the reader turns a level
-// set's leaves and tiles into a sparse field.
+// OpenVDB level-set files read into sparse fields: a level set's leaves and tiles, sample (i, j, k)
+// of the field at OpenVDB index (i, j, k) for our own files (write_level_set_vdb.cpp writes them
+// without OpenVDB), placed by their transform for any other.
 #include "field_vdb.hpp"
 
-#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
-#include <functional>
-#include <memory>
 
 #include "host_memory.hpp"
-#include "vdb_format.hpp"
+#include "openvdb_headers.hpp"
+#include "writers.hpp"
 
 // Only here: rebuilding pulls in OpenVDB's mesher and mesh-to-volume (see openvdb_headers.hpp for
 // the visibility).
@@ -28,138 +23,17 @@ namespace oclvox::detail {
 
 namespace {
 
-constexpr int kLeaf = SparseField::kLeaf;
-
-// Leaf i of a batch: its minimum voxel in `origin`, and its 8x8x8 samples, x fastest (those
-// beyond the grid are never read), either in `scratch` (filled) or where the field holds them.
-// Called for several leaves at once, from several threads.
-using LeafAt =
-    std::function<const float*(size_t i, float* scratch, std::array<int64_t, 3>& origin)>;
-// A batch of `count` leaves, leaf_at(i, ...) for each.
-using LeafBatch = std::function<void(size_t count, const LeafAt& leaf_at)>;
-
-// The level set of the leaves that for_each_batch hands over, batch by batch (every leaf that may
-// hold a sample within the band; `leaves` of them, for progress). band_voxels <= 0: the largest
-// |value|, found as the leaves pass (every sample is kept until it is known).
-void write_level_set(const std::string& path, const Grid& g, double band_voxels,
-                     ProgressPhases& progress, uint64_t leaves,
-                     const std::function<void(const LeafBatch&)>& for_each_batch) {
-    openvdb::initialize();
-    const bool band_known = band_voxels > 0;
-    float background = band_known ? float(band_voxels * g.voxel_size) : INFINITY;
-
-    // Phase 1: grid, transform and metadata (the background set once it is known).
-    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(band_known ? background : 0.0f);
-    place_vdb_grid(*grid, g, "sdf", openvdb::GRID_LEVEL_SET);
-
-    // Phase 2: the narrow band as active voxels, leaf by leaf. The rest stays background, and the
-    // signed flood fill then gives the inactive regions inside the surface the background's
-    // negative, as a level set's tiles must have. A batch's leaves are built on their own, in
-    // parallel (one after another they were a quarter of writing a 2048^3 band), and then put in
-    // the tree. The band, then the flood fill and the file (no progress of their own, estimated
-    // at about the band's cost together).
-    const size_t band = progress.add(2), file = progress.add(1);
-    openvdb::FloatTree& tree = grid->tree();
-    openvdb::tree::ValueAccessor<openvdb::FloatTree> access(tree);
-    using Leaf = openvdb::FloatTree::LeafNodeType;
-    static_assert(Leaf::DIM == kLeaf, "our leaves are OpenVDB's");
-    uint64_t visited = 0;
-    float largest = 0;
-    std::vector<std::unique_ptr<Leaf>> built;
-    for_each_batch([&](size_t count, const LeafAt& leaf_at) {
-        built.clear();
-        built.resize(count);
-        const float batch_largest = tbb::parallel_reduce(
-            tbb::blocked_range<size_t>(0, count, 64), 0.0f,
-            [&](const tbb::blocked_range<size_t>& r, float most) {
-                float scratch[SparseField::kLeafSamples];
-                for (size_t i = r.begin(); i != r.end(); ++i) {
-                    std::array<int64_t, 3> origin;
-                    const float* samples = leaf_at(i, scratch, origin);
-                    const int64_t nx = std::min<int64_t>(kLeaf, g.dims[0] - origin[0]);
-                    const int64_t ny = std::min<int64_t>(kLeaf, g.dims[1] - origin[1]);
-                    const int64_t nz = std::min<int64_t>(kLeaf, g.dims[2] - origin[2]);
-                    for (int64_t z = 0; z < nz; ++z)
-                        for (int64_t y = 0; y < ny; ++y)
-                            for (int64_t x = 0; x < nx; ++x) {
-                                const float value = samples[x + kLeaf * (y + kLeaf * z)];
-                                most = std::max(most, std::abs(value));
-                                if (!(std::abs(value) < background)) continue;
-                                // Made at its first value in the band, holding the tree's
-                                // background, inactive, as the tree makes a leaf.
-                                if (!built[i])
-                                    built[i] = std::make_unique<Leaf>(
-                                        openvdb::Coord(int(origin[0]), int(origin[1]),
-                                                       int(origin[2])),
-                                        tree.background(), false);
-                                // The leaf's own offset (z fastest): origin is a whole leaf's.
-                                built[i]->setValueOn(openvdb::Index(x << 6 | y << 3 | z), value);
-                            }
-                }
-                return most;
-            },
-            [](float a, float b) { return std::max(a, b); });
-        largest = std::max(largest, batch_largest);
-        for (std::unique_ptr<Leaf>& leaf : built)
-            if (leaf) access.addLeaf(leaf.release());
-        visited += count;
-        progress.report(band, visited, leaves);
-    });
-    if (!band_known) {
-        // Now the band is known: what a known band would have left out becomes background,
-        // inactive, and leaves left without an active voxel go, as they would not have been made.
-        background = largest;
-        band_voxels = double(largest) / g.voxel_size;
-        for (auto leaf = tree.beginLeaf(); leaf; ++leaf)
-            for (auto voxel = leaf->beginValueOn(); voxel; ++voxel)
-                if (!(std::abs(*voxel) < background)) {
-                    voxel.setValue(background);
-                    voxel.setValueOff();
-                }
-        tree.root().setBackground(background, true);
-        openvdb::tools::pruneInactive(tree);
-    }
-    grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(band_voxels));
-    openvdb::tools::signedFloodFill(tree);
-
-    // Phase 3: the file.
-    progress.report(file, 0, 1);
-    write_vdb_file(path, grid, [&] { progress.finish(); });
+// OpenVDB's index space has its sample (i, j, k) at index point (i, j, k); ours has voxel
+// (i, j, k) centred at origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size. So the transform scales
+// by voxel_size and translates to vdb_index_origin (writers.hpp), as every .vdb we write does:
+// the same integer (i, j, k) addresses the same voxel in both, and world positions agree.
+openvdb::math::Transform::Ptr voxel_centre_transform(const Grid& grid) {
+    openvdb::math::Transform::Ptr transform =
+        openvdb::math::Transform::createLinearTransform(grid.voxel_size);
+    const std::array<double, 3> centre = vdb_index_origin(grid);
+    transform->postTranslate(openvdb::Vec3d(centre[0], centre[1], centre[2]));
+    return transform;
 }
-
-}  // namespace
-
-void write_field_vdb(const std::string& path, const Grid& g, double band_voxels,
-                     const FieldLayer& layer, ProgressPhases& progress) {
-    // Every leaf of the grid, gathered from a slab of a leaf's height of layers: a slab's leaves
-    // are a batch.
-    const auto& d = g.dims;
-    const int64_t leaves_x = (d[0] + kLeaf - 1) / kLeaf, leaves_y = (d[1] + kLeaf - 1) / kLeaf;
-    const uint64_t leaves =
-        uint64_t(leaves_x) * uint64_t(leaves_y) * uint64_t((d[2] + kLeaf - 1) / kLeaf);
-    const size_t per_layer = size_t(d[0]) * size_t(d[1]);
-    write_level_set(path, g, band_voxels, progress, leaves, [&](const LeafBatch& batch) {
-        std::vector<float> slab(per_layer * kLeaf);
-        for (int64_t z = 0; z < d[2]; z += kLeaf) {
-            const int64_t depth = std::min<int64_t>(kLeaf, d[2] - z);
-            for (int64_t k = 0; k < depth; ++k) layer(z + k, &slab[size_t(k) * per_layer]);
-            batch(size_t(leaves_x * leaves_y),
-                  [&](size_t i, float* scratch, std::array<int64_t, 3>& origin) {
-                      const int64_t x = int64_t(i) % leaves_x * kLeaf;
-                      const int64_t y = int64_t(i) / leaves_x * kLeaf;
-                      origin = {x, y, z};
-                      const int64_t row = std::min<int64_t>(kLeaf, d[0] - x);
-                      for (int64_t k = 0; k < depth; ++k)
-                          for (int64_t j = y; j < std::min(y + kLeaf, d[1]); ++j)
-                              std::copy_n(&slab[size_t(k) * per_layer + size_t(x + d[0] * j)], row,
-                                          &scratch[kLeaf * ((j - y) + kLeaf * k)]);
-                      return static_cast<const float*>(scratch);
-                  });
-        }
-    });
-}
-
-namespace {
 
 [[noreturn]] void bad_vdb(const std::string& path, const std::string& why) {
     throw InputError("cannot read field " + path + ": " + why);

@@ -17,9 +17,7 @@ namespace oclvox::detail {
 // describe the whole run; a fixed total also cannot grow while the run goes on.
 constexpr uint64_t kPhasedProgressTotal = 1000000;
 
-// Exported from the shared liboclvox, as the module of OpenVDB's functions reports through it
-// (vdb_module.hpp).
-class __attribute__((visibility("default"))) ProgressPhases {
+class ProgressPhases {
   public:
     // `what` names the run in the message of the Cancelled it throws ("signed distance field").
     ProgressPhases(ProgressCallback callback, std::string what);

@@ -6,7 +6,7 @@ namespace oclvox::detail {
 
 const VdbFunctions& linked_vdb_functions() {
     static const VdbFunctions functions = {
-        write_field_vdb, static_cast<SparseField (*)(const std::string&)>(read_field_vdb),
+        static_cast<SparseField (*)(const std::string&)>(read_field_vdb),
         static_cast<SparseField (*)(const std::string&, const Grid&, double)>(read_field_vdb)};
     return functions;
 }

@@ -3,9 +3,6 @@
 
 namespace oclvox::detail {
 
-const VdbFunctions& vdb_functions_to_write(const std::string&) {
-    return linked_vdb_functions();
-}
 const VdbFunctions& vdb_functions_to_read(const std::string&) {
     return linked_vdb_functions();
 }

@@ -56,12 +56,6 @@ const Loaded& loaded() {
 
 }  // namespace
 
-const VdbFunctions& vdb_functions_to_write(const std::string& path) {
-    const Loaded& module = loaded();
-    if (!module.functions) throw OutputError("cannot write " + path + ": " + module.why);
-    return *module.functions;
-}
-
 const VdbFunctions& vdb_functions_to_read(const std::string& path) {
     const Loaded& module = loaded();
     if (!module.functions) throw InputError("cannot read " + path + ": " + module.why);

@@ -91,9 +91,14 @@ void put_grid_prefix(BlockWriter& sink, const Grid& grid, const GridDescription&
 
 namespace oclvox::detail {
 
-// A level-set FloatGrid "sdf" of a sparse field's leaves, byte for byte what write_field_vdb
-// (field_vdb.cpp) makes of them through OpenVDB, without OpenVDB. See write_level_set_vdb.cpp.
+// A level-set FloatGrid "sdf", byte for byte what OpenVDB's writer makes of the same level set
+// but for its optional delayed-load index. See write_level_set_vdb.cpp. Throws OutputError.
+// A sparse field's leaves, its band field.band_voxels():
 void write_level_set_vdb(const std::string& path, const SparseField& field,
                          ProgressPhases& progress);
+// A dense field's layers, from layer(k, out) in order, 8 (a leaf's height) held at a time;
+// band_voxels <= 0 takes the largest |value| (every leaf is kept until it is known).
+void write_level_set_vdb(const std::string& path, const Grid& grid, double band_voxels,
+                         const FieldLayer& layer, ProgressPhases& progress);
 
 }  // namespace oclvox::detail

@@ -1,14 +1,16 @@
-// OpenVDB level-set writer for sparse fields, without OpenVDB: a FloatGrid named "sdf" of class
-// "level set", sample (i, j, k) at index (i, j, k) (the transform of every .vdb we write), its
-// background the field's, a voxel active where |value| < background, every other value the
-// background signed as OpenVDB's signed flood fill signs it.
+// OpenVDB level-set writer, without OpenVDB: a FloatGrid named "sdf" of class "level set", sample
+// (i, j, k) at index (i, j, k) (the transform of every .vdb we write), its background the band in
+// world units, a voxel active where |value| < background, every other value the background signed
+// as OpenVDB's signed flood fill signs it. Sparse fields are written from their leaves, dense ones
+// from their layers, 8 (a leaf's height) held at a time, keeping the leaves with a sample in the
+// band; both give the same file for the same values.
 //
-// Why not through OpenVDB (field_vdb.cpp, which still writes dense fields): building its tree
-// allocates each leaf (2 KiB, 0.3 M of them at 2048^3, fresh pages the kernel must clear), and
-// its serial writer then compresses each leaf with Blosc, which gains 6-8% on distances: for
-// bunny00 at 2048^3 the tree was 1.6 s and the file 2.8 s against a 2.5 s field. Here the
-// leaves' masks and signs are worked out on every core from the field's own leaves, which are
-// then written from where they lie.
+// Why not through OpenVDB (as until 2026-12-07): building its tree allocates each leaf (2 KiB,
+// 0.3 M of them at 2048^3, fresh pages the kernel must clear), and its serial writer then
+// compresses each leaf with Blosc, which gains 6-8% on distances: for bunny00 at 2048^3 the tree
+// was 1.6 s and the file 2.8 s against a 2.5 s field. Here the leaves' masks and signs are worked
+// out on every core from the field's own leaves (or layers), which are then written from where
+// they lie.
 //
 // The layout is that of write_vdb.cpp (OpenVDB file format 224, one grid, a 5-4-3 tree,
 // compression "active mask" only) with float values. What differs from a bool tree:
@@ -25,12 +27,15 @@
 //   - the root starts with the background (a float), and its tiles are (x, y, z, value, active).
 //   - a leaf's buffer is its value mask then its compressed values (no origin).
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 
 #include "atomic_file.hpp"
 #include "bit_count.hpp"
@@ -47,12 +52,23 @@ constexpr uint64_t kLeafBytes = 2144;
 
 constexpr uint8_t kAllOutside = 0, kAllInside = 1, kSelectOutside = 3;  // writeCompressedValues
 
-// A leaf as written: its key, the field's leaf it comes from, its value mask, which of its
+// The leaves to write, in any order: count, each one's minimum voxel and its 512 samples (x
+// fastest; those beyond the grid are never read), and the level set's background and band.
+struct LeafSource {
+    const Grid& grid;
+    float background;
+    double band_voxels;
+    size_t count;
+    std::function<std::array<int64_t, 3>(size_t)> origin;
+    std::function<const float*(size_t)> samples;
+};
+
+// A leaf as written: its key, the source's leaf it comes from, its value mask, which of its
 // inactive values are inside (-background) after the flood fill, and whether its first and last
 // values (offsets 0 and 511) are inside, which its parent's flood fill reads.
 struct LevelSetLeaf {
     uint64_t key;
-    size_t stored;  // the field's n-th stored leaf
+    size_t stored;  // the source's n-th leaf
     uint64_t active[8];
     uint64_t inside[8];
     bool first_inside, last_inside;
@@ -176,27 +192,27 @@ using LowerFill = FilledNode<4>;
 using UpperFill = FilledNode<5>;
 
 // The leaves within the band, in OpenVDB's order, with their masks and signs.
-std::vector<LevelSetLeaf> level_set_leaves(const SparseField& field) {
-    const size_t count = field.leaf_count();
+std::vector<LevelSetLeaf> level_set_leaves(const LeafSource& source) {
+    const size_t count = source.count;
     std::vector<std::pair<uint64_t, size_t>> order(count);
     tbb::parallel_for(size_t(0), count, [&](size_t n) {
-        const auto o = field.leaf_origin(field.leaf_indices()[n]);
+        const auto o = source.origin(n);
         order[n] = {leaf_key(o[0], o[1], o[2]), n};
     });
     tbb::parallel_sort(order.begin(), order.end());
     std::vector<LevelSetLeaf> leaves(count);
     std::vector<uint8_t> kept(count);
-    const auto& d = field.grid().dims;
+    const auto& d = source.grid.dims;
     tbb::parallel_for(size_t(0), count, [&](size_t i) {
         const size_t n = order[i].second;
-        const auto o = field.leaf_origin(field.leaf_indices()[n]);
+        const auto o = source.origin(n);
         const std::array<int64_t, 3> inside_grid{std::min<int64_t>(8, d[0] - o[0]),
                                                  std::min<int64_t>(8, d[1] - o[1]),
                                                  std::min<int64_t>(8, d[2] - o[2])};
         LevelSetLeaf& leaf = leaves[i];
         leaf.key = order[i].first;
         leaf.stored = n;
-        kept[i] = fill_leaf(field.leaf_samples(n), inside_grid, field.background(), leaf);
+        kept[i] = fill_leaf(source.samples(n), inside_grid, source.background, leaf);
     });
     size_t used = 0;
     for (size_t i = 0; i < count; ++i)
@@ -228,17 +244,14 @@ void put_leaf_buffer(BlockWriter& sink, const LevelSetLeaf& leaf, const float* s
         }
 }
 
-}  // namespace
-
-void write_level_set_vdb(const std::string& path, const SparseField& field,
-                         ProgressPhases& progress) {
+void write_leaves(const std::string& path, const LeafSource& source, ProgressPhases& progress) {
     const size_t gather = progress.add(1), file = progress.add(2);
-    const float background = field.background();
+    const float background = source.background;
 
     // Phase 1: the leaves in the band, in OpenVDB's order, with their signs; the nodes above
     // them, flood-filled bottom up; the statistics the metadata records.
     progress.report(gather, 0, 1);
-    const std::vector<LevelSetLeaf> leaves = level_set_leaves(field);
+    const std::vector<LevelSetLeaf> leaves = level_set_leaves(source);
     const TreeShape shape = tree_shape(
         leaves.size(), [&](size_t i) { return leaves[i].key; }, [](size_t) { return false; });
     std::vector<LowerFill> lowers(shape.lowers.size());
@@ -280,8 +293,8 @@ void write_level_set_vdb(const std::string& path, const SparseField& field,
     // Phase 2: the file: what precedes the tree, the tree's topology, its leaves' buffers.
     write_file_atomically(path, [&](std::ostream& out) {
         BlockWriter sink(out);
-        put_grid_prefix(sink, field.grid(),
-                        {"sdf", "Tree_float_5_4_3", "level set", field.band_voxels()}, stats);
+        put_grid_prefix(sink, source.grid,
+                        {"sdf", "Tree_float_5_4_3", "level set", source.band_voxels}, stats);
         sink.little_endian(int32_t(1));  // buffer count
         sink.little_endian(background);
         sink.little_endian(uint32_t(root_tiles.size()));
@@ -301,12 +314,84 @@ void write_level_set_vdb(const std::string& path, const SparseField& field,
             }
         }
         for (size_t i = 0; i < leaves.size(); ++i) {
-            put_leaf_buffer(sink, leaves[i], field.leaf_samples(leaves[i].stored));
+            put_leaf_buffer(sink, leaves[i], source.samples(leaves[i].stored));
             if ((i & 4095) == 4095) progress.report(file, i + 1, leaves.size());
         }
         sink.flush();
         progress.finish();
     });
+}
+
+}  // namespace
+
+void write_level_set_vdb(const std::string& path, const SparseField& field,
+                         ProgressPhases& progress) {
+    write_leaves(path,
+                 {field.grid(), field.background(), field.band_voxels(), field.leaf_count(),
+                  [&](size_t n) { return field.leaf_origin(field.leaf_indices()[n]); },
+                  [&](size_t n) { return field.leaf_samples(n); }},
+                 progress);
+}
+
+void write_level_set_vdb(const std::string& path, const Grid& grid, double band_voxels,
+                         const FieldLayer& layer, ProgressPhases& progress) {
+    // Phase 1: the leaves with a sample in the band, gathered from slabs of a leaf's height of
+    // layers. Without a band, every leaf is kept until the band (the largest |value|) is known.
+    const size_t slabs = progress.add(2);
+    const bool band_known = band_voxels > 0;
+    const float band = band_known ? float(band_voxels * grid.voxel_size) : INFINITY;
+    const auto& d = grid.dims;
+    const int64_t leaves_x = (d[0] + 7) / 8, leaves_y = (d[1] + 7) / 8;
+    const size_t per_layer = size_t(d[0]) * size_t(d[1]), per_slab = size_t(leaves_x * leaves_y);
+    std::vector<float> slab(per_layer * 8), slab_leaves(per_slab * SparseField::kLeafSamples);
+    std::vector<uint8_t> in_band(per_slab);
+    std::vector<std::array<int64_t, 3>> origins;
+    std::vector<float> samples;
+    float largest = 0;
+    for (int64_t z = 0; z < d[2]; z += 8) {
+        progress.report(slabs, uint64_t(z), uint64_t(d[2]));
+        const int64_t depth = std::min<int64_t>(8, d[2] - z);
+        for (int64_t k = 0; k < depth; ++k) layer(z + k, &slab[size_t(k) * per_layer]);
+        const float slab_largest = tbb::parallel_reduce(
+            tbb::blocked_range<size_t>(0, per_slab), 0.0f,
+            [&](const tbb::blocked_range<size_t>& r, float most) {
+                for (size_t i = r.begin(); i != r.end(); ++i) {
+                    const int64_t x = int64_t(i) % leaves_x * 8, y = int64_t(i) / leaves_x * 8;
+                    const int64_t row = std::min<int64_t>(8, d[0] - x);
+                    float* leaf = &slab_leaves[i * SparseField::kLeafSamples];
+                    bool any = false;
+                    for (int64_t k = 0; k < depth; ++k)
+                        for (int64_t j = y; j < std::min(y + 8, d[1]); ++j) {
+                            const float* from = &slab[size_t(k) * per_layer + size_t(x + d[0] * j)];
+                            std::copy_n(from, row, &leaf[8 * ((j - y) + 8 * k)]);
+                            for (int64_t n = 0; n < row; ++n) {
+                                most = std::max(most, std::abs(from[n]));
+                                any |= std::abs(from[n]) < band;
+                            }
+                        }
+                    in_band[i] = any;
+                }
+                return most;
+            },
+            [](float a, float b) { return std::max(a, b); });
+        largest = std::max(largest, slab_largest);
+        for (size_t i = 0; i < per_slab; ++i) {
+            if (!in_band[i]) continue;
+            origins.push_back({int64_t(i) % leaves_x * 8, int64_t(i) / leaves_x * 8, z});
+            const float* leaf = &slab_leaves[i * SparseField::kLeafSamples];
+            samples.insert(samples.end(), leaf, leaf + SparseField::kLeafSamples);
+        }
+    }
+    progress.report(slabs, 1, 1);
+
+    // Phase 2: the file. A band found from the samples is their largest |value|: those at it are
+    // the background (inactive), and leaves left without an active sample are not written.
+    write_leaves(path,
+                 {grid, band_known ? band : largest,
+                  band_known ? band_voxels : double(largest) / grid.voxel_size, origins.size(),
+                  [&](size_t n) { return origins[n]; },
+                  [&](size_t n) { return &samples[n * SparseField::kLeafSamples]; }},
+                 progress);
 }
 
 }  // namespace oclvox::detail

@@ -17,8 +17,8 @@
 // all cores, put in OpenVDB's order, and written in large pieces, laid out exactly as OpenVDB's
 // io::Stream lays out the same grid once pruned (full leaves and full internal nodes as active
 // tiles); the tests compare the bytes with OpenVDB's own file, and read it back through OpenVDB's
-// C++ and Python APIs. Sparse level sets are written the same way (write_level_set_vdb.cpp), on
-// the shared layout of vdb_stream.cpp; dense fields still go through OpenVDB (field_vdb.cpp).
+// C++ and Python APIs. Level sets are written the same way (write_level_set_vdb.cpp), on the
+// shared layout of vdb_stream.cpp.
 //
 // The layout (OpenVDB file format 224 as OpenVDB 10.0 writes it to a stream, one grid, tree
 // Root -> Internal<5> -> Internal<4> -> Leaf<bool, 3>, compression "active mask" only; integers
