@@ -2,7 +2,6 @@
 // double-precision brute force (Ericson's Voronoi-region closest point, not the library's
 // projection-or-edges formulation).
 #include <openvdb/io/File.h>
-#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -18,9 +17,9 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
-#include <sstream>
 
 #include "oclvox/sdf.hpp"
+#include "openvdb_reference.hpp"
 #include "sdf_internal.hpp"
 #include "test_support.hpp"
 
@@ -1263,19 +1262,7 @@ std::string openvdb_written_level_set(
     const std::function<float(int64_t, int64_t, int64_t)>& value) {
     openvdb::initialize();
     const openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(background);
-    grid->setName("sdf");
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
-    const openvdb::math::Transform::Ptr transform =
-        openvdb::math::Transform::createLinearTransform(g.voxel_size);
-    transform->postTranslate(openvdb::Vec3d(g.origin[0] + 0.5 * g.voxel_size,
-                                            g.origin[1] + 0.5 * g.voxel_size,
-                                            g.origin[2] + 0.5 * g.voxel_size));
-    grid->setTransform(transform);
-    grid->insertMeta("oclvox_origin",
-                     openvdb::Vec3DMetadata(openvdb::Vec3d(g.origin[0], g.origin[1], g.origin[2])));
-    grid->insertMeta("oclvox_voxel_size", openvdb::DoubleMetadata(g.voxel_size));
-    grid->insertMeta("oclvox_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(
-                                        int(g.dims[0]), int(g.dims[1]), int(g.dims[2]))));
+    place_as_our_vdb_files_do(*grid, g, "sdf", openvdb::GRID_LEVEL_SET);
     grid->insertMeta("oclvox_band_voxels", openvdb::DoubleMetadata(band_voxels));
     openvdb::FloatGrid::Accessor access = grid->getAccessor();
     for (int64_t k = 0; k < g.dims[2]; ++k)
@@ -1286,11 +1273,7 @@ std::string openvdb_written_level_set(
                     access.setValueOn(openvdb::Coord(int(i), int(j), int(k)), v);
             }
     openvdb::tools::signedFloodFill(grid->tree());
-    std::ostringstream out;
-    openvdb::io::Stream stream(out);
-    stream.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK);
-    stream.write(openvdb::GridCPtrVec{grid});
-    std::string bytes = out.str();
+    std::string bytes = written_by_openvdb(grid);
 
     auto int32_at = [&](size_t at) {
         int32_t v;

@@ -2,7 +2,6 @@
 // specification (not from the writer), and must give back exactly the voxels that were written.
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>
-#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -29,6 +28,7 @@
 #include "atomic_file.hpp"
 #include "oclvox/field.hpp"
 #include "oclvox/oclvox.hpp"
+#include "openvdb_reference.hpp"
 #include "test_support.hpp"
 #include "writers.hpp"
 
@@ -1361,29 +1361,13 @@ TEST_F(WriterTest, VdbOfManyBrickGroupsHasExactlyTheSetVoxels) {
 std::string openvdb_written_occupancy(const SparseVoxels& voxels) {
     const Grid& g = voxels.grid();
     const openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
-    grid->setName("occupancy");
-    grid->setGridClass(openvdb::GRID_UNKNOWN);
-    const openvdb::math::Transform::Ptr transform =
-        openvdb::math::Transform::createLinearTransform(g.voxel_size);
-    transform->postTranslate(openvdb::Vec3d(g.origin[0] + 0.5 * g.voxel_size,
-                                            g.origin[1] + 0.5 * g.voxel_size,
-                                            g.origin[2] + 0.5 * g.voxel_size));
-    grid->setTransform(transform);
-    grid->insertMeta("oclvox_origin",
-                     openvdb::Vec3DMetadata(openvdb::Vec3d(g.origin[0], g.origin[1], g.origin[2])));
-    grid->insertMeta("oclvox_voxel_size", openvdb::DoubleMetadata(g.voxel_size));
-    grid->insertMeta("oclvox_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(
-                                        int(g.dims[0]), int(g.dims[1]), int(g.dims[2]))));
+    oclvox::test::place_as_our_vdb_files_do(*grid, g, "occupancy", openvdb::GRID_UNKNOWN);
     openvdb::BoolGrid::Accessor access = grid->getAccessor();
     voxels.for_each([&](int64_t i, int64_t j, int64_t k) {
         access.setValueOn(openvdb::Coord(int(i), int(j), int(k)), true);
     });
     grid->tree().prune();
-    std::ostringstream out;
-    openvdb::io::Stream stream(out);
-    stream.setCompression(openvdb::io::COMPRESS_ACTIVE_MASK);
-    stream.write(openvdb::GridCPtrVec{grid});
-    return out.str();
+    return oclvox::test::written_by_openvdb(grid);
 }
 
 // The bytes of our .vdb are those of OpenVDB's writer for the same voxels but for the file's

@@ -34,6 +34,10 @@ constexpr uint64_t kLowerBytes = kLowerEntries * 8 + 2 * kLowerEntries / 8 + 12;
 constexpr int kLowerBits = 12, kUpperBits = 15;
 uint64_t leaf_key(int64_t x, int64_t y, int64_t z);
 std::array<int32_t, 3> leaf_origin(uint64_t key);
+// The origin of the upper node (root entry) whose key is `upper_key` (a leaf key's top bits).
+inline std::array<int32_t, 3> upper_origin(uint64_t upper_key) {
+    return leaf_origin(upper_key << (kUpperBits + kLowerBits));
+}
 
 // The bytes of `value` as they lie in memory, as OpenVDB writes its masks and coordinates (its
 // files are little-endian, as is every host it supports).

@@ -135,9 +135,8 @@ struct FilledNode {
     std::array<uint64_t, kEntries / 64> children{}, inside{};
     bool first_inside = false, last_inside = false;
 
-    bool child(size_t i) const { return children[i >> 6] >> (i & 63) & 1; }
-
-    // child_at(i) for each child offset i (increasing): its first and last values' insideness.
+    // offsets: the children's offsets, increasing; child_first(c), child_last(c): whether child
+    // c's first and last values are inside.
     template <class FirstInside, class LastInside>
     void fill(const std::vector<uint32_t>& offsets, const FirstInside& child_first,
               const LastInside& child_last) {
@@ -278,8 +277,8 @@ void write_leaves(const std::string& path, const LeafSource& source, ProgressPha
     // values are inside.
     std::vector<std::array<int32_t, 3>> root_tiles;
     for (size_t u = 1; u < shape.uppers.size(); ++u) {
-        const auto a = leaf_origin(shape.uppers[u - 1].key << (kUpperBits + kLowerBits));
-        const auto b = leaf_origin(shape.uppers[u].key << (kUpperBits + kLowerBits));
+        const auto a = upper_origin(shape.uppers[u - 1].key);
+        const auto b = upper_origin(shape.uppers[u].key);
         if (a[0] != b[0] || a[1] != b[1] || b[2] - a[2] == 4096) continue;
         if (!uppers[u - 1].last_inside || !uppers[u].first_inside) continue;
         for (int32_t z = a[2] + 4096; z != b[2]; z += 4096) root_tiles.push_back({a[0], a[1], z});
@@ -305,7 +304,7 @@ void write_leaves(const std::string& path, const LeafSource& source, ProgressPha
             sink.little_endian(uint8_t(0));  // inactive
         }
         for (size_t u = 0; u < shape.uppers.size(); ++u) {
-            put_bytes(sink, leaf_origin(shape.uppers[u].key << (kUpperBits + kLowerBits)));
+            put_bytes(sink, upper_origin(shape.uppers[u].key));
             uppers[u].put(sink);
             for (size_t l = shape.uppers[u].first; l < shape.uppers[u].end; ++l) {
                 lowers[l].put(sink);

@@ -176,20 +176,16 @@ void put_topology(BlockWriter& sink, const std::vector<LeafBits>& leaves, const 
     for (const UpperNode& upper : shape.uppers) root_tiles += upper.full();
     sink.little_endian(root_tiles);
     sink.little_endian(uint32_t(shape.uppers.size() - root_tiles));
-    auto put_origin = [&](uint64_t upper_key) {
-        const auto o = leaf_origin(upper_key << (kUpperBits + kLowerBits));
-        put_bytes(sink, o);
-    };
     for (const UpperNode& upper : shape.uppers)
         if (upper.full()) {
-            put_origin(upper.key);
+            put_bytes(sink, upper_origin(upper.key));
             sink.little_endian(uint8_t(1));  // value
             sink.little_endian(uint8_t(1));  // active
         }
     std::vector<uint32_t> children, tiles;
     for (const UpperNode& upper : shape.uppers) {
         if (upper.full()) continue;
-        put_origin(upper.key);
+        put_bytes(sink, upper_origin(upper.key));
         children.clear();
         tiles.clear();
         for (size_t l = upper.first; l < upper.end; ++l)
