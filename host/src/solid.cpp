@@ -36,10 +36,15 @@ Choice choose_inside_test(const Mesh& mesh, InsideTest requested, bool parity_fi
     if (edges.non_manifold)
         return {InsideTest::Winding,
                 "mesh has " + std::to_string(edges.non_manifold) + " non-manifold edges"};
-    if (edges.misoriented)
-        return {InsideTest::Winding, "mesh has " + std::to_string(edges.misoriented) +
-                                         " edges between inconsistently oriented triangles"};
     if (!parity_fits) return {InsideTest::Winding, too_far};
+    // Crossing parity counts crossings whichever way a triangle winds, so a closed mesh with
+    // flipped triangles is still filled exactly. The winding number is not: a flipped triangle
+    // adds minus twice its own winding number, which nears 1 in size beside it (a cube of 10
+    // voxels a side with its top face flipped loses 196 voxels of the three layers under it).
+    if (edges.misoriented)
+        return {InsideTest::Parity, "mesh is closed (" + std::to_string(edges.misoriented) +
+                                        " edges between inconsistently oriented triangles: "
+                                        "crossing parity does not depend on orientation)"};
     return {InsideTest::Parity, "mesh is closed"};
 }
 // Shared by both entry points: choose the test, and record the choice.

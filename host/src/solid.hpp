@@ -18,7 +18,8 @@ struct MeshEdgeReport {
     uint64_t boundary = 0;      // used by one triangle
     uint64_t non_manifold = 0;  // used by more than two
     uint64_t misoriented = 0;   // used by two triangles running it the same way
-    bool closed() const { return boundary == 0 && non_manifold == 0 && misoriented == 0; }
+    // Every edge used by exactly two triangles, whichever way they run it.
+    bool closed() const { return boundary == 0 && non_manifold == 0; }
 };
 MeshEdgeReport mesh_edge_report(const Mesh& mesh);
 
@@ -34,9 +35,10 @@ void for_each_parity_column(const Mesh& mesh, const Grid& grid, int brick_size,
 
 // Both return the solid voxels only (no surface), in options.brick_size bricks, and set
 // stats.inside_test and stats.inside_test_reason. Auto picks parity for a closed mesh (every
-// edge shared by two oppositely oriented triangles) that fits the exact parity arithmetic, and
-// the winding number otherwise. Solid works from the mesh itself, not the surface's prepared
-// triangles: it needs every triangle, unclipped and including those outside the grid.
+// edge shared by exactly two triangles, whichever way they run it: parity does not depend on
+// orientation) that fits the exact parity arithmetic, and the winding number otherwise. Solid works
+// from the mesh itself, not the surface's prepared triangles: it needs every triangle, unclipped
+// and including those outside the grid.
 SparseVoxels solid_device(Device::Impl& cl, const Mesh& mesh, const Grid& grid,
                           const VoxelizeOptions& options, VoxelizeStats& stats);
 SparseVoxels solid_reference(const Mesh& mesh, const Grid& grid, const VoxelizeOptions& options,

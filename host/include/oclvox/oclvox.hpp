@@ -239,7 +239,7 @@ VoxelizeMode voxelize_mode_from_string(const std::string& name);
 
 // How Solid decides "inside".
 enum class InsideTest {
-    Auto,     // Parity for closed, consistently oriented meshes, Winding otherwise
+    Auto,     // Parity for closed meshes (whatever their orientation), Winding otherwise
     Parity,   // crossing parity along voxel columns (Schwarz & Seidel)
     Winding,  // generalized winding number > 0.5 (Jacobson et al. 2013)
 };
