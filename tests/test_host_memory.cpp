@@ -1,6 +1,7 @@
 // The host memory budget (README "Guarantees"): every allocation whose size comes from the input
 // (dense distance fields and their working copies, solid results and the winding number's dense
-// state, dense copies, CSG fields, the meshers' buffers, .npy samples) is checked against it
+// state, dense copies, CSG fields, a sparse field's band, a band-less .vdb's leaves, the meshers'
+// buffers, .npy samples) is checked against it
 // before anything is allocated, and refused with an error naming both sizes. The budget is an
 // option where the call has one (VoxelizeOptions::host_budget_bytes, SdfOptions::
 // host_budget_bytes), else $OCLVOX_HOST_MEMORY_MIB, so these tests need no real memory: each
@@ -187,6 +188,45 @@ TEST(HostMemory, CsgFieldOverBudgetIsRefusedBeforeAllocating) {
                     budget_of("16 MiB")});
 }
 
+// One triangle across 16384^2 voxels reaches 2^21 leaves of a sparse field's band, 4 GiB of
+// samples: over a 16 MiB budget (8192 leaves) it is refused while the band's leaves are listed,
+// before the lists grow (its 2^24 blocks alone would list 128 MiB), and so is a band of few
+// leaves but many pairs. A field whose samples (and a batch of them beside) just fit is not
+// refused, and one byte less is refused by the check on the whole list.
+TEST(HostMemory, SparseFieldOverBudgetIsRefusedWhileItsBandIsListed) {
+    ScopedBudget unset(nullptr);
+    Device& gpu = device();
+    Mesh triangle;
+    add_triangle(triangle, {0, 0, 4}, {16384, 0, 4}, {0, 16384, 4});
+    const Grid grid = unit_grid(16384, 16384, 8);
+    SdfOptions options;
+    options.host_budget_bytes = 16 * kMiB;
+    const std::vector<std::string> outgrown = {"band of this sparse distance field outgrows",
+                                               budget_of("16 MiB")};
+    expect_refused([&] { signed_distance_sparse(gpu, triangle, grid, options); }, outgrown);
+    expect_refused([&] { signed_distance_sparse_reference(triangle, grid, options); }, outgrown);
+    // 100,000 copies of one small triangle: a few leaves, but 100,000 (leaf, triangle) pairs at
+    // 26 bytes, over 1 MiB.
+    Mesh copies;
+    for (int t = 0; t < 100000; ++t) add_triangle(copies, {3, 3, 3}, {5, 3, 3}, {3, 5, 3});
+    options.host_budget_bytes = kMiB;
+    expect_refused([&] { signed_distance_sparse(gpu, copies, unit_grid(16, 16, 16), options); },
+                   {"band of this sparse distance field outgrows", budget_of("1 MiB")}, false);
+
+    const Mesh box = box_mesh({10, 10, 10}, {50, 50, 50});
+    const Grid small = unit_grid(64, 64, 64);
+    VoxelizeStats stats;
+    options.host_budget_bytes = 0;
+    signed_distance_sparse(gpu, box, small, options, &stats);
+    const uint64_t leaves = stats.bricks_active;
+    ASSERT_GT(leaves, 100u);
+    options.host_budget_bytes = 2 * leaves * SparseField::kLeafSamples * sizeof(float);
+    EXPECT_EQ(signed_distance_sparse(gpu, box, small, options).leaf_count(), leaves);
+    options.host_budget_bytes -= 1;
+    expect_refused([&] { signed_distance_sparse(gpu, box, small, options); },
+                   {"the samples of " + std::to_string(leaves) + " leaves"}, false);
+}
+
 // A sphere of radius 30 voxels in a 96^3 field: its surface needs a few MiB of mesher buffers and
 // mesh (about 11,000 vertices at 40 bytes and 22,000 triangles at 24), over 1 MiB, under 64. So
 // few MiB cannot be told from the allocator's own growth (under AddressSanitizer), so only the
@@ -232,6 +272,34 @@ TEST(HostMemory, SparseMeshingOverBudgetIsRefused) {
     }
     ScopedBudget budget("64");
     EXPECT_GT(marching_cubes(field).triangles.size(), 30000u);
+}
+
+// A .vdb of a field written layer by layer with no band (a full grid's) holds all its leaves until
+// the largest distance is known: 16^3 leaves of 128^3 voxels, 2048 bytes of samples and 24 of
+// origin each, 8.1 MiB. Over a 4 MiB budget it is refused before the first layer is asked for
+// (a full grid computes its slabs as they are asked for), and leaves no file.
+TEST(HostMemory, VdbOfEveryLeafOverBudgetIsRefusedBeforeItsFirstLayer) {
+    const std::string path =
+        ::testing::TempDir() + "oclvox_host_memory_" + std::to_string(getpid()) + ".vdb";
+    const Grid grid = unit_grid(128, 128, 128);
+    int layers = 0;
+    const FieldLayer layer = [&](int64_t k, float* out) {
+        ++layers;
+        std::fill_n(out, 128 * 128, float(k) - 60.5f);
+    };
+    {
+        ScopedBudget budget("4");
+        expect_refused(
+            [&] { write_field(path, grid, 0.0, layer); },
+            {"128x128x128 voxels", mib(uint64_t(4096) * (2048 + 24)), budget_of("4 MiB")});
+        EXPECT_EQ(layers, 0);
+        EXPECT_FALSE(std::filesystem::exists(path));
+    }
+    ScopedBudget budget("16");
+    write_field(path, grid, 0.0, layer);
+    EXPECT_EQ(layers, 128);
+    EXPECT_TRUE(std::filesystem::exists(path));
+    std::filesystem::remove(path);
 }
 
 TEST(HostMemory, NpyFieldOverTheDefaultBudgetIsAnInputErrorNamingTheFile) {

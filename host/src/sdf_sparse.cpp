@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 
@@ -252,33 +253,58 @@ BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const Sdf
     // independent, so fixed chunks of them run in parallel and are joined in chunk order: the
     // lists come out in ascending triangle order whatever the threads. Reports (and so a cancel)
     // come between rounds of chunks, on this thread.
-    constexpr size_t kChunk = 2048, kRound = 32;
+    // The budget is checked as the lists grow, not once they are whole, so that a grid too large
+    // for it (one triangle across a grid of 100000^2 voxels reaches 1.5e8 leaves, 300 GB of
+    // samples) is refused in a moment instead of after minutes and gigabytes of lists. Leaves
+    // and pairs only grow, so every refusal here is one the checks on the whole would make: one
+    // triangle's leaves are among the field's, a leaf is at most 8 of its blocks, and the pairs
+    // so far are among all pairs. Which check comes first depends on the threads, so both give
+    // the same message.
+    const uint64_t pair_bytes = sizeof(LeafPair) + 2 * sizeof(uint32_t) + sizeof(uint16_t);
+    const uint64_t max_leaves = budget / (kLeafSamples * sizeof(float));
+    const uint64_t max_pairs = budget / pair_bytes;
+    auto refuse = [&] {
+        throw GridError(
+            "the band of this sparse distance field outgrows the host memory budget of " +
+            mib_text(budget) +
+            " (its leaves' samples or their triangle lists): lower the resolution "
+            "or the band, or raise the budget");
+    };
+    constexpr size_t kChunk = 2048, kRound = 32, kCountStep = 65536;
     const size_t chunks = (n + kChunk - 1) / kChunk;
     std::vector<std::vector<LeafPair>> chunk_pairs(chunks);
-    uint64_t pairs = 0;
+    std::atomic<uint64_t> pairs_so_far{0};
     for (size_t round = 0; round < chunks; round += kRound) {
         const size_t round_end = std::min(chunks, round + kRound);
         tbb::parallel_for(round, round_end, [&](size_t c) {
             auto& chunk = chunk_pairs[c];
             std::vector<uint64_t> own;
-            for (size_t index = c * kChunk; index < std::min(n, (c + 1) * kChunk); ++index) {
+            size_t counted = 0;  // of the chunk's pairs, those in pairs_so_far
+            const size_t end = std::min(n, (c + 1) * kChunk);
+            for (size_t index = c * kChunk; index < end; ++index) {
                 own.clear();
                 for_each_near_block(prepared.triangles[index], prepared.band,
                                     [&](int bx, int by, int bz) {
+                                        if (own.size() > 8 * max_leaves) refuse();
                                         own.push_back(leaves.leaf_of_block(bx, by, bz));
                                     });
                 std::sort(own.begin(), own.end());
                 own.erase(std::unique(own.begin(), own.end()), own.end());
+                if (own.size() > max_leaves) refuse();
                 for (const uint64_t leaf : own)
                     chunk.push_back({leaf, uint32_t(index),
                                      leaf_rows(prepared.triangles[index], leaves.origin(leaf))});
+                // Added to the shared count in steps, not a triangle at a time, so that the
+                // threads do not contend for it.
+                if (chunk.size() - counted >= kCountStep || index + 1 == end) {
+                    if ((pairs_so_far += chunk.size() - counted) > max_pairs) refuse();
+                    counted = chunk.size();
+                }
             }
         });
-        for (size_t c = round; c < round_end; ++c) pairs += chunk_pairs[c].size();
-        check_host_memory(pairs * (sizeof(LeafPair) + 2 * sizeof(uint32_t) + sizeof(uint16_t)),
-                          budget, "the triangle lists of the leaves of a sparse distance field");
         if (report) report(round_end, chunks);
     }
+    const uint64_t pairs = pairs_so_far;
     if (pairs >= (uint64_t(1) << 32))
         throw GridError("a sparse distance field of " + std::to_string(pairs) +
                         " (leaf, triangle) pairs is over the limit of 2^32: lower the resolution");

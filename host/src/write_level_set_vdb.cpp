@@ -39,6 +39,7 @@
 
 #include "atomic_file.hpp"
 #include "bit_count.hpp"
+#include "host_memory.hpp"
 #include "vdb_stream.hpp"
 
 namespace oclvox::detail {
@@ -342,6 +343,17 @@ void write_level_set_vdb(const std::string& path, const Grid& grid, double band_
     const auto& d = grid.dims;
     const int64_t leaves_x = (d[0] + 7) / 8, leaves_y = (d[1] + 7) / 8;
     const size_t per_layer = size_t(d[0]) * size_t(d[1]), per_slab = size_t(leaves_x * leaves_y);
+    // Without a band every leaf is held, so the grid's leaves must fit the host memory budget;
+    // checked before the first layer is asked for (a full grid computes its slabs as they are).
+    if (!band_known)
+        check_host_memory(
+            uint64_t(per_slab) * uint64_t((d[2] + 7) / 8) *
+                (SparseField::kLeafSamples * sizeof(float) + sizeof(std::array<int64_t, 3>)),
+            default_host_budget(),
+            "a .vdb of every sample of " + std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" +
+                std::to_string(d[2]) +
+                " voxels (all its leaves are held until its band, the largest "
+                "distance, is known; .npy is written a layer at a time)");
     std::vector<float> slab(per_layer * 8), slab_leaves(per_slab * SparseField::kLeafSamples);
     std::vector<uint8_t> in_band(per_slab);
     std::vector<std::array<int64_t, 3>> origins;
