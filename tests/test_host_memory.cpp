@@ -189,7 +189,7 @@ TEST(HostMemory, CsgFieldOverBudgetIsRefusedBeforeAllocating) {
 }
 
 // One triangle across 16384^2 voxels reaches 2^21 leaves of a sparse field's band, 4 GiB of
-// samples: over a 16 MiB budget (8192 leaves) it is refused while the band's leaves are listed,
+// samples: over a 4 MiB budget (2048 leaves) it is refused while the band's leaves are listed,
 // before the lists grow (its 2^24 blocks alone would list 128 MiB), and so is a band of few
 // leaves but many pairs. A field whose samples (and a batch of them beside) just fit is not
 // refused, and one byte less is refused by the check on the whole list.
@@ -200,9 +200,9 @@ TEST(HostMemory, SparseFieldOverBudgetIsRefusedWhileItsBandIsListed) {
     add_triangle(triangle, {0, 0, 4}, {16384, 0, 4}, {0, 16384, 4});
     const Grid grid = unit_grid(16384, 16384, 8);
     SdfOptions options;
-    options.host_budget_bytes = 16 * kMiB;
+    options.host_budget_bytes = 4 * kMiB;
     const std::vector<std::string> outgrown = {"band of this sparse distance field outgrows",
-                                               budget_of("16 MiB")};
+                                               budget_of("4 MiB")};
     expect_refused([&] { signed_distance_sparse(gpu, triangle, grid, options); }, outgrown);
     expect_refused([&] { signed_distance_sparse_reference(triangle, grid, options); }, outgrown);
     // 100,000 copies of one small triangle: a few leaves, but 100,000 (leaf, triangle) pairs at
