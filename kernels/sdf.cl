@@ -67,8 +67,8 @@ __kernel __attribute__((reqd_work_group_size(64, 1, 1))) void band_leaf_samples(
 // rows' voxels that the band left at band2 take the tree's distance (one walk per row, each from
 // the leaf that last brought the row before it nearer); the band's voxels keep theirs, the same
 // minimum over the triangles near them, and start the walk with it.
-__kernel void far_distances(__global const OvSdfNode* nodes, __global const uint* order,
-                            __global const OvSdfTriangle* triangles, ulong item_base,
+__kernel void far_distances(__global const OvSdfNode* nodes,
+                            __global const OvSdfTriangle* tree_triangles, ulong item_base,
                             ulong item_end, int nx, int ny, float band2, __global uint* distance2) {
     ulong item = item_base + get_global_id(0);
     if (item >= item_end) return;
@@ -90,8 +90,8 @@ __kernel void far_distances(__global const OvSdfNode* nodes, __global const uint
         }
         if (!far) continue;
         float result[8];
-        vstore8(ov_tree_row_distance2(nodes, order, triangles, i0, j, k, vload8(0, start), &hint),
-                0, result);
+        vstore8(ov_tree_row_distance2(nodes, tree_triangles, i0, j, k, vload8(0, start), &hint), 0,
+                result);
         for (int l = 0; l < width; ++l)
             if (start[l] == INFINITY) distance2[first + l] = as_uint(result[l]);
     }

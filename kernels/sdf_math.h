@@ -273,14 +273,14 @@ OV_SDF_FN float ov_row_box_margin(__global const OvSdfNode* node, int i0, int j,
 }
 
 // The row's distances to the triangles of leaf node n, folded into best (lanes take the least);
-// whether any lane got nearer.
+// whether any lane got nearer. tree_triangles: the triangles in the tree's order
+// (triangles[order[t]] at t), so that a leaf's are read side by side.
 OV_SDF_FN int ov_row_leaf_distance2(__global const OvSdfNode* node,
-                                    __global const unsigned int* order,
-                                    __global const OvSdfTriangle* triangles, int i0, int j, int k,
-                                    float8* best) {
+                                    __global const OvSdfTriangle* tree_triangles, int i0, int j,
+                                    int k, float8* best) {
     float8 before = *best;
     for (unsigned int t = node->first; t < node->first + node->count; ++t) {
-        OvSdfTriangle triangle = triangles[order[t]];
+        OvSdfTriangle triangle = tree_triangles[t];
         *best = fmin(*best, ov_row_distance2(&triangle, i0, j, k));
     }
     return any(*best < before);
@@ -300,11 +300,10 @@ OV_SDF_FN int ov_row_leaf_distance2(__global const OvSdfNode* node,
 // OV_SDF_NO_HINT; on return, the last leaf that brought this row nearer. A leaf taken twice changes
 // nothing, and every bound is some triangle's distance, so the result does not depend on it.
 OV_SDF_FN float8 ov_tree_row_distance2(__global const OvSdfNode* nodes,
-                                       __global const unsigned int* order,
-                                       __global const OvSdfTriangle* triangles, int i0, int j,
+                                       __global const OvSdfTriangle* tree_triangles, int i0, int j,
                                        int k, float8 best, unsigned int* hint) {
     if (*hint != OV_SDF_NO_HINT)
-        ov_row_leaf_distance2(nodes + *hint, order, triangles, i0, j, k, &best);
+        ov_row_leaf_distance2(nodes + *hint, tree_triangles, i0, j, k, &best);
     unsigned int stack[OV_SDF_TREE_DEPTH];
     int top = 0;
     unsigned int n = 0;
@@ -322,7 +321,7 @@ OV_SDF_FN float8 ov_tree_row_distance2(__global const OvSdfNode* nodes,
                 n = closer;
                 descend = 1;
             }
-        } else if (ov_row_leaf_distance2(node, order, triangles, i0, j, k, &best)) {
+        } else if (ov_row_leaf_distance2(node, tree_triangles, i0, j, k, &best)) {
             *hint = n;
         }
         if (descend) continue;
