@@ -90,6 +90,23 @@ void read_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t
     queue.enqueueUnmapMemObject(buffer, mapped);
 }
 
+// Calls fill(pointer) to write the first `count` elements of `buffer` where the device maps them,
+// then unmaps it, also when fill throws: data made on the way (a reordered copy, say) then needs no
+// host copy of its own beside the buffer.
+template <typename T, typename F>
+void write_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t count, F&& fill) {
+    if (count == 0) return;  // a mapping of no bytes is invalid
+    void* mapped = queue.enqueueMapBuffer(buffer, CL_TRUE, CL_MAP_WRITE_INVALIDATE_REGION, 0,
+                                          count * sizeof(T));
+    try {
+        fill(static_cast<T*>(mapped));
+    } catch (...) {
+        queue.enqueueUnmapMemObject(buffer, mapped);
+        throw;
+    }
+    queue.enqueueUnmapMemObject(buffer, mapped);
+}
+
 }  // namespace oclvox::detail
 
 namespace oclvox {
