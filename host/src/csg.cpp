@@ -10,6 +10,7 @@
 
 #include "file_names.hpp"
 #include "host_memory.hpp"
+#include "number_text.hpp"
 #include "oclvox/sdf.hpp"
 #include "sdf_internal.hpp"
 
@@ -196,8 +197,8 @@ ScalarField csg(const ScalarField& a, const ScalarField& b, CsgOp op) {
 SparseField csg(const SparseField& a, const SparseField& b, CsgOp op) {
     if (a.background() != b.background())
         throw GridError("CSG needs both sparse fields with the same band, got " +
-                        std::to_string(a.band_voxels()) + " and " +
-                        std::to_string(b.band_voxels()) + " voxels");
+                        detail::number_text(a.band_voxels()) + " and " +
+                        detail::number_text(b.band_voxels()) + " voxels");
     // Grids on one lattice: both fields moved onto the box of both.
     Index3 offset;
     if (!same_grid(a.grid(), b.grid())) {

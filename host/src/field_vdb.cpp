@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "host_memory.hpp"
+#include "number_text.hpp"
 #include "openvdb_headers.hpp"
 #include "writers.hpp"
 
@@ -322,7 +323,7 @@ SparseField read_field_vdb(const std::string& path, const Grid& lattice, double 
     const float background = float(band_voxels * lattice.voxel_size);
     if (!(background > 0) || !std::isfinite(background))
         throw GridError("a level set's band must be finite and positive, got " +
-                        std::to_string(band_voxels) + " voxels");
+                        detail::number_text(band_voxels) + " voxels");
     const openvdb::FloatGrid::ConstPtr vdb = read_level_set(path);
     // On the lattice already: the same voxel size, and index 0's centre whole voxels from the
     // lattice's voxel (0, 0, 0) (the tolerances of csg's lattice test).

@@ -2,12 +2,12 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <limits>
 #include <vector>
 
 #include "mesh_bounds.hpp"
+#include "number_text.hpp"
 #include "oclvox/oclvox.hpp"
 
 namespace oclvox {
@@ -15,13 +15,6 @@ namespace oclvox {
 namespace {
 std::string dims_text(const std::array<int64_t, 3>& d) {
     return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
-}
-
-// The shortest text that reads back as x: std::to_string prints 6 decimals, so a voxel of 1e-7
-// would read "0.000000", and two grids that differ in the 7th digit would print alike.
-std::string number_text(double x) {
-    char text[32];
-    return std::string(text, std::to_chars(text, text + sizeof text, x).ptr);
 }
 
 }  // namespace
@@ -58,15 +51,15 @@ bool same_grid(const Grid& a, const Grid& b) {
 
 std::string to_string(const Grid& g) {
     return std::to_string(g.dims[0]) + "x" + std::to_string(g.dims[1]) + "x" +
-           std::to_string(g.dims[2]) + " voxels of " + number_text(g.voxel_size) + " at (" +
-           number_text(g.origin[0]) + ", " + number_text(g.origin[1]) + ", " +
-           number_text(g.origin[2]) + ")";
+           std::to_string(g.dims[2]) + " voxels of " + detail::number_text(g.voxel_size) + " at (" +
+           detail::number_text(g.origin[0]) + ", " + detail::number_text(g.origin[1]) + ", " +
+           detail::number_text(g.origin[2]) + ")";
 }
 
 void validate_grid(const Grid& grid) {
     if (!(grid.voxel_size > 0) || !std::isfinite(grid.voxel_size))
         throw GridError("voxel size must be a positive finite number, got " +
-                        number_text(grid.voxel_size));
+                        detail::number_text(grid.voxel_size));
     for (int k = 0; k < 3; ++k) {
         if (!std::isfinite(grid.origin[k])) throw GridError("grid origin is not finite");
         if (grid.dims[k] < 1)
@@ -108,9 +101,9 @@ Grid fit_grid(const Mesh& mesh, const GridFit& fit) {
     for (int k = 0; k < 3; ++k) {
         double cells = std::ceil((hi[k] - lo[k]) / grid.voxel_size);
         if (!(cells < double(kMaxGridAxis)))
-            throw GridError("the mesh spans " + number_text(hi[k] - lo[k]) +
+            throw GridError("the mesh spans " + detail::number_text(hi[k] - lo[k]) +
                             " units, more than the maximum " + std::to_string(kMaxGridAxis) +
-                            " voxels of size " + number_text(grid.voxel_size));
+                            " voxels of size " + detail::number_text(grid.voxel_size));
         // extent / (extent / N) can round to just above N (or a shorter axis's quotient to just
         // above a whole number), and ceil would then add a voxel the mesh does not reach.
         // So the count is the smallest that covers the mesh as the voxelizer computes positions.

@@ -8,6 +8,7 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <utility>
 
 #include "kernel_sources.hpp"
 #include "oclvox/oclvox.hpp"
@@ -73,16 +74,15 @@ cl::Buffer upload(const cl::Context& context, const cl::CommandQueue& queue,
     return buffer;
 }
 
-// Calls f(pointer) with the first `count` elements of `buffer` mapped for reading, then unmaps
-// it, also when f throws. A CPU device maps the buffer itself (no copy into fresh host pages,
-// which fault in at several microseconds a page); a GPU driver makes the same transfer a read
-// would.
+// Calls f(pointer) with the first `count` elements of `buffer` mapped with `flags`, then unmaps
+// it, also when f throws. Shared by read_mapped and write_mapped.
 template <typename T, typename F>
-void read_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t count, F&& f) {
+void with_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, cl_map_flags flags,
+                 size_t count, F&& f) {
     if (count == 0) return;  // a mapping of no bytes is invalid
-    void* mapped = queue.enqueueMapBuffer(buffer, CL_TRUE, CL_MAP_READ, 0, count * sizeof(T));
+    void* mapped = queue.enqueueMapBuffer(buffer, CL_TRUE, flags, 0, count * sizeof(T));
     try {
-        f(static_cast<const T*>(mapped));
+        f(static_cast<T*>(mapped));
     } catch (...) {
         queue.enqueueUnmapMemObject(buffer, mapped);
         throw;
@@ -90,21 +90,20 @@ void read_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t
     queue.enqueueUnmapMemObject(buffer, mapped);
 }
 
-// Calls fill(pointer) to write the first `count` elements of `buffer` where the device maps them,
-// then unmaps it, also when fill throws: data made on the way (a reordered copy, say) then needs no
-// host copy of its own beside the buffer.
+// Calls f(pointer) with the first `count` elements of `buffer` mapped for reading. A CPU device
+// maps the buffer itself (no copy into fresh host pages, which fault in at several microseconds a
+// page); a GPU driver makes the same transfer a read would.
+template <typename T, typename F>
+void read_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t count, F&& f) {
+    with_mapped<const T>(queue, buffer, CL_MAP_READ, count, std::forward<F>(f));
+}
+
+// Calls fill(pointer) to write the first `count` elements of `buffer` where the device maps them:
+// data made on the way (a reordered copy, say) then needs no host copy of its own beside the
+// buffer.
 template <typename T, typename F>
 void write_mapped(const cl::CommandQueue& queue, const cl::Buffer& buffer, size_t count, F&& fill) {
-    if (count == 0) return;  // a mapping of no bytes is invalid
-    void* mapped = queue.enqueueMapBuffer(buffer, CL_TRUE, CL_MAP_WRITE_INVALIDATE_REGION, 0,
-                                          count * sizeof(T));
-    try {
-        fill(static_cast<T*>(mapped));
-    } catch (...) {
-        queue.enqueueUnmapMemObject(buffer, mapped);
-        throw;
-    }
-    queue.enqueueUnmapMemObject(buffer, mapped);
+    with_mapped<T>(queue, buffer, CL_MAP_WRITE_INVALIDATE_REGION, count, std::forward<F>(fill));
 }
 
 }  // namespace oclvox::detail

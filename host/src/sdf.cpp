@@ -10,6 +10,7 @@
 #include <cstring>
 
 #include "host_memory.hpp"
+#include "number_text.hpp"
 #include "sdf_internal.hpp"
 
 namespace oclvox {
@@ -71,7 +72,7 @@ void validate_sdf_options(const Grid& grid, const SdfOptions& options) {
         options.band_voxels > double(kMaxGridAxis))
         throw GridError("the distance band must be a positive number of voxels up to " +
                         std::to_string(kMaxGridAxis) + ", got " +
-                        std::to_string(options.band_voxels));
+                        detail::number_text(options.band_voxels));
     const int64_t end = options.end_layer ? options.end_layer : grid.dims[2];
     if (options.first_layer < 0 || options.first_layer >= end || end > grid.dims[2])
         throw GridError("layers " + std::to_string(options.first_layer) + " to " +
@@ -372,7 +373,7 @@ ScalarField csg_run(const Backend& backend, const Mesh& a, const Mesh& b, CsgOp 
 int64_t field_padding(double band_voxels) {
     if (!(band_voxels > 0) || !(band_voxels < double(kMaxGridAxis)))
         throw GridError("band must be a positive number of voxels below 2^20, got " +
-                        std::to_string(band_voxels));
+                        detail::number_text(band_voxels));
     return int64_t(std::ceil(band_voxels)) + 1;
 }
 

@@ -258,8 +258,8 @@ BandLeaves band_leaves(const SdfTriangles& prepared, const Grid& grid, const Sdf
     // samples) is refused in a moment instead of after minutes and gigabytes of lists. Leaves
     // and pairs only grow, so every refusal here is one the checks on the whole would make: one
     // triangle's leaves are among the field's, a leaf is at most 8 of its blocks, and the pairs
-    // so far are among all pairs. Which check comes first depends on the threads, so both give
-    // the same message.
+    // so far are among all pairs. Which check comes first depends on the threads, so all three
+    // give one message.
     const uint64_t pair_bytes = sizeof(LeafPair) + 2 * sizeof(uint32_t) + sizeof(uint16_t);
     const uint64_t max_leaves = budget / (kLeafSamples * sizeof(float));
     const uint64_t max_pairs = budget / pair_bytes;

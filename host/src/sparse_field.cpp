@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "host_memory.hpp"
+#include "number_text.hpp"
 #include "oclvox/field.hpp"
 
 namespace oclvox {
@@ -32,7 +33,7 @@ SparseField::SparseField(const Grid& grid, double band_voxels, SparseVoxels insi
         throw GridError("a sparse field's inside voxels must have the field's grid");
     if (!(background_ > 0) || !std::isfinite(background_))
         throw GridError("a sparse field's band must be finite and positive, got " +
-                        std::to_string(band_voxels) + " voxels");
+                        detail::number_text(band_voxels) + " voxels");
 }
 
 std::array<int64_t, 3> SparseField::leaf_dims() const {
